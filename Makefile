@@ -1,0 +1,86 @@
+# pushstep: real-time balance controller runtime.  `make help` lists targets.
+.DEFAULT_GOAL := all
+SHELL := /bin/bash
+
+BUILD   ?= build
+ARGS    ?=
+CC      ?= cc
+CXX     ?= c++
+
+# Debian 12 packages the build, the tests and `make run` need (see README).
+DEPS_PKGS := gcc g++ libc6-dev make pkg-config libmujoco-dev libcyaml-dev libyaml-dev \
+             libcmocka-dev libcjson-dev libgpiod-dev rt-tests can-utils
+
+WARN    := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototypes
+CFLAGS  ?= -O2 -g
+CFLAGS  += -std=c11 -D_GNU_SOURCE -pthread $(WARN) -MMD -MP
+LDLIBS  := -lmujoco -lcyaml -lyaml -lm -pthread
+SANFLAGS := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+
+LIB_SRCS  := $(filter-out rt/main.c,$(wildcard rt/*.c drivers/*.c policy/*.c sim/*.c))
+MAIN_SRC  := rt/main.c
+FAKE_SRCS := $(wildcard tests/fakes/*.c)
+TEST_SRCS := $(wildcard tests/test_*.c)
+# Tests that count allocations or page faults, or need full speed, run without
+# sanitizers (ASan replaces malloc, which the allocation guard interposes).
+NOSAN_TESTS := $(basename $(notdir $(wildcard tests/test_e2e*.c tests/test_guard*.c tests/test_noalloc*.c)))
+SAN_TESTS   := $(filter-out $(NOSAN_TESTS),$(basename $(notdir $(TEST_SRCS))))
+
+OBJ      = $(patsubst %.c,$(BUILD)/obj/%.o,$(1))
+SANOBJ   = $(patsubst %.c,$(BUILD)/san/%.o,$(1))
+LIB_OBJS    := $(call OBJ,$(LIB_SRCS))
+LIB_SANOBJS := $(call SANOBJ,$(LIB_SRCS))
+FAKE_OBJS    := $(call OBJ,$(FAKE_SRCS))
+FAKE_SANOBJS := $(call SANOBJ,$(FAKE_SRCS))
+TEST_BINS := $(addprefix $(BUILD)/tests/,$(SAN_TESTS) $(NOSAN_TESTS))
+
+.PHONY: all deps run test clean format help bench check-format
+all: $(BUILD)/pushstep
+
+help:
+	@echo "make deps    install missing Debian packages (as root; idempotent)"
+	@echo "make all     build $(BUILD)/pushstep (default)"
+	@echo "make run     deps + build + run against the simulated crowd, board sim"
+	@echo "             options pass through: make run ARGS=\"--duration 5 --lockstep\""
+	@echo "make test    deps + build + run the whole cmocka suite"
+	@echo "make format  clang-format every C source in place"
+	@echo "make clean   remove $(BUILD)/"
+
+deps:
+	@bash tools/deps.sh $(DEPS_PKGS)
+
+$(BUILD)/obj/%.o: %.c
+	@mkdir -p $(@D)
+	$(CC) $(CFLAGS) -c $< -o $@
+
+$(BUILD)/san/%.o: %.c
+	@mkdir -p $(@D)
+	$(CC) $(CFLAGS) $(SANFLAGS) -c $< -o $@
+
+$(BUILD)/pushstep: $(call OBJ,$(MAIN_SRC)) $(LIB_OBJS)
+	$(CC) $(CFLAGS) -o $@ $^ $(LDLIBS)
+
+$(addprefix $(BUILD)/tests/,$(SAN_TESTS)): $(BUILD)/tests/%: $(BUILD)/san/tests/%.o $(LIB_SANOBJS) $(FAKE_SANOBJS)
+	@mkdir -p $(@D)
+	$(CC) $(CFLAGS) $(SANFLAGS) -o $@ $^ $(LDLIBS) -lcmocka
+
+$(addprefix $(BUILD)/tests/,$(NOSAN_TESTS)): $(BUILD)/tests/%: $(BUILD)/obj/tests/%.o $(LIB_OBJS) $(FAKE_OBJS)
+	@mkdir -p $(@D)
+	$(CC) $(CFLAGS) -o $@ $^ $(LDLIBS) -lcmocka
+
+run: deps $(BUILD)/pushstep
+	$(BUILD)/pushstep --board sim $(ARGS)
+
+test: deps $(BUILD)/pushstep $(TEST_BINS)
+	@bash tools/run-tests.sh $(TEST_BINS)
+
+bench: deps $(BUILD)/pushstep
+	@bash bench/run.sh
+
+format:
+	clang-format -i $$(git ls-files '*.c' '*.h')
+
+clean:
+	rm -rf $(BUILD)
+
+-include $(shell find $(BUILD) -name '*.d' 2>/dev/null)

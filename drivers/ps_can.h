@@ -1,0 +1,94 @@
+/*
+ * ps_can: the CAN transport interface.
+ *
+ * The loop talks to every CAN bus through a ps_can_port_t: an ops table plus
+ * an implementation context. Implementations: drivers/ps_can_socket.c (Linux
+ * SocketCAN, later), sim/ps_can_sim.c (simulated wire with bit timing),
+ * tests/fakes/ps_can_fake.c (scripted). The loop never knows which it has.
+ *
+ * Threads: a port is used by one thread (the loop) unless an implementation
+ * says otherwise. Allocation: none here; implementations allocate in their own
+ * INIT-phase open function.
+ */
+#ifndef PS_CAN_H
+#define PS_CAN_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define PS_CAN_MAX_DLEN 8u     /**< classical CAN payload bytes */
+#define PS_CAN_SFF_MASK 0x7ffu /**< 11-bit identifier mask */
+#define PS_CAN_EFF_MASK 0x1fffffffu
+
+/** One classical CAN data frame. */
+typedef struct {
+    uint32_t id;     /**< 11- or 29-bit identifier */
+    uint8_t len;     /**< payload length, 0..8 */
+    uint8_t is_ext;  /**< 1: 29-bit identifier */
+    uint8_t pad[2];
+    uint8_t data[PS_CAN_MAX_DLEN];
+    int64_t t_ns;    /**< rx: time the frame was complete on the wire (CLOCK_MONOTONIC
+                          or simulated time); tx: ignored */
+} ps_can_frame_t;
+
+/** ISO 11898 fault confinement state of the controller. */
+typedef enum {
+    PS_CAN_BUS_ERROR_ACTIVE = 0,
+    PS_CAN_BUS_ERROR_WARNING,
+    PS_CAN_BUS_ERROR_PASSIVE,
+    PS_CAN_BUS_OFF,
+} ps_can_bus_mode_t;
+
+/** Bus state and counters, as a snapshot. */
+typedef struct {
+    ps_can_bus_mode_t mode;
+    uint16_t tx_error_count; /**< TEC */
+    uint16_t rx_error_count; /**< REC */
+    uint64_t n_tx_frames;    /**< frames this port put on the wire */
+    uint64_t n_rx_frames;    /**< frames this port took off the wire */
+    uint64_t n_tx_dropped;   /**< frames refused because the tx queue was full */
+    uint64_t n_rx_dropped;   /**< frames lost because the rx queue was full */
+    uint64_t n_late;         /**< frames that completed after the tick they were sent in */
+    uint64_t n_bits;         /**< bit times used on the wire by both directions */
+    double load;             /**< observed bus load, 0..1, since open */
+} ps_can_state_t;
+
+typedef struct {
+    /** Queue up to n frames for transmission. @return number queued (0..n) | -errno
+     *  @rt RT-SAFE, never blocks */
+    int (*send_batch)(void *ctx, const ps_can_frame_t *frames, size_t n);
+    /** Take up to max received frames without blocking. @return count (0..max) | -errno
+     *  @rt RT-SAFE, never blocks */
+    int (*recv_batch)(void *ctx, ps_can_frame_t *out, size_t max);
+    /** @return 0 | -errno  @rt RT-SAFE */
+    int (*get_state)(void *ctx, ps_can_state_t *out);
+    /** Release the bus. Safe to call twice. @rt INIT */
+    void (*close)(void *ctx);
+} ps_can_ops_t;
+
+typedef struct {
+    const ps_can_ops_t *ops;
+    void *ctx;
+    const char *name; /**< interface name for messages, e.g. "can0" */
+} ps_can_port_t;
+
+/** Forwarders: @pre port opened  @return as the ops above  @rt RT-SAFE, loop thread */
+static inline int ps_can_send_batch(const ps_can_port_t *p, const ps_can_frame_t *f, size_t n)
+{
+    return p->ops->send_batch(p->ctx, f, n);
+}
+static inline int ps_can_recv_batch(const ps_can_port_t *p, ps_can_frame_t *out, size_t max)
+{
+    return p->ops->recv_batch(p->ctx, out, max);
+}
+static inline int ps_can_get_state(const ps_can_port_t *p, ps_can_state_t *out)
+{
+    return p->ops->get_state(p->ctx, out);
+}
+static inline void ps_can_close(ps_can_port_t *p)
+{
+    if (p->ops != NULL && p->ops->close != NULL)
+        p->ops->close(p->ctx);
+}
+
+#endif /* PS_CAN_H */

@@ -1,0 +1,113 @@
+/*
+ * ps_mit: the MIT-mode actuator protocol (CubeMars AK / Damiao style), as
+ * pure encode/decode functions. See docs/can-protocols.md for the byte layout.
+ *
+ * Command (8 bytes, host -> driver, CAN id = motor id):
+ *   p16 | v12 | kp12 | kd12 | t12, big-endian bit packing, each value mapped
+ *   linearly from [min, max] onto [0, 2^bits - 1] and rounded to nearest.
+ * Special frames: FF FF FF FF FF FF FF FC enter motor mode, ...FD exit, ...FE
+ *   set current position as zero.
+ * Reply (8 bytes, driver -> host, CAN id = reply id):
+ *   byte0 = motor id (low nibble) | fault << 4, p16, v12, i12 (phase current),
+ *   byte6 = driver (MOSFET) temperature degC, byte7 = rotor temperature degC,
+ *   both as int8.
+ *
+ * Threads: any (pure functions). Allocation: none.
+ */
+#ifndef PS_MIT_H
+#define PS_MIT_H
+
+#include <stdint.h>
+
+#define PS_MIT_FRAME_LEN 8u
+#define PS_MIT_P_BITS    16u
+#define PS_MIT_V_BITS    12u
+#define PS_MIT_KP_BITS   12u
+#define PS_MIT_KD_BITS   12u
+#define PS_MIT_T_BITS    12u
+#define PS_MIT_I_BITS    12u
+
+/** Wire ranges of one driver's packing (firmware constants of that motor
+ *  model). kp and kd ranges start at 0. */
+typedef struct {
+    float p_min_rad, p_max_rad;
+    float v_min_rad_s, v_max_rad_s;
+    float kp_max_nm_rad;
+    float kd_max_nm_s_rad;
+    float t_min_nm, t_max_nm;
+    float i_min_a, i_max_a; /**< reply current range */
+} ps_mit_range_t;
+
+typedef struct {
+    float p_rad;        /**< position set-point */
+    float v_rad_s;      /**< velocity set-point */
+    float kp_nm_rad;    /**< stiffness */
+    float kd_nm_s_rad;  /**< damping */
+    float t_ff_nm;      /**< feed-forward torque */
+} ps_mit_cmd_t;
+
+/** Driver fault codes carried in the reply's high nibble. */
+typedef enum {
+    PS_MIT_FAULT_NONE = 0x0,
+    PS_MIT_FAULT_OVERVOLTAGE = 0x8,
+    PS_MIT_FAULT_UNDERVOLTAGE = 0x9,
+    PS_MIT_FAULT_OVERCURRENT = 0xA,
+    PS_MIT_FAULT_MOS_OVERTEMP = 0xB,
+    PS_MIT_FAULT_ROTOR_OVERTEMP = 0xC,
+    PS_MIT_FAULT_COMMS_LOST = 0xD,
+    PS_MIT_FAULT_OVERLOAD = 0xE,
+} ps_mit_fault_t;
+
+typedef struct {
+    uint8_t motor_id;   /**< low nibble of the sender's motor id */
+    uint8_t fault;      /**< ps_mit_fault_t */
+    float p_rad;
+    float v_rad_s;
+    float i_a;          /**< phase current */
+    int8_t temp_mos_c;
+    int8_t temp_rotor_c;
+} ps_mit_reply_t;
+
+typedef enum {
+    PS_MIT_SPECIAL_ENTER = 0xFC,
+    PS_MIT_SPECIAL_EXIT = 0xFD,
+    PS_MIT_SPECIAL_ZERO = 0xFE,
+} ps_mit_special_t;
+
+/** Check a range table: min < max, kp/kd max > 0, all finite.
+ *  @return 0 | -EINVAL  @rt RT-SAFE */
+int ps_mit_check_range(const ps_mit_range_t *r);
+
+/** Encode a command. A field outside its wire range or NaN is refused, never
+ *  clamped silently (the servo layer clamps to the tighter joint limits first).
+ *  @pre r checked  @post out written on success  @return 0 | -PS_ERR_LIMIT
+ *  @rt RT-SAFE O(1) */
+int ps_mit_encode_cmd(const ps_mit_range_t *r, const ps_mit_cmd_t *cmd,
+                      uint8_t out[PS_MIT_FRAME_LEN]);
+
+/** Decode a command frame (the driver's side, used by the emulated actuator).
+ *  @return 0 | -PS_ERR_PROTOCOL (len != 8 or a special frame)  @rt RT-SAFE */
+int ps_mit_decode_cmd(const ps_mit_range_t *r, const uint8_t *data, uint8_t len,
+                      ps_mit_cmd_t *out);
+
+/** @post out = the 8-byte special frame  @rt RT-SAFE */
+void ps_mit_encode_special(ps_mit_special_t which, uint8_t out[PS_MIT_FRAME_LEN]);
+
+/** @return the special code (0xFC..0xFE) if data is a special frame, else 0  @rt RT-SAFE */
+int ps_mit_classify_special(const uint8_t *data, uint8_t len);
+
+/** Encode a reply (driver side). Values outside the range saturate, as a
+ *  driver's packing does.  @rt RT-SAFE */
+void ps_mit_encode_reply(const ps_mit_range_t *r, const ps_mit_reply_t *rep,
+                         uint8_t out[PS_MIT_FRAME_LEN]);
+
+/** Decode a reply. @return 0 | -PS_ERR_PROTOCOL (len != 8)  @rt RT-SAFE */
+int ps_mit_decode_reply(const ps_mit_range_t *r, const uint8_t *data, uint8_t len,
+                        ps_mit_reply_t *out);
+
+/** Linear float <-> unsigned mapping used by every field, exposed for tests.
+ *  float_to_uint rounds to nearest and saturates.  @rt RT-SAFE */
+uint32_t ps_mit_float_to_uint(float x, float min, float max, unsigned bits);
+float ps_mit_uint_to_float(uint32_t u, float min, float max, unsigned bits);
+
+#endif /* PS_MIT_H */

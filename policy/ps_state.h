@@ -1,0 +1,55 @@
+/*
+ * ps_state: the measured and estimated robot state shared by the estimator,
+ * the policy slot and the servo layer. Plain data, no functions.
+ */
+#ifndef PS_STATE_H
+#define PS_STATE_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "../rt/ps_config.h"
+
+/** One joint as its driver last reported it. */
+typedef struct {
+    float q_rad;
+    float qd_rad_s;
+    float tau_nm;       /**< current * kt */
+    float temp_c;       /**< max(mos, rotor) */
+    uint8_t fault;      /**< ps_mit_fault_t */
+    int64_t t_ns;       /**< time the reply arrived; 0: never */
+} ps_joint_meas_t;
+
+typedef struct {
+    float gyro_body_rad_s[3];
+    float accel_body_m_s2[3];
+    int64_t t_ns; /**< 0: never */
+} ps_imu_meas_t;
+
+typedef struct {
+    uint32_t n_joints;
+    ps_joint_meas_t joints[PS_MAX_JOINTS];
+    ps_imu_meas_t imu;
+} ps_meas_t;
+
+/** Estimated state. Ground frame: origin on the ground under the midpoint of
+ *  the feet, x forward (trunk heading), y left, z up. */
+typedef struct {
+    float roll_rad, pitch_rad;   /**< trunk tilt (complementary filter) */
+    float com_m[3];              /**< com_m[2] is the CoM height above the ground */
+    float com_vel_m_s[3];
+    float cop_m[2];              /**< centre of pressure (x, y) */
+    float foot_m[2][3];          /**< sole centres, [0] left, [1] right */
+    bool is_contact[2];
+    bool is_fallen;
+} ps_estimate_t;
+
+/** Joint targets produced by the policy slot. */
+typedef struct {
+    uint32_t n_joints;
+    float q_rad[PS_MAX_JOINTS];
+    float qd_rad_s[PS_MAX_JOINTS];
+    float tau_ff_nm[PS_MAX_JOINTS];
+} ps_targets_t;
+
+#endif /* PS_STATE_H */

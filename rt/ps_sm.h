@@ -1,0 +1,94 @@
+/*
+ * ps_sm: the safety state machine, as a table.
+ *
+ * States: STANDBY (drives limp, enable on), RAMP (blend from the measured
+ * pose to the controller's targets over control.ramp_s), ACTIVE (controller
+ * in charge), DAMPING (zero stiffness, configured damping, until the time
+ * runs out or the robot is still), ESTOP (latched; enable output off; only an
+ * explicit reset, with the e-stop input released, leaves it).
+ *
+ * Each tick the loop gathers a condition bitmask (operator requests, watchdog
+ * findings, timers) and calls ps_sm_next(), which is pure: the first edge of
+ * the current state whose trigger bits intersect the conditions and whose
+ * blocker bits do not wins; no match means stay. Entry actions are the loop's
+ * business, run after the transition.
+ *
+ * Watchdog rule (docs/safety.md): a fault that means the *controller's output*
+ * cannot be trusted while the hardware still can (stale actuator reply, stale
+ * IMU, missed policy deadline, NaN or out-of-range target, fall detected)
+ * leads to DAMPING, so the drives still brake the robot down; a fault that
+ * means the *hardware* cannot be trusted (e-stop input, bus off, driver fault
+ * or over-temperature) leads to ESTOP.
+ *
+ * Threads: pure functions, any thread. Allocation: none.
+ */
+#ifndef PS_SM_H
+#define PS_SM_H
+
+#include <stdint.h>
+
+typedef enum {
+    PS_SM_STANDBY = 0,
+    PS_SM_RAMP,
+    PS_SM_ACTIVE,
+    PS_SM_DAMPING,
+    PS_SM_ESTOP,
+    PS_SM_STATE_COUNT
+} ps_sm_state_t;
+
+/** Condition bits. Requests (REQ_*) come from the operator; the rest from the loop. */
+typedef enum {
+    PS_SM_C_REQ_START = 1u << 0,      /**< operator: STANDBY -> RAMP */
+    PS_SM_C_REQ_STOP = 1u << 1,       /**< operator: RAMP/ACTIVE -> DAMPING */
+    PS_SM_C_REQ_RESET = 1u << 2,      /**< operator: ESTOP -> STANDBY */
+    PS_SM_C_REQ_ESTOP = 1u << 3,      /**< operator: software e-stop */
+    PS_SM_C_ESTOP_INPUT = 1u << 4,    /**< e-stop GPIO reads pressed */
+    PS_SM_C_RAMP_DONE = 1u << 5,      /**< ramp time elapsed */
+    PS_SM_C_DAMP_DONE = 1u << 6,      /**< damping time elapsed or robot still */
+    PS_SM_C_REPLY_STALE = 1u << 7,    /**< an actuator reply is older than allowed */
+    PS_SM_C_IMU_STALE = 1u << 8,      /**< IMU sample older than allowed */
+    PS_SM_C_POLICY_LATE = 1u << 9,    /**< policy missed its deadline */
+    PS_SM_C_TARGET_INVALID = 1u << 10,/**< NaN or out-of-range joint target */
+    PS_SM_C_FALL = 1u << 11,          /**< estimator says fallen */
+    PS_SM_C_DRIVE_FAULT = 1u << 12,   /**< driver fault bits or over-temperature */
+    PS_SM_C_BUS_OFF = 1u << 13,       /**< a CAN controller went bus-off */
+} ps_sm_cond_t;
+
+#define PS_SM_C_SOFT_FAULTS                                                                    \
+    (PS_SM_C_REPLY_STALE | PS_SM_C_IMU_STALE | PS_SM_C_POLICY_LATE | PS_SM_C_TARGET_INVALID |  \
+     PS_SM_C_FALL)
+#define PS_SM_C_HARD_FAULTS                                                                    \
+    (PS_SM_C_REQ_ESTOP | PS_SM_C_ESTOP_INPUT | PS_SM_C_DRIVE_FAULT | PS_SM_C_BUS_OFF)
+#define PS_SM_C_REQUESTS                                                                       \
+    (PS_SM_C_REQ_START | PS_SM_C_REQ_STOP | PS_SM_C_REQ_RESET | PS_SM_C_REQ_ESTOP)
+
+/** One edge: leave `from` for `to` when (cond & trigger) && !(cond & blocker). */
+typedef struct {
+    ps_sm_state_t from;
+    uint32_t trigger;
+    uint32_t blocker;
+    ps_sm_state_t to;
+} ps_sm_edge_t;
+
+/** @return the state after applying conditions (first matching edge, else state)
+ *  @rt RT-SAFE O(edges), pure */
+ps_sm_state_t ps_sm_next(ps_sm_state_t state, uint32_t cond);
+
+/** Would an operator request (one REQ_* bit) be accepted now, given the
+ *  other conditions (e.g. e-stop input still pressed blocks a reset)?
+ *  @post *out_reason set to a static sentence when refused
+ *  @return 0 accepted | -PS_ERR_ILLEGAL_STATE | -EINVAL not a single request bit
+ *  @rt RT-SAFE, pure */
+int ps_sm_check_request(ps_sm_state_t state, uint32_t request, uint32_t cond,
+                        const char **out_reason);
+
+/** @return the edge table and its length (for docs and tests)  @rt RT-SAFE */
+const ps_sm_edge_t *ps_sm_edges(unsigned *out_n);
+
+/** @return "STANDBY", ... or "?"  @rt RT-SAFE */
+const char *ps_sm_state_name(ps_sm_state_t s);
+
+/** @return name of the lowest set condition bit, e.g. "REPLY_STALE"  @rt RT-SAFE */
+const char *ps_sm_cond_name(uint32_t bit);
+
+#endif /* PS_SM_H */

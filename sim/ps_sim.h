@@ -1,0 +1,95 @@
+/*
+ * ps_sim: the simulated robot the loop runs against on board `sim`.
+ *
+ * A MuJoCo plant (sim/ps_plant.c, the model named in the robot file) plus
+ * emulated devices that sit on simulated CAN buses (sim/ps_can_sim.c) and a
+ * simulated GPIO port, exactly where real hardware would sit: each actuator
+ * consumes MIT command frames and answers with MIT reply frames (quantised,
+ * on-driver PD, torque limit, temperature model); the IMU sends its two
+ * frames per sample with noise and bias. The loop sees only ps_can_port_t,
+ * ps_gpio_port_t and ps_clock_t, and does not know it runs on a simulation.
+ *
+ * Two modes:
+ *  - real time: the plant runs on its own thread, paced by CLOCK_MONOTONIC
+ *    at the servo period like hardware, exchanging frames through the buses;
+ *    ps_sim_clock() is the monotonic clock.
+ *  - lockstep: no thread; ps_sim_clock() is a simulated clock whose
+ *    sleep_until advances the plant to the deadline. Deterministic for a seed.
+ *
+ * The scenario drives pushes, the harness, e-stop presses and injected
+ * faults at simulated times.
+ *
+ * Threads: create/destroy on the main thread; ports used by the loop thread;
+ * the plant thread is internal. Allocation: all at create.
+ */
+#ifndef PS_SIM_H
+#define PS_SIM_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../drivers/ps_can.h"
+#include "../drivers/ps_gpio.h"
+#include "../rt/ps_clock.h"
+#include "../rt/ps_config.h"
+
+typedef struct ps_sim ps_sim_t;
+
+typedef struct {
+    const ps_board_cfg_t *board;
+    const ps_robot_cfg_t *robot;
+    const ps_scenario_cfg_t *scenario;
+    const char *model_path;   /**< resolved MJCF path */
+    bool is_lockstep;
+    int64_t period_ns;        /**< servo period; plant paced at this */
+    const uint8_t *joint_phase; /**< from the bus plan (unused by devices; informative) */
+} ps_sim_cfg_t;
+
+/** Ground truth from the plant, for tests and the summary. */
+typedef struct {
+    double t_s;            /**< simulated time */
+    double com_m[3];       /**< whole-body CoM, world */
+    double head_height_m;  /**< height of the head/trunk top */
+    bool is_fallen;        /**< any body other than the feet touches the ground, or CoM low */
+    uint64_t n_steps;      /**< physics steps taken */
+    uint64_t n_cmd_frames; /**< command frames the emulated drivers consumed */
+    uint64_t n_cmd_out_of_limits; /**< commands outside the joint's configured limits */
+    uint64_t n_bad_frames; /**< frames the emulated devices rejected */
+    double max_temp_c;
+} ps_sim_truth_t;
+
+/** Load the model, build devices and buses, apply the scenario's initial
+ *  state (robot in stance, harness engaged unless the scenario says otherwise).
+ *  @post *out_sim owned by the caller until ps_sim_destroy
+ *  @return 0 | -PS_ERR_PLANT (err says why) | -PS_ERR_CONFIG (joint missing
+ *          in the model) | -ENOMEM  @rt INIT */
+int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t err_len);
+
+/** @return the CAN port of bus bus_idx (loop side)  @rt INIT */
+ps_can_port_t ps_sim_can_port(ps_sim_t *s, unsigned bus_idx);
+
+/** @return the GPIO port (loop side)  @rt INIT */
+ps_gpio_port_t ps_sim_gpio_port(ps_sim_t *s);
+
+/** @return the clock the loop must use (simulated in lockstep)  @rt INIT */
+const ps_clock_t *ps_sim_clock(ps_sim_t *s);
+
+/** Real-time mode: start the plant thread at start_ns, pacing at period_ns.
+ *  Lockstep: set simulated time to start_ns. @return 0 | -errno  @rt INIT */
+int ps_sim_start(ps_sim_t *s, int64_t start_ns);
+
+/** Stop the plant thread (no-op in lockstep). Safe to call twice. @rt INIT */
+void ps_sim_stop(ps_sim_t *s);
+
+/** @post *out = current truth (thread-safe snapshot)  @rt NON-RT */
+void ps_sim_get_truth(ps_sim_t *s, ps_sim_truth_t *out);
+
+/** Pending operator requests from the scenario (START, STOP, RESET) that fell
+ *  due since the last call, as ps_sm condition bits. @rt RT-SAFE, loop thread */
+uint32_t ps_sim_take_requests(ps_sim_t *s);
+
+/** @post all resources freed; s invalid. Safe on NULL.  @rt INIT */
+void ps_sim_destroy(ps_sim_t *s);
+
+#endif /* PS_SIM_H */

@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# Runs each cmocka test binary given, prints its output, and ends with one
+# line "N passed, N failed" summed over all binaries (tests that crash before
+# cmocka's summary count as one failure each). Exit 1 if anything failed.
+set -uo pipefail
+passed=0; failed=0; crashed=()
+for bin in "$@"; do
+    echo "=== $(basename "$bin")"
+    out=$("$bin" 2>&1); rc=$?
+    printf '%s\n' "$out"
+    p=$(printf '%s\n' "$out" | sed -n 's/^\[  PASSED  \] \([0-9]\+\) test(s)\./\1/p' | awk '{s+=$1} END {print s+0}')
+    f=$(printf '%s\n' "$out" | sed -n 's/^\[  FAILED  \] \([0-9]\+\) test(s), listed below:/\1/p' | awk '{s+=$1} END {print s+0}')
+    if ! printf '%s\n' "$out" | grep -q '^\[  PASSED  \]'; then
+        crashed+=("$(basename "$bin") (rc $rc)"); f=$((f + 1))
+    elif [ "$rc" -ne 0 ] && [ "$f" -eq 0 ]; then
+        crashed+=("$(basename "$bin") (rc $rc)"); f=1
+    fi
+    passed=$((passed + p)); failed=$((failed + f))
+done
+[ ${#crashed[@]} -gt 0 ] && printf 'did not finish cleanly: %s\n' "${crashed[*]}"
+echo "$passed passed, $failed failed"
+[ "$failed" -eq 0 ]
