@@ -1,0 +1,70 @@
+/*
+ * ps_plant: the MuJoCo 2.2.2 plant (libmujoco-dev). Loads the MJCF model
+ * named by the robot file, maps the robot's joints to the model's hinge
+ * joints and torque actuators by name, and steps physics. Knows nothing about
+ * CAN: the emulated devices (sim/ps_devices.c) turn frames into torques.
+ *
+ * Units: SI, double (MuJoCo's mjtNum). Joint arrays are indexed like the
+ * robot file's joints. World frame: z up, robot initially facing +x.
+ *
+ * Threads: one thread at a time (the plant thread, or the loop thread in
+ * lockstep). Allocation: at create only (mj_loadXML, mj_makeData).
+ */
+#ifndef PS_PLANT_H
+#define PS_PLANT_H
+
+#include <stdbool.h>
+#include <stddef.h>
+
+#include "../rt/ps_config.h"
+
+typedef struct ps_plant ps_plant_t;
+
+typedef struct {
+    double t_s;
+    double com_m[3];        /**< whole-body centre of mass, world */
+    double head_height_m;   /**< world z of the head body */
+    double pelvis_m[3];
+    bool is_fallen;         /**< a body other than the feet touches the floor */
+} ps_plant_truth_t;
+
+/** Load the model and place the robot in its stance (robot->joints[].stance_rad)
+ *  with the soles on the floor.
+ *  @return 0 | -PS_ERR_PLANT (model fails to load; err has MuJoCo's message)
+ *          | -PS_ERR_CONFIG (a robot joint or actuator is missing in the model) @rt INIT */
+int ps_plant_create(const char *model_path, const ps_robot_cfg_t *robot, ps_plant_t **out,
+                    char *err, size_t err_len);
+
+/** @return physics time step (the model's option timestep)  @units s */
+double ps_plant_timestep_s(const ps_plant_t *p);
+
+/** Joint torques to apply from now on (clamped to the model's ctrlrange). */
+void ps_plant_set_torques(ps_plant_t *p, const double *tau_nm);
+
+/** @post q and qd of every robot joint  @units rad, rad/s */
+void ps_plant_get_joints(const ps_plant_t *p, double *out_q_rad, double *out_qd_rad_s);
+
+/** Ideal IMU at the pelvis IMU site: angular velocity and specific force
+ *  (gravity-compensated accelerometer reading) in the IMU frame. */
+void ps_plant_get_imu(const ps_plant_t *p, double out_gyro_rad_s[3], double out_accel_m_s2[3]);
+
+/** @return body index for a name, or -ENOENT */
+int ps_plant_find_body(const ps_plant_t *p, const char *name);
+
+/** External force on a body's CoM (world frame) until changed. */
+void ps_plant_set_external_force(ps_plant_t *p, int body_idx, const double force_n[3]);
+
+/** Harness: a stiff spring-damper holding the pelvis at its initial pose
+ *  (like a gantry on a real robot). Engaged at create. */
+void ps_plant_set_harness(ps_plant_t *p, bool is_engaged);
+
+/** Advance physics by one timestep. @return 0 | -PS_ERR_PLANT (NaN/instability) */
+int ps_plant_step(ps_plant_t *p);
+
+/** @post *out = current truth */
+void ps_plant_get_truth(const ps_plant_t *p, ps_plant_truth_t *out);
+
+/** Safe on NULL. */
+void ps_plant_destroy(ps_plant_t *p);
+
+#endif /* PS_PLANT_H */
