@@ -14,7 +14,7 @@ DEPS_PKGS := gcc g++ libc6-dev make pkg-config libmujoco-dev libcyaml-dev libyam
 WARN    := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototypes
 CFLAGS  ?= -O2 -g
 CFLAGS  += -std=c11 -D_GNU_SOURCE -pthread $(WARN) -MMD -MP
-LDLIBS  := -lmujoco -lcyaml -lyaml -lm -pthread
+LDLIBS  := -lmujoco -lcyaml -lyaml -lcjson -lm -pthread
 SANFLAGS := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
 
 LIB_SRCS  := $(filter-out rt/main.c,$(wildcard rt/*.c drivers/*.c policy/*.c sim/*.c))

@@ -12,6 +12,7 @@
 #define PS_GPIO_H
 
 #include <stdbool.h>
+#include <stddef.h>
 
 typedef enum {
     PS_GPIO_LED_OFF = 0,

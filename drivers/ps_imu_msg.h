@@ -17,10 +17,10 @@
 
 #include "ps_can.h"
 
-#define PS_IMU_GYRO_LSB_RAD_S  0.001f
-#define PS_IMU_ACCEL_LSB_M_S2  0.002f
-#define PS_IMU_STATUS_GYRO_SAT  0x01u
-#define PS_IMU_STATUS_ACCEL_SAT 0x02u
+#define PS_IMU_GYRO_LSB_RAD_S       0.001f
+#define PS_IMU_ACCEL_LSB_M_S2       0.002f
+#define PS_IMU_STATUS_GYRO_SAT      0x01u
+#define PS_IMU_STATUS_ACCEL_SAT     0x02u
 #define PS_IMU_STATUS_SELFTEST_FAIL 0x80u
 
 typedef struct {
@@ -29,10 +29,16 @@ typedef struct {
     int8_t temp_c;
     uint8_t seq;
     uint8_t status;
+    int64_t t_ns; /**< rx: end-of-frame time of the gyro frame (the earlier
+                       half, closest to the measurement); encode ignores it */
 } ps_imu_sample_t;
 
-/** Encode a sample into its two frames (values saturate to the int16 range
- *  and set the saturation status bits). @post out[0] gyro, out[1] accel  @rt RT-SAFE */
+/** Encode a sample into its two frames. Values are rounded to the nearest
+ *  LSB and saturate to +-32767 LSB, setting the matching saturation bit in the
+ *  status byte (s->status is kept and OR-ed with those bits); a NaN component
+ *  is sent as 0 with its saturation bit set, so the receiver sees it flagged.
+ *  Frames are 11-bit ids, len 8, t_ns 0.
+ *  @post out[0] gyro (id base_id), out[1] accel (id base_id + 1)  @rt RT-SAFE O(1) */
 void ps_imu_msg_encode(uint32_t base_id, const ps_imu_sample_t *s, ps_can_frame_t out[2]);
 
 /** Pairs frames into samples. Feed every frame from the IMU's bus. */
@@ -48,7 +54,13 @@ typedef struct {
 /** @post rx reset for base_id  @rt RT-SAFE */
 void ps_imu_msg_rx_init(ps_imu_msg_rx_t *rx, uint32_t base_id);
 
-/** Feed one frame. @post *out written when a complete sample is formed
+/** Feed one frame. A gyro frame is held until the accel frame with the same
+ *  seq arrives (a newer gyro frame replaces an unpaired one). An accel frame
+ *  with no held gyro frame, or with a different seq, is refused and the held
+ *  gyro frame discarded; so is any IMU frame of the wrong length.
+ *  Extended-id (29-bit) frames are never IMU frames.
+ *  @post *out written only when a complete sample is formed (status from the
+ *        gyro frame, t_ns of the gyro frame)
  *  @return 1 sample complete | 0 frame consumed, no sample yet | -ENOENT not an IMU frame
  *          | -PS_ERR_PROTOCOL wrong length or seq mismatch  @rt RT-SAFE O(1) */
 int ps_imu_msg_rx_feed(ps_imu_msg_rx_t *rx, const ps_can_frame_t *f, ps_imu_sample_t *out);

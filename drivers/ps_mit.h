@@ -39,11 +39,11 @@ typedef struct {
 } ps_mit_range_t;
 
 typedef struct {
-    float p_rad;        /**< position set-point */
-    float v_rad_s;      /**< velocity set-point */
-    float kp_nm_rad;    /**< stiffness */
-    float kd_nm_s_rad;  /**< damping */
-    float t_ff_nm;      /**< feed-forward torque */
+    float p_rad;       /**< position set-point */
+    float v_rad_s;     /**< velocity set-point */
+    float kp_nm_rad;   /**< stiffness */
+    float kd_nm_s_rad; /**< damping */
+    float t_ff_nm;     /**< feed-forward torque */
 } ps_mit_cmd_t;
 
 /** Driver fault codes carried in the reply's high nibble. */
@@ -59,11 +59,11 @@ typedef enum {
 } ps_mit_fault_t;
 
 typedef struct {
-    uint8_t motor_id;   /**< low nibble of the sender's motor id */
-    uint8_t fault;      /**< ps_mit_fault_t */
+    uint8_t motor_id; /**< low nibble of the sender's motor id */
+    uint8_t fault;    /**< ps_mit_fault_t */
     float p_rad;
     float v_rad_s;
-    float i_a;          /**< phase current */
+    float i_a; /**< phase current */
     int8_t temp_mos_c;
     int8_t temp_rotor_c;
 } ps_mit_reply_t;
@@ -78,17 +78,20 @@ typedef enum {
  *  @return 0 | -EINVAL  @rt RT-SAFE */
 int ps_mit_check_range(const ps_mit_range_t *r);
 
-/** Encode a command. A field outside its wire range or NaN is refused, never
- *  clamped silently (the servo layer clamps to the tighter joint limits first).
- *  @pre r checked  @post out written on success  @return 0 | -PS_ERR_LIMIT
+/** Encode a command. A field outside its wire range, NaN or infinite is
+ *  refused, never clamped silently (the servo layer clamps to the tighter joint
+ *  limits first). Ranges are inclusive: kp in [0, kp_max], kd in [0, kd_max].
+ *  A command whose packing would equal a special frame (p, v, kp, kd all at
+ *  their maxima and t within 3 LSB of t_max) is refused too, since a driver
+ *  would read it as a mode change.
+ *  @pre r checked  @post out written on success only  @return 0 | -PS_ERR_LIMIT
  *  @rt RT-SAFE O(1) */
 int ps_mit_encode_cmd(const ps_mit_range_t *r, const ps_mit_cmd_t *cmd,
                       uint8_t out[PS_MIT_FRAME_LEN]);
 
 /** Decode a command frame (the driver's side, used by the emulated actuator).
  *  @return 0 | -PS_ERR_PROTOCOL (len != 8 or a special frame)  @rt RT-SAFE */
-int ps_mit_decode_cmd(const ps_mit_range_t *r, const uint8_t *data, uint8_t len,
-                      ps_mit_cmd_t *out);
+int ps_mit_decode_cmd(const ps_mit_range_t *r, const uint8_t *data, uint8_t len, ps_mit_cmd_t *out);
 
 /** @post out = the 8-byte special frame  @rt RT-SAFE */
 void ps_mit_encode_special(ps_mit_special_t which, uint8_t out[PS_MIT_FRAME_LEN]);
@@ -106,7 +109,11 @@ int ps_mit_decode_reply(const ps_mit_range_t *r, const uint8_t *data, uint8_t le
                         ps_mit_reply_t *out);
 
 /** Linear float <-> unsigned mapping used by every field, exposed for tests.
- *  float_to_uint rounds to nearest and saturates.  @rt RT-SAFE */
+ *  float_to_uint: u = round((x - min) * (2^bits - 1) / (max - min)), halves
+ *  rounded up; x <= min -> 0, x >= max -> 2^bits - 1, NaN -> 0.
+ *  uint_to_float: x = u * (max - min) / (2^bits - 1) + min (u saturates to
+ *  2^bits - 1). Round trip error is at most half an LSB inside [min, max].
+ *  @pre bits 1..32  @rt RT-SAFE */
 uint32_t ps_mit_float_to_uint(float x, float min, float max, unsigned bits);
 float ps_mit_uint_to_float(uint32_t u, float min, float max, unsigned bits);
 

@@ -12,6 +12,13 @@
  * support polygon. Fallen: tilt beyond fall_tilt_rad or CoM below
  * fall_com_height_m.
  *
+ * Sign conventions, limits of the lumped model and the sources followed are in
+ * docs/estimation.md. Joint torques are read as the actuator torque on the
+ * child link about the joint's positive axis (MIT reply, MuJoCo
+ * qfrc_actuator); with that convention a foot's CoP offset from its ankle is
+ * x = +tau_pitch / F_z, y = -tau_roll / F_z (the signs above describe the
+ * reaction torque on the shank; see ps_estimate.c for the derivation).
+ *
  * Threads: loop thread. Allocation: none.
  */
 #ifndef PS_ESTIMATE_H
@@ -23,26 +30,52 @@
 enum { PS_LEG_HIP_YAW, PS_LEG_HIP_ROLL, PS_LEG_HIP_PITCH, PS_LEG_KNEE, PS_LEG_ANKLE_PITCH,
        PS_LEG_ANKLE_ROLL, PS_LEG_N_JOINTS };
 
+#define PS_ESTIMATE_FILTER_TAU_S 0.5f  /**< default complementary filter time constant */
+#define PS_ESTIMATE_CONTACT_M    0.02f /**< sole within this of the lowest sole: contact */
+#define PS_ESTIMATE_VEL_TAU_S    0.02f /**< low-pass time constant of the CoM velocity */
+#define PS_ESTIMATE_IMU_GAP_S    0.1f  /**< IMU gap longer than this: re-initialise tilt */
+#define PS_ESTIMATE_G_M_S2       9.81f /**< gravity, also the accelerometer gate centre */
+#define PS_ESTIMATE_ACCEL_GATE   0.2f  /**< accel used for tilt only if | |a|/g - 1 | <= this */
+
 typedef struct {
     const ps_robot_cfg_t *robot;
     int leg_idx[2][PS_LEG_N_JOINTS]; /**< joint index of each leg joint, [0] left */
     float dt_s;
-    float filter_tau_s;  /**< complementary filter time constant */
-    bool has_tilt;
-    ps_estimate_t est;
+    float filter_tau_s;  /**< complementary filter time constant; user may modify */
+    bool has_tilt;       /**< read-only: a valid accelerometer sample has set the tilt */
+    ps_estimate_t est;   /**< read-only: the latest estimate */
     float prev_com_m[3];
+    int64_t last_imu_t_ns; /**< time of the last IMU sample used; 0: none */
+    bool has_prev_com;     /**< prev_com_m holds the previous update's CoM */
 } ps_estimator_t;
 
-/** Finds the leg joints by name ("l_hip_yaw" ... "r_ankle_roll").
- *  @pre robot outlives e  @return 0 | -ENOENT a leg joint is missing  @rt INIT */
+/** Finds the leg joints by name ("l_hip_yaw" ... "r_ankle_roll"), zeroes the
+ *  estimate, sets filter_tau_s to PS_ESTIMATE_FILTER_TAU_S.
+ *  @pre robot outlives e  @post e ready; no tilt until the first IMU sample
+ *  @units dt_s: seconds between ps_estimate_update calls (the servo tick)
+ *  @return 0 | -EINVAL e or robot NULL, dt_s <= 0 or mass_kg <= 0
+ *          | -ENOENT a leg joint is missing  @rt INIT */
 int ps_estimate_init(ps_estimator_t *e, const ps_robot_cfg_t *robot, float dt_s);
 
-/** @post e->est updated from m  @rt RT-SAFE O(joints) */
+/** @pre init ok, m->joints indexed like robot->joints
+ *  @post e->est updated from m: tilt from an IMU sample newer than the last
+ *  used one (t_ns == 0 or not newer: tilt kept), feet/contact/CoM/CoP from the
+ *  joints. No-op when e or m is NULL.  @rt RT-SAFE O(joints), loop thread */
 void ps_estimate_update(ps_estimator_t *e, const ps_meas_t *m);
 
 /** Forward kinematics of one leg, exposed for tests: sole centre in the pelvis
- *  frame. @pre side 0 left, 1 right  @units rad in, m out  @rt RT-SAFE */
+ *  frame (convention in docs/estimation.md).
+ *  @pre side 0 left, 1 right (any other value: right), all pointers valid
+ *  @units rad in, m out  @rt RT-SAFE */
 void ps_estimate_leg_fk(const ps_kinematics_cfg_t *k, int side, const float q_rad[PS_LEG_N_JOINTS],
                         float out_sole_m[3]);
+
+/** Forward kinematics with the ankle centre and the foot orientation.
+ *  @pre as ps_estimate_leg_fk; out_ankle_m / out_rot may be NULL
+ *  @post out_rot[r][c]: foot axes (columns) in the pelvis frame
+ *  @units rad in, m out  @rt RT-SAFE */
+void ps_estimate_leg_fk_pose(const ps_kinematics_cfg_t *k, int side,
+                             const float q_rad[PS_LEG_N_JOINTS], float out_sole_m[3],
+                             float out_ankle_m[3], float out_rot[3][3]);
 
 #endif /* PS_ESTIMATE_H */

@@ -11,6 +11,10 @@
 
 #include "ps_policy.h"
 
+#define PS_STAND_K_TILT_DEFAULT 0.5f  /**< rad of ankle per rad of trunk tilt */
+#define PS_STAND_K_COM_DEFAULT  1.0f  /**< rad of ankle per m of CoM offset */
+#define PS_STAND_CORR_MAX_RAD   0.15f /**< |ankle correction| limit */
+
 typedef struct {
     const ps_robot_cfg_t *robot;
     int idx_ankle_pitch[2], idx_ankle_roll[2]; /**< [0] left, [1] right, -1 if absent */
@@ -18,10 +22,19 @@ typedef struct {
     float k_com;      /**< ankle angle per m of CoM offset */
 } ps_stand_t;
 
-/** @pre robot outlives st  @return 0 | -EINVAL  @rt INIT */
+/** Finds l/r_ankle_pitch and l/r_ankle_roll by name (-1 if absent: that
+ *  joint gets no correction), sets the default gains (user may modify).
+ *  @pre robot outlives st  @post st ready
+ *  @return 0 | -EINVAL st or robot NULL, n_joints 0 or > PS_MAX_JOINTS  @rt INIT */
 int ps_stand_init(ps_stand_t *st, const ps_robot_cfg_t *robot);
 
-/** @post *out is this controller in the policy slot  @rt INIT */
+/** @post *out is this controller in the policy slot (name "stand"). Its step
+ *  writes stance_rad for every joint, qd = tau_ff = 0, plus the ankle
+ *  correction (sign derivation in ps_stand.c), clamped to
+ *  +-PS_STAND_CORR_MAX_RAD and to the joint limits. No correction when est is
+ *  NULL, non-finite or fallen. step returns 0 | -EINVAL ctx/out NULL or bad
+ *  joint count | -PS_ERR_LIMIT a target is not finite (out untouched).
+ *  @pre st initialised, both non-NULL  @rt INIT */
 void ps_stand_as_policy(ps_stand_t *st, ps_policy_t *out);
 
 #endif /* PS_STAND_H */

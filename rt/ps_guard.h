@@ -1,13 +1,21 @@
 /*
  * ps_guard: proves the tick allocates nothing and takes no page faults.
  *
- * ps_guard.c interposes malloc, calloc, realloc, free (and posix_memalign,
- * aligned_alloc) for the whole process and forwards to glibc's __libc_*
- * functions. While a thread is armed (thread-local flag), each call from it
- * is counted. Page faults of the armed thread are taken from
- * getrusage(RUSAGE_THREAD) at arm and at report. Work that is not the loop's
+ * ps_guard.c interposes malloc, calloc, realloc, free, posix_memalign,
+ * aligned_alloc, memalign, valloc and pvalloc for the whole process and
+ * forwards to glibc's __libc_* functions (same heap, so malloc_usable_size
+ * and friends stay valid). While a thread is armed and not paused
+ * (thread-local flags), each call from it is counted; the wrappers take no
+ * lock and allocate nothing. Page faults of the armed thread are taken from
+ * getrusage(RUSAGE_THREAD) (minor + major) at arm, at pause and resume (so
+ * paused spans are excluded) and at read/disarm. Work that is not the loop's
  * but runs on its thread (the lockstep plant step) is bracketed by
  * ps_guard_pause()/ps_guard_resume() and excluded from both counts.
+ *
+ * Sanitizers: under AddressSanitizer (or ThreadSanitizer) the sanitizer
+ * owns malloc, so ps_guard.c defines no interposers: n_allocs and n_frees
+ * then always read 0 (ps_guard_counts_allocs() says so) while n_faults still
+ * works. Tests that check allocation counts must be built without sanitizers.
  *
  * Threads: per-thread state; counters are read by the same thread.
  * Allocation: none.
@@ -19,25 +27,36 @@
 #include <stdint.h>
 
 typedef struct {
-    uint64_t n_allocs;   /**< malloc/calloc/realloc/memalign calls while armed */
-    uint64_t n_frees;    /**< free calls while armed (free(NULL) included) */
-    uint64_t n_faults;   /**< minor + major page faults while armed, not paused */
+    uint64_t n_allocs; /**< malloc/calloc/realloc/memalign/posix_memalign/aligned_alloc/
+                            valloc/pvalloc calls while armed and not paused */
+    uint64_t n_frees;  /**< free calls while armed and not paused (free(NULL) included) */
+    uint64_t n_faults; /**< minor + major page faults while armed, not paused */
 } ps_guard_counts_t;
 
-/** Start counting for the calling thread (zeroes its counts). @rt INIT */
+/** Start counting for the calling thread (zeroes its counts, clears pause).
+ *  @post ps_guard_is_armed()  @rt INIT, the thread itself */
 void ps_guard_arm(void);
 
-/** Stop counting; @post *out = counts since arm  @rt INIT */
+/** Stop counting. @pre out != NULL  @post *out = counts since arm (zeros if
+ *  never armed); the thread is disarmed  @rt INIT, the thread itself */
 void ps_guard_disarm(ps_guard_counts_t *out);
 
-/** Exclude what follows from the counts until resume. Nestable: no.  @rt RT-SAFE */
+/** Exclude what follows from the counts until resume. Nestable: no (a second
+ *  pause, or a resume without pause, does nothing). No effect when disarmed.
+ *  @rt RT-SAFE (one getrusage syscall), the armed thread */
 void ps_guard_pause(void);
 void ps_guard_resume(void);
 
-/** @return counts so far for the calling thread (syscall for faults)  @rt NON-RT */
+/** @pre out != NULL  @post *out = counts so far for the calling thread
+ *  (syscall for faults); an armed thread stays armed; after disarm, the
+ *  counts disarm returned  @rt NON-RT, the thread itself */
 void ps_guard_read(ps_guard_counts_t *out);
 
 /** @return true while the calling thread is armed and not paused  @rt RT-SAFE */
 bool ps_guard_is_armed(void);
+
+/** @return true when this build interposes malloc (false under ASan/TSan:
+ *  n_allocs and n_frees stay 0)  @rt RT-SAFE */
+bool ps_guard_counts_allocs(void);
 
 #endif /* PS_GUARD_H */

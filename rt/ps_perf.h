@@ -1,11 +1,16 @@
 /*
  * ps_perf: latency accounting in fixed-size log-linear histograms.
  *
- * Buckets: values below PS_PERF_SUB_BUCKETS ns get one bucket per ns; above,
- * each power-of-two range [2^k, 2^(k+1)) ns is split into PS_PERF_SUB_BUCKETS
- * equal buckets (HdrHistogram-style), giving a relative resolution of 1/PS_PERF_SUB_BUCKETS
- * (about 3 %) from 1 ns up to ~68 s, in a fixed array. Percentiles are read
- * from the bucket counts (upper bucket edge, clamped to the exact max).
+ * Buckets: values below PS_PERF_SUB_BUCKETS (32) ns get one bucket per ns;
+ * above, each power-of-two range [2^k, 2^(k+1)) ns, k >= 5, is split into
+ * PS_PERF_SUB_BUCKETS equal buckets (HdrHistogram-style), so a bucket's width
+ * is at most 1/32 of its lower edge (about 3 %). Bucket index 32*o + s:
+ * o = 0 is the linear range [0, 32), o >= 1 the octave [2^(o+4), 2^(o+5)).
+ * With PS_PERF_OCTAVES = 37 the top octave is [2^40, 2^41) ns, i.e. the
+ * histogram resolves up to 2^41 ns (about 36.6 min); larger values go into
+ * the top bucket and are also counted in n_over. Quantiles are read from the
+ * bucket counts: the largest value of the bucket holding the rank (hi - 1),
+ * clamped to [min, max] (so q = 0 gives min and q = 1 gives max exactly).
  *
  * Threads: a histogram has one writer (the loop); readers take a snapshot by
  * copying (ps_perf_copy) from another thread and accept a torn read of a
@@ -18,30 +23,42 @@
 
 #define PS_PERF_SUB_BITS    5u /* 32 sub-buckets per octave */
 #define PS_PERF_SUB_BUCKETS (1u << PS_PERF_SUB_BITS)
-#define PS_PERF_OCTAVES     37u /* up to 2^36 ns = 68.7 s */
+#define PS_PERF_OCTAVES     37u /* linear [0,32) + octaves up to 2^41 ns */
 #define PS_PERF_N_BUCKETS   (PS_PERF_SUB_BUCKETS * PS_PERF_OCTAVES)
 
 typedef struct {
     uint64_t n;
-    int64_t min_ns, max_ns;
-    int64_t sum_ns;
-    uint64_t n_over; /**< samples beyond the top bucket (counted in the top bucket too) */
+    int64_t min_ns, max_ns; /**< exact; 0 when empty */
+    int64_t sum_ns;         /**< exact unless it would overflow: saturates at INT64_MAX */
+    uint64_t n_over;        /**< samples beyond the top bucket (counted in the top bucket too) */
     uint32_t buckets[PS_PERF_N_BUCKETS];
 } ps_perf_hist_t;
 
-/** @post h empty  @rt RT-SAFE (touches the whole array: call at init to prefault) */
+/** @pre h != NULL  @post h empty  @rt RT-SAFE (touches the whole array: call at init to prefault)
+ */
 void ps_perf_reset(ps_perf_hist_t *h);
 
-/** Record one sample; negative values count as 0. @rt RT-SAFE O(1) */
+/** Record one sample; negative values count as 0.
+ *  @pre h != NULL  @units ns  @rt RT-SAFE O(1), the writer thread */
 void ps_perf_record(ps_perf_hist_t *h, int64_t value_ns);
 
-/** @pre 0 <= q <= 1  @return the q-quantile (0 when empty)  @units ns  @rt NON-RT O(buckets) */
+/** Snapshot a histogram (memcpy); from another thread a bucket being written
+ *  may be torn, and n/min/max/sum may disagree by the sample under way.
+ *  @pre out, h != NULL  @post *out = *h  @rt RT-SAFE O(buckets), any thread */
+void ps_perf_copy(ps_perf_hist_t *out, const ps_perf_hist_t *h);
+
+/** @pre 0 <= q <= 1 (clamped)  @return the q-quantile: the sample of rank
+ *  ceil(q * n) (at least 1) rounded up to its bucket's largest value, clamped
+ *  to [min, max]; 0 when empty  @units ns  @rt NON-RT O(buckets) */
 int64_t ps_perf_quantile_ns(const ps_perf_hist_t *h, double q);
 
-/** @return mean (0 when empty)  @units ns */
+/** @return mean (0 when empty)  @units ns  @rt RT-SAFE O(1) */
 double ps_perf_mean_ns(const ps_perf_hist_t *h);
 
-/** Bucket index of a value and a bucket's [lo, hi) edges, exposed for tests. */
+/** Bucket index of a value and a bucket's [lo, hi) edges, exposed for tests.
+ *  bucket_of: negative -> 0, beyond the top -> PS_PERF_N_BUCKETS - 1.
+ *  lo/hi: @pre idx < PS_PERF_N_BUCKETS (else -1); the top bucket's hi is 2^41
+ *  although it also holds the n_over samples.  @units ns  @rt RT-SAFE O(1) */
 unsigned ps_perf_bucket_of(int64_t value_ns);
 int64_t ps_perf_bucket_lo_ns(unsigned idx);
 int64_t ps_perf_bucket_hi_ns(unsigned idx);

@@ -17,14 +17,16 @@
 typedef struct {
     uint8_t *storage;
     size_t record_size;
-    uint32_t mask;                 /**< n_slots - 1 */
-    _Atomic uint32_t head;         /**< next slot to write (producer-owned) */
-    _Atomic uint32_t tail;         /**< next slot to read (consumer-owned) */
-    _Atomic uint64_t n_dropped;    /**< records refused because full */
+    uint32_t mask;              /**< n_slots - 1 */
+    _Atomic uint32_t head;      /**< next slot to write (producer-owned) */
+    _Atomic uint32_t tail;      /**< next slot to read (consumer-owned) */
+    _Atomic uint64_t n_dropped; /**< records refused because full */
 } ps_ring_t;
 
 /** @pre storage holds n_slots * record_size bytes, n_slots power of two >= 2
- *  @return 0 | -EINVAL  @rt INIT */
+ *  (at most 2^31), record_size > 0  @post ring empty, n_dropped 0
+ *  @return 0 | -EINVAL (NULL pointer, record_size 0, n_slots not a power of
+ *  two in [2, 2^31])  @rt INIT, before either thread uses it */
 int ps_ring_init(ps_ring_t *r, void *storage, uint32_t n_slots, size_t record_size);
 
 /** Copy one record in. @return 0 | -EAGAIN full (dropped, counted)
@@ -34,7 +36,8 @@ int ps_ring_push(ps_ring_t *r, const void *record);
 /** Copy one record out. @return 0 | -EAGAIN empty  @rt RT-SAFE, consumer thread only */
 int ps_ring_pop(ps_ring_t *r, void *out_record);
 
-/** @return records waiting (approximate from the other thread)  @rt RT-SAFE */
+/** @return records waiting, 0..n_slots (approximate from the other thread)
+ *  @rt RT-SAFE, any thread */
 uint32_t ps_ring_count(const ps_ring_t *r);
 
 /** @return records dropped so far  @rt RT-SAFE, any thread */

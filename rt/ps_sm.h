@@ -38,29 +38,43 @@ typedef enum {
 
 /** Condition bits. Requests (REQ_*) come from the operator; the rest from the loop. */
 typedef enum {
-    PS_SM_C_REQ_START = 1u << 0,      /**< operator: STANDBY -> RAMP */
-    PS_SM_C_REQ_STOP = 1u << 1,       /**< operator: RAMP/ACTIVE -> DAMPING */
-    PS_SM_C_REQ_RESET = 1u << 2,      /**< operator: ESTOP -> STANDBY */
-    PS_SM_C_REQ_ESTOP = 1u << 3,      /**< operator: software e-stop */
-    PS_SM_C_ESTOP_INPUT = 1u << 4,    /**< e-stop GPIO reads pressed */
-    PS_SM_C_RAMP_DONE = 1u << 5,      /**< ramp time elapsed */
-    PS_SM_C_DAMP_DONE = 1u << 6,      /**< damping time elapsed or robot still */
-    PS_SM_C_REPLY_STALE = 1u << 7,    /**< an actuator reply is older than allowed */
-    PS_SM_C_IMU_STALE = 1u << 8,      /**< IMU sample older than allowed */
-    PS_SM_C_POLICY_LATE = 1u << 9,    /**< policy missed its deadline */
-    PS_SM_C_TARGET_INVALID = 1u << 10,/**< NaN or out-of-range joint target */
-    PS_SM_C_FALL = 1u << 11,          /**< estimator says fallen */
-    PS_SM_C_DRIVE_FAULT = 1u << 12,   /**< driver fault bits or over-temperature */
-    PS_SM_C_BUS_OFF = 1u << 13,       /**< a CAN controller went bus-off */
+    PS_SM_C_REQ_START = 1u << 0,       /**< operator: STANDBY -> RAMP */
+    PS_SM_C_REQ_STOP = 1u << 1,        /**< operator: RAMP/ACTIVE -> DAMPING */
+    PS_SM_C_REQ_RESET = 1u << 2,       /**< operator: ESTOP -> STANDBY */
+    PS_SM_C_REQ_ESTOP = 1u << 3,       /**< operator: software e-stop */
+    PS_SM_C_ESTOP_INPUT = 1u << 4,     /**< e-stop GPIO reads pressed */
+    PS_SM_C_RAMP_DONE = 1u << 5,       /**< ramp time elapsed */
+    PS_SM_C_DAMP_DONE = 1u << 6,       /**< damping time elapsed or robot still */
+    PS_SM_C_REPLY_STALE = 1u << 7,     /**< an actuator reply is older than allowed */
+    PS_SM_C_IMU_STALE = 1u << 8,       /**< IMU sample older than allowed */
+    PS_SM_C_POLICY_LATE = 1u << 9,     /**< policy missed its deadline */
+    PS_SM_C_TARGET_INVALID = 1u << 10, /**< NaN or out-of-range joint target */
+    PS_SM_C_FALL = 1u << 11,           /**< estimator says fallen */
+    PS_SM_C_DRIVE_FAULT = 1u << 12,    /**< driver fault bits or over-temperature */
+    PS_SM_C_BUS_OFF = 1u << 13,        /**< a CAN controller went bus-off */
 } ps_sm_cond_t;
 
-#define PS_SM_C_SOFT_FAULTS                                                                    \
-    (PS_SM_C_REPLY_STALE | PS_SM_C_IMU_STALE | PS_SM_C_POLICY_LATE | PS_SM_C_TARGET_INVALID |  \
+#define PS_SM_C_SOFT_FAULTS                                                                        \
+    (PS_SM_C_REPLY_STALE | PS_SM_C_IMU_STALE | PS_SM_C_POLICY_LATE | PS_SM_C_TARGET_INVALID |      \
      PS_SM_C_FALL)
-#define PS_SM_C_HARD_FAULTS                                                                    \
+#define PS_SM_C_HARD_FAULTS                                                                        \
     (PS_SM_C_REQ_ESTOP | PS_SM_C_ESTOP_INPUT | PS_SM_C_DRIVE_FAULT | PS_SM_C_BUS_OFF)
-#define PS_SM_C_REQUESTS                                                                       \
+#define PS_SM_C_REQUESTS                                                                           \
     (PS_SM_C_REQ_START | PS_SM_C_REQ_STOP | PS_SM_C_REQ_RESET | PS_SM_C_REQ_ESTOP)
+
+/** Number of condition bits (bit 0 .. PS_SM_COND_COUNT - 1); ps_sm_cond_name
+ *  has one name per bit. */
+#define PS_SM_COND_COUNT 14u
+#define PS_SM_C_ALL      ((1u << PS_SM_COND_COUNT) - 1u)
+
+/** What blocks STANDBY -> RAMP: every hard fault, and the soft faults that
+ *  make *starting* unsafe (no fresh actuator or IMU data to ramp from). The
+ *  other soft faults (POLICY_LATE, TARGET_INVALID, FALL) do not block a start:
+ *  if they persist, RAMP drops to DAMPING on its first tick. */
+#define PS_SM_C_START_BLOCKERS (PS_SM_C_HARD_FAULTS | PS_SM_C_REPLY_STALE | PS_SM_C_IMU_STALE)
+/** What blocks ESTOP -> STANDBY: any hard fault still present (e-stop input
+ *  still pressed, bus still off, drive still faulted, e-stop requested again). */
+#define PS_SM_C_RESET_BLOCKERS PS_SM_C_HARD_FAULTS
 
 /** One edge: leave `from` for `to` when (cond & trigger) && !(cond & blocker). */
 typedef struct {
@@ -70,25 +84,41 @@ typedef struct {
     ps_sm_state_t to;
 } ps_sm_edge_t;
 
-/** @return the state after applying conditions (first matching edge, else state)
- *  @rt RT-SAFE O(edges), pure */
+/** @return the state after applying conditions (first matching edge, else state);
+ *  a state outside the enum yields PS_SM_ESTOP (fail safe)
+ *  @rt RT-SAFE O(edges), pure, any thread */
 ps_sm_state_t ps_sm_next(ps_sm_state_t state, uint32_t cond);
+
+/** The edge ps_sm_next() would take, so the loop can log *why* it moved
+ *  (e.g. the lowest bit of cond & edge.trigger, via ps_sm_cond_name).
+ *  A matching edge may lead back to the same state (ESTOP's latch edge).
+ *  @pre none  @post none
+ *  @return index into ps_sm_edges() | -1 no edge matches (stay), or state invalid
+ *  @rt RT-SAFE O(edges), pure, any thread */
+int ps_sm_find_edge(ps_sm_state_t state, uint32_t cond);
 
 /** Would an operator request (one REQ_* bit) be accepted now, given the
  *  other conditions (e.g. e-stop input still pressed blocks a reset)?
- *  @post *out_reason set to a static sentence when refused
+ *  Accepted means ps_sm_next(state, cond | request) takes the request's edge:
+ *  START from STANDBY unless PS_SM_C_START_BLOCKERS; STOP from RAMP/ACTIVE;
+ *  RESET from ESTOP unless PS_SM_C_RESET_BLOCKERS; ESTOP from every state.
+ *  @pre out_reason may be NULL
+ *  @post *out_reason set to a static sentence ("start refused: ...") when
+ *        refused (also for -EINVAL); untouched when accepted
  *  @return 0 accepted | -PS_ERR_ILLEGAL_STATE | -EINVAL not a single request bit
  *  @rt RT-SAFE, pure */
 int ps_sm_check_request(ps_sm_state_t state, uint32_t request, uint32_t cond,
                         const char **out_reason);
 
-/** @return the edge table and its length (for docs and tests)  @rt RT-SAFE */
+/** @pre out_n may be NULL  @post *out_n = number of edges
+ *  @return the edge table and its length (for docs and tests)  @rt RT-SAFE */
 const ps_sm_edge_t *ps_sm_edges(unsigned *out_n);
 
 /** @return "STANDBY", ... or "?"  @rt RT-SAFE */
 const char *ps_sm_state_name(ps_sm_state_t s);
 
-/** @return name of the lowest set condition bit, e.g. "REPLY_STALE"  @rt RT-SAFE */
+/** @return name of the lowest set condition bit, e.g. "REPLY_STALE"; "?" when
+ *  no bit below PS_SM_COND_COUNT is set  @rt RT-SAFE */
 const char *ps_sm_cond_name(uint32_t bit);
 
 #endif /* PS_SM_H */

@@ -9,6 +9,7 @@
 
 #include <stdatomic.h>
 #include <stdbool.h>
+#include <stddef.h> /* ps_gpio.h uses NULL without including it */
 #include <stdint.h>
 
 #include "../drivers/ps_gpio.h"
@@ -26,8 +27,18 @@ void ps_gpio_sim_init(ps_gpio_sim_t *g);
 /** @return the loop-side port  @rt INIT */
 ps_gpio_port_t ps_gpio_sim_port(ps_gpio_sim_t *g);
 
+/* Port semantics: read_estop -EINVAL on out NULL; set_enable counts an edge
+ * only when the level changes; set_led -EINVAL on a value other than
+ * OFF/ON (line unchanged); close is a no-op. */
+
 /** Plant/scenario side. @rt RT-SAFE, any thread */
 void ps_gpio_sim_set_estop(ps_gpio_sim_t *g, bool is_pressed);
 bool ps_gpio_sim_is_enabled(const ps_gpio_sim_t *g);
+
+/** @return the LED line as last set by the loop  @rt RT-SAFE, any thread */
+ps_gpio_led_t ps_gpio_sim_get_led(const ps_gpio_sim_t *g);
+
+/** @return enable output changes seen so far  @rt RT-SAFE, any thread */
+uint64_t ps_gpio_sim_enable_edges(const ps_gpio_sim_t *g);
 
 #endif /* PS_GPIO_SIM_H */

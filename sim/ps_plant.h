@@ -7,8 +7,19 @@
  * Units: SI, double (MuJoCo's mjtNum). Joint arrays are indexed like the
  * robot file's joints. World frame: z up, robot initially facing +x.
  *
+ * Model requirements (sim/models/ps1.xml meets them): one free joint (the
+ * floating base, "pelvis"); per robot joint a hinge and a motor actuator of
+ * the same name; a body "head"; foot bodies whose names end in "foot" (every
+ * other geom touching a world-body geom counts as a fall); a site "imu" with a
+ * gyro sensor "imu_gyro" and an accelerometer "imu_accel" on it.
+ *
+ * Harness: spring 20 kN/m + 1.5 kN s/m and 1.5 kN m/rad + 100 N m s/rad on
+ * the pelvis toward its pose at create (holds the limp robot within ~2 cm).
+ *
  * Threads: one thread at a time (the plant thread, or the loop thread in
- * lockstep). Allocation: at create only (mj_loadXML, mj_makeData).
+ * lockstep). Allocation: at create only (mj_loadXML, mj_makeData). The first
+ * create installs a silent MuJoCo warning handler (if none is installed) so
+ * the library never prints; instability is reported by ps_plant_step.
  */
 #ifndef PS_PLANT_H
 #define PS_PLANT_H
@@ -29,16 +40,22 @@ typedef struct {
 } ps_plant_truth_t;
 
 /** Load the model and place the robot in its stance (robot->joints[].stance_rad)
- *  with the soles on the floor.
+ *  with the soles on the floor (lowest foot point at z = 0), upright at the
+ *  world origin facing +x, at rest; the harness is engaged.
+ *  @pre robot->n_joints <= PS_MAX_JOINTS  @post *out set only on success;
+ *       err holds a one-line message on failure
  *  @return 0 | -PS_ERR_PLANT (model fails to load; err has MuJoCo's message)
- *          | -PS_ERR_CONFIG (a robot joint or actuator is missing in the model) @rt INIT */
+ *          | -PS_ERR_CONFIG (a robot joint or actuator is missing in the model,
+ *            or the model lacks the free joint, head, feet or IMU; err names it)
+ *          | -EINVAL (NULL argument) | -ENOMEM  @rt INIT */
 int ps_plant_create(const char *model_path, const ps_robot_cfg_t *robot, ps_plant_t **out,
                     char *err, size_t err_len);
 
 /** @return physics time step (the model's option timestep)  @units s */
 double ps_plant_timestep_s(const ps_plant_t *p);
 
-/** Joint torques to apply from now on (clamped to the model's ctrlrange). */
+/** Joint torques to apply from now on (clamped to the model's ctrlrange;
+ *  a non-finite entry applies 0).  @pre tau_nm has robot n_joints entries */
 void ps_plant_set_torques(ps_plant_t *p, const double *tau_nm);
 
 /** @post q and qd of every robot joint  @units rad, rad/s */
@@ -51,18 +68,30 @@ void ps_plant_get_imu(const ps_plant_t *p, double out_gyro_rad_s[3], double out_
 /** @return body index for a name, or -ENOENT */
 int ps_plant_find_body(const ps_plant_t *p, const char *name);
 
-/** External force on a body's CoM (world frame) until changed. */
+/** External force on a body's CoM (world frame) until changed; added to the
+ *  harness force when body_idx is the pelvis. An invalid body_idx is ignored. */
 void ps_plant_set_external_force(ps_plant_t *p, int body_idx, const double force_n[3]);
 
 /** Harness: a stiff spring-damper holding the pelvis at its initial pose
  *  (like a gantry on a real robot). Engaged at create. */
 void ps_plant_set_harness(ps_plant_t *p, bool is_engaged);
 
-/** Advance physics by one timestep. @return 0 | -PS_ERR_PLANT (NaN/instability) */
+/** Advance physics by one timestep. @return 0 | -PS_ERR_PLANT (NaN/instability;
+ *  MuJoCo has then reset the state, so stop stepping) */
 int ps_plant_step(ps_plant_t *p);
 
 /** @post *out = current truth */
 void ps_plant_get_truth(const ps_plant_t *p, ps_plant_truth_t *out);
+
+/** Total mass of the floating robot (the free joint's subtree).
+ *  @pre created  @return mass  @units kg  @rt RT-SAFE O(1) */
+double ps_plant_total_mass_kg(const ps_plant_t *p);
+
+/** Lowest world z of any geom of a foot body (a body whose name ends in
+ *  "foot"), from the last computed kinematics (create, or the last step).
+ *  @pre created  @return height above the floor plane z = 0  @units m
+ *  @rt RT-SAFE O(ngeom) */
+double ps_plant_foot_min_z_m(const ps_plant_t *p);
 
 /** Safe on NULL. */
 void ps_plant_destroy(ps_plant_t *p);

@@ -17,7 +17,21 @@
  *    sleep_until advances the plant to the deadline. Deterministic for a seed.
  *
  * The scenario drives pushes, the harness, e-stop presses and injected
- * faults at simulated times.
+ * faults at simulated times (relative to ps_sim_start's start_ns).
+ *
+ * Emulated drivers start in motor mode OFF, like real MIT drivers: commands
+ * are answered but not obeyed until the loop sends ENTER to the joint
+ * (sim/ps_devices.h). They go limp with COMMS_LOST after 100 ms without a
+ * command in motor mode.
+ *
+ * Timing: each servo period runs the model's physics steps (the model's
+ * timestep must divide the period). At each physics step the devices take the
+ * frames whose end-of-frame time has come, reply, and set torques; the IMU
+ * samples on the period grid. In lockstep the period [t, t + period) is run
+ * by sleep_until(t + period), so commands the loop sends at t act from the
+ * first physics step after they are on the wire. In real time the plant
+ * thread runs the period at start + period/2 + k period (half a period after
+ * the loop's tick) so commands sent early in a tick act in the same period.
  *
  * Threads: create/destroy on the main thread; ports used by the loop thread;
  * the plant thread is internal. Allocation: all at create.
@@ -33,6 +47,7 @@
 #include "../drivers/ps_gpio.h"
 #include "../rt/ps_clock.h"
 #include "../rt/ps_config.h"
+#include "ps_devices.h"
 
 typedef struct ps_sim ps_sim_t;
 
@@ -40,9 +55,9 @@ typedef struct {
     const ps_board_cfg_t *board;
     const ps_robot_cfg_t *robot;
     const ps_scenario_cfg_t *scenario;
-    const char *model_path;   /**< resolved MJCF path */
+    const char *model_path; /**< resolved MJCF path */
     bool is_lockstep;
-    int64_t period_ns;        /**< servo period; plant paced at this */
+    int64_t period_ns;          /**< servo period; plant paced at this */
     const uint8_t *joint_phase; /**< from the bus plan (unused by devices; informative) */
 } ps_sim_cfg_t;
 
@@ -55,8 +70,20 @@ typedef struct {
     uint64_t n_steps;      /**< physics steps taken */
     uint64_t n_cmd_frames; /**< command frames the emulated drivers consumed */
     uint64_t n_cmd_out_of_limits; /**< commands outside the joint's configured limits */
-    uint64_t n_bad_frames; /**< frames the emulated devices rejected */
+    uint64_t n_bad_frames;        /**< frames the emulated devices rejected */
     double max_temp_c;
+    /* Added by sim/ps_sim.c (documented extensions): */
+    double pelvis_m[3];         /**< pelvis origin, world */
+    uint64_t n_plant_overruns;  /**< real time: plant periods skipped because physics
+                                     fell behind the clock (0 in lockstep) */
+    uint64_t n_cmd_ignored;     /**< command frames received outside motor mode */
+    uint64_t n_reply_frames;    /**< replies the emulated drivers put on the buses */
+    uint64_t n_imu_samples;     /**< IMU samples sent (two frames each) */
+    uint64_t n_dev_tx_dropped;  /**< device frames refused by a full bus queue */
+    uint64_t n_unrouted_frames; /**< frames on a bus that no device's id matches
+                                     (also counted in n_bad_frames) */
+    int plant_err;              /**< 0, or the first ps_plant_step error; physics
+                                     stops advancing after it */
 } ps_sim_truth_t;
 
 /** Load the model, build devices and buses, apply the scenario's initial
@@ -88,6 +115,12 @@ void ps_sim_get_truth(ps_sim_t *s, ps_sim_truth_t *out);
 /** Pending operator requests from the scenario (START, STOP, RESET) that fell
  *  due since the last call, as ps_sm condition bits. @rt RT-SAFE, loop thread */
 uint32_t ps_sim_take_requests(ps_sim_t *s);
+
+/** Copy of one emulated driver's state (motor mode, fault, temperature,
+ *  counters), for tests and the summary.
+ *  @pre lockstep, or the plant thread stopped (no lock guards the devices)
+ *  @return 0 | -EINVAL joint_idx out of range  @rt NON-RT */
+int ps_sim_get_actuator(ps_sim_t *s, unsigned joint_idx, ps_devices_actuator_t *out);
 
 /** @post all resources freed; s invalid. Safe on NULL.  @rt INIT */
 void ps_sim_destroy(ps_sim_t *s);

@@ -1,0 +1,382 @@
+/*
+ * pushstep: start-up, wiring and shutdown.
+ *
+ * This is the one place that knows which implementation sits behind each port:
+ * it reads the board file and wires the simulated plant (board kind `sim`) or,
+ * later, the SocketCAN and libgpiod drivers (kind `linux`) into the loop.
+ * Everything here is INIT or NON-RT; the loop thread runs ps_loop_run only.
+ */
+#include <errno.h>
+#include <getopt.h>
+#include <libgen.h>
+#include <limits.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/mman.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "ps_app.h"
+#include "ps_err.h"
+#include "ps_guard.h"
+#include "ps_logger.h"
+#include "ps_rtsetup.h"
+#include "ps_summary.h"
+
+#define STACK_PREFAULT    (256u * 1024u)
+#define RT_START_LEAD_NS  (20 * PS_NS_PER_MS)
+#define LOCKSTEP_START_NS PS_NS_PER_S /* t = 0 means "never" in measurements */
+#define TRUTH_POLL_NS     (10 * PS_NS_PER_MS)
+
+typedef struct {
+    const char *board;
+    const char *robot;
+    const char *scenario;
+    double duration_s;
+    bool has_duration;
+    bool is_lockstep;
+    bool is_rt_required;
+    bool is_quiet;
+    const char *summary_path;
+    double start_after_s; /**< real boards: request START after this; < 0 never */
+} options_t;
+
+/* Everything the run owns; static because ps_app_t is large and must not
+ * live on a thread stack. */
+static struct {
+    options_t opt;
+    char data_dir[PATH_MAX];
+    ps_app_t app;
+    ps_logger_t logger;
+    int64_t start_ns, end_ns;
+    unsigned rt_missing;
+    ps_guard_counts_t guard;
+    int loop_rc;
+    _Atomic bool is_loop_done;
+} g;
+
+static const char USAGE[] =
+    "usage: pushstep [options]\n"
+    "Runs the balance controller's fixed-step loop against a board: real hardware\n"
+    "or, for board `sim`, the MuJoCo plant with emulated CAN actuators, IMU and GPIO.\n"
+    "\n"
+    "  --board NAME|FILE     board file, or NAME for boards/NAME.yaml (default sim)\n"
+    "  --robot FILE          robot file: joint map, ranges, gains, limits\n"
+    "                        (default robots/ps1.yaml)\n"
+    "  --scenario FILE       simulation scenario: operator events, pushes, faults\n"
+    "                        (default scenarios/stand.yaml on board sim)\n"
+    "  --duration S          run S seconds of loop time, then stop through damping\n"
+    "                        (default: the scenario's duration_s; 0 = until Ctrl-C)\n"
+    "  --lockstep            simulation only: no real-time pacing; loop and plant\n"
+    "                        alternate on simulated time, as fast as the plant allows,\n"
+    "                        deterministic for a scenario seed\n"
+    "  --summary FILE.json   write the end summary as JSON: ticks, overruns, latency\n"
+    "                        percentiles per stage, state transitions, mallocs and\n"
+    "                        page faults after init, bus loads, fall detected\n"
+    "  --require-rt          fail instead of warning when mlockall, SCHED_FIFO or CPU\n"
+    "                        affinity are not permitted\n"
+    "  --start-after S       real boards: request START S seconds after start\n"
+    "                        (on board sim the scenario's events do this)\n"
+    "  --quiet               no status lines (transitions and the summary still print)\n"
+    "  -h, --help            this text\n"
+    "\n"
+    "Ctrl-C (or the end of --duration) brakes the robot through DAMPING to STANDBY\n"
+    "before exiting; a second Ctrl-C while braking requests e-stop.\n"
+    "Exit status: 0 ok, 1 runtime failure, 2 bad usage or configuration.\n";
+
+/* ---- options and paths ------------------------------------------------ */
+
+static int parse_seconds(const char *text, const char *what, double *out)
+{
+    char *end = NULL;
+    errno = 0;
+    double v = strtod(text, &end);
+    if (errno != 0 || end == text || *end != '\0' || !(v >= 0.0) || v > 86400.0) {
+        fprintf(stderr, "pushstep: %s: \"%s\" is not a number of seconds in [0, 86400]\n", what,
+                text);
+        return -EINVAL;
+    }
+    *out = v;
+    return 0;
+}
+
+static int parse_options(int argc, char **argv, options_t *o)
+{
+    enum { O_LOCKSTEP = 256, O_SUMMARY, O_REQUIRE_RT, O_START_AFTER, O_QUIET };
+    static const struct option LONG[] = {
+        {"board", required_argument, NULL, 'b'},
+        {"robot", required_argument, NULL, 'r'},
+        {"scenario", required_argument, NULL, 's'},
+        {"duration", required_argument, NULL, 'd'},
+        {"lockstep", no_argument, NULL, O_LOCKSTEP},
+        {"summary", required_argument, NULL, O_SUMMARY},
+        {"require-rt", no_argument, NULL, O_REQUIRE_RT},
+        {"start-after", required_argument, NULL, O_START_AFTER},
+        {"quiet", no_argument, NULL, O_QUIET},
+        {"help", no_argument, NULL, 'h'},
+        {NULL, 0, NULL, 0},
+    };
+    *o = (options_t){.board = "sim", .start_after_s = -1.0};
+    int c;
+    while ((c = getopt_long(argc, argv, "h", LONG, NULL)) != -1) {
+        switch (c) {
+        case 'b': o->board = optarg; break;
+        case 'r': o->robot = optarg; break;
+        case 's': o->scenario = optarg; break;
+        case 'd':
+            if (parse_seconds(optarg, "--duration", &o->duration_s) < 0)
+                return -EINVAL;
+            o->has_duration = true;
+            break;
+        case O_LOCKSTEP: o->is_lockstep = true; break;
+        case O_SUMMARY: o->summary_path = optarg; break;
+        case O_REQUIRE_RT: o->is_rt_required = true; break;
+        case O_START_AFTER:
+            if (parse_seconds(optarg, "--start-after", &o->start_after_s) < 0)
+                return -EINVAL;
+            break;
+        case O_QUIET: o->is_quiet = true; break;
+        case 'h': fputs(USAGE, stdout); exit(0);
+        default: fputs(USAGE, stderr); return -EINVAL;
+        }
+    }
+    if (optind < argc) {
+        fprintf(stderr, "pushstep: unexpected argument \"%s\"\n%s", argv[optind], USAGE);
+        return -EINVAL;
+    }
+    return 0;
+}
+
+/* The installed data (boards/, robots/, scenarios/, sim/models/) sits one
+ * level above the binary's directory (build/pushstep -> repo root). */
+static void find_data_dir(char *out, size_t len)
+{
+    char exe[PATH_MAX];
+    ssize_t n = readlink("/proc/self/exe", exe, sizeof(exe) - 1);
+    if (n <= 0) {
+        snprintf(out, len, ".");
+        return;
+    }
+    exe[n] = '\0';
+    snprintf(out, len, "%s/..", dirname(exe));
+}
+
+/* ---- real-time setup -------------------------------------------------- */
+
+static int setup_process_rt(void)
+{
+    int rc = ps_rtsetup_lock_memory();
+    if (rc < 0) {
+        g.rt_missing |= PS_RT_MISSING_MLOCK;
+        long pages = ps_rtsetup_prefault_maps();
+        (void)pages; /* best effort: only lowers the odds of later faults */
+    }
+    return 0;
+}
+
+static void report_rt(void)
+{
+    if (g.rt_missing == 0)
+        return;
+    char what[200];
+    ps_rtsetup_describe(g.rt_missing, what, sizeof(what));
+    if (g.opt.is_rt_required)
+        fprintf(stderr, "pushstep: real-time setup not permitted: %s\n", what);
+    else
+        fprintf(stderr, "pushstep: warning: real-time setup incomplete: %s; running on without "
+                        "(--require-rt makes this fatal)\n",
+                what);
+}
+
+/* ---- the loop thread -------------------------------------------------- */
+
+static void *loop_thread_main(void *arg)
+{
+    (void)arg;
+    if (!g.opt.is_lockstep)
+        g.rt_missing |= ps_rtsetup_thread(g.app.board.rt.priority, g.app.board.rt.loop_cpu);
+    report_rt(); /* still INIT: the loop has not started */
+    if (g.opt.is_rt_required && g.rt_missing != 0) {
+        g.loop_rc = -PS_ERR_RT_UNAVAILABLE;
+        atomic_store(&g.is_loop_done, true);
+        return NULL;
+    }
+    ps_rtsetup_prefault_stack(STACK_PREFAULT);
+    ps_guard_arm();
+    g.loop_rc = ps_loop_run(&g.app.loop, g.start_ns, g.end_ns);
+    ps_guard_disarm(&g.guard);
+    atomic_store(&g.is_loop_done, true);
+    return NULL;
+}
+
+static void on_signal(int sig)
+{
+    (void)sig;
+    ps_loop_request_stop(&g.app.loop);
+}
+
+static int install_signals(void)
+{
+    struct sigaction sa;
+    memset(&sa, 0, sizeof(sa));
+    sa.sa_handler = on_signal;
+    sigemptyset(&sa.sa_mask);
+    if (sigaction(SIGINT, &sa, NULL) < 0 || sigaction(SIGTERM, &sa, NULL) < 0)
+        return -errno;
+    return 0;
+}
+
+static int64_t wall_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (int64_t)ts.tv_sec * PS_NS_PER_S + ts.tv_nsec;
+}
+
+/* Ground truth is sampled from the main thread while the loop runs: whether
+ * the robot really fell while the controller was in charge. */
+static void watch_truth(ps_summary_t *sum)
+{
+    const struct timespec poll = {0, TRUTH_POLL_NS};
+    sum->truth_min_com_height_active_m = 1e9;
+    while (!atomic_load(&g.is_loop_done)) {
+        nanosleep(&poll, NULL);
+        if (g.app.sim == NULL)
+            continue;
+        ps_sm_state_t st = *(volatile ps_sm_state_t *)&g.app.loop.state;
+        if (st != PS_SM_ACTIVE)
+            continue;
+        ps_sim_truth_t t;
+        ps_sim_get_truth(g.app.sim, &t);
+        if (t.is_fallen)
+            sum->truth_fell_while_active = true;
+        if (t.com_m[2] < sum->truth_min_com_height_active_m)
+            sum->truth_min_com_height_active_m = t.com_m[2];
+    }
+    if (sum->truth_min_com_height_active_m > 1e8)
+        sum->truth_min_com_height_active_m = 0;
+}
+
+static int run_loop(ps_summary_t *sum)
+{
+    double duration_s = g.opt.has_duration ? g.opt.duration_s : g.app.scenario.duration_s;
+    const ps_clock_t *clock = g.app.loop.cfg.clock;
+    g.start_ns = g.opt.is_lockstep ? LOCKSTEP_START_NS : ps_clock_now_ns(clock) + RT_START_LEAD_NS;
+    g.end_ns = duration_s > 0 ? g.start_ns + ps_s_to_ns(duration_s) : 0;
+    if (g.opt.start_after_s >= 0)
+        ps_app_request_start_at(&g.app, g.start_ns + ps_s_to_ns(g.opt.start_after_s));
+    int rc = ps_logger_start(&g.logger, &g.app.loop, &g.app.ring, stdout, g.start_ns, g.opt.is_quiet,
+                             g.app.board.rt.worker_cpu);
+    if (rc < 0)
+        return rc;
+    rc = ps_sim_start(g.app.sim, g.start_ns);
+    if (rc < 0) {
+        ps_logger_stop(&g.logger);
+        return rc;
+    }
+    printf("running %s on board %s (%s), robot %s, %s%.1f s\n",
+           g.opt.is_lockstep ? "lockstep" : "in real time", g.app.board.name, g.app.board_path,
+           g.app.robot.name, duration_s > 0 ? "" : "until Ctrl-C, ", duration_s);
+    fflush(stdout);
+    pthread_t th;
+    int64_t wall0 = wall_ns();
+    rc = -pthread_create(&th, NULL, loop_thread_main, NULL);
+    if (rc == 0) {
+        watch_truth(sum);
+        (void)pthread_join(th, NULL); /* the thread always ends */
+        rc = g.loop_rc;
+    }
+    sum->wall_s = ps_ns_to_s(wall_ns() - wall0);
+    ps_sim_stop(g.app.sim);
+    ps_logger_stop(&g.logger);
+    return rc;
+}
+
+static void finish_summary(ps_summary_t *sum)
+{
+    sum->board_path = g.app.board_path;
+    sum->robot_path = g.app.robot_path;
+    sum->scenario_path = g.app.scenario_path[0] ? g.app.scenario_path : NULL;
+    sum->is_lockstep = g.opt.is_lockstep;
+    sum->loop_s = ps_ns_to_s((int64_t)g.app.loop.counters.n_ticks * g.app.loop.period_ns);
+    sum->loop = &g.app.loop;
+    sum->logger = &g.logger;
+    sum->guard = g.guard;
+#if defined(__SANITIZE_ADDRESS__)
+    sum->is_guard_exact = false;
+#else
+    sum->is_guard_exact = true;
+#endif
+    sum->rt_missing = g.rt_missing;
+    sum->plan = &g.app.plan;
+    sum->board = &g.app.board;
+    for (uint32_t b = 0; b < g.app.board.n_buses; b++)
+        if (ps_can_get_state(&g.app.loop.cfg.buses[b], &sum->bus_states[b]) < 0)
+            memset(&sum->bus_states[b], 0, sizeof(sum->bus_states[b]));
+    if (g.app.sim != NULL) {
+        ps_sim_truth_t t;
+        ps_sim_get_truth(g.app.sim, &t);
+        sum->has_truth = true;
+        sum->truth_cmd_out_of_limits = t.n_cmd_out_of_limits;
+        sum->truth_plant_overruns = t.n_plant_overruns;
+    }
+}
+
+static void print_plan(const ps_app_t *app)
+{
+    const ps_canbus_plan_t *p = &app->plan;
+    for (uint32_t b = 0; b < p->n_buses; b++)
+        printf("bus %s: %u sources, worst tick %u of %u bits (%.1f%%), average %.1f%%, "
+               "budget %.0f%%\n",
+               app->board.buses[b].ifname, p->n_sources[b], p->tick_bits_max[b],
+               p->tick_capacity_bits[b], p->load_peak[b] * 100, p->load_avg[b] * 100,
+               (double)app->board.bus_budget * 100);
+}
+
+int main(int argc, char **argv)
+{
+    if (parse_options(argc, argv, &g.opt) < 0)
+        return 2;
+    find_data_dir(g.data_dir, sizeof(g.data_dir));
+    ps_app_opts_t ao = {
+        .data_dir = g.data_dir,
+        .board = g.opt.board,
+        .robot = g.opt.robot,
+        .scenario = g.opt.scenario,
+        .is_lockstep = g.opt.is_lockstep,
+    };
+    char err[PS_ERR_MSG_LEN];
+    int rc = ps_app_init(&g.app, &ao, err, sizeof(err));
+    if (rc == 0 || rc == -PS_ERR_BUS_BUDGET)
+        print_plan(&g.app);
+    if (rc < 0) {
+        fprintf(stderr, "pushstep: %s\n", err);
+        ps_app_deinit(&g.app);
+        return 2;
+    }
+    rc = setup_process_rt();
+    if (rc == 0)
+        rc = install_signals();
+    ps_summary_t sum;
+    memset(&sum, 0, sizeof(sum));
+    if (rc == 0)
+        rc = run_loop(&sum);
+    if (rc == -PS_ERR_RT_UNAVAILABLE)
+        fprintf(stderr, "pushstep: --require-rt: %s\n", ps_strerror(rc));
+    else if (rc < 0)
+        fprintf(stderr, "pushstep: loop failed: %s\n", ps_strerror(rc));
+    if (g.app.loop.counters.n_ticks > 0) {
+        finish_summary(&sum);
+        ps_summary_print(&sum, stdout);
+        if (g.opt.summary_path != NULL &&
+            ps_summary_write_json(&sum, g.opt.summary_path, err, sizeof(err)) < 0) {
+            fprintf(stderr, "pushstep: %s\n", err);
+            rc = -EIO;
+        }
+    }
+    ps_app_deinit(&g.app);
+    return rc < 0 ? 1 : 0;
+}

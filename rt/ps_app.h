@@ -1,0 +1,70 @@
+/*
+ * ps_app: builds a runnable system from the three configuration files, in
+ * one place: loads and cross-checks board, robot and scenario, plans the CAN
+ * buses, wires the ports of the board's kind (the simulated plant for `sim`;
+ * the SocketCAN/libgpiod drivers for `linux` are not built yet), the policy
+ * slot (standing controller), the record ring and the loop. main() and the
+ * end-to-end tests both start the system through here.
+ *
+ * Threads: main thread. Allocation: INIT only (the sim allocates at create);
+ * ps_app_t is large: keep it static or on the heap.
+ */
+#ifndef PS_APP_H
+#define PS_APP_H
+
+#include <limits.h>
+#include <stdbool.h>
+
+#include "../drivers/ps_canbus.h"
+#include "../policy/ps_stand.h"
+#include "../sim/ps_sim.h"
+#include "ps_config.h"
+#include "ps_loop.h"
+#include "ps_ring.h"
+
+#define PS_APP_RING_SLOTS   1024u
+#define PS_APP_STATUS_EVERY 100u /**< ticks between status records */
+
+typedef struct {
+    const char *data_dir; /**< where boards/, robots/, scenarios/ live */
+    const char *board;    /**< NAME (boards/NAME.yaml) or a file path */
+    const char *robot;    /**< file path or NAME; NULL: ps1 */
+    const char *scenario; /**< file path or NAME; NULL: stand on sim, none otherwise */
+    bool is_lockstep;
+} ps_app_opts_t;
+
+typedef struct {
+    char board_path[PATH_MAX], robot_path[PATH_MAX], scenario_path[PATH_MAX];
+    char model_path[PATH_MAX];
+    bool is_lockstep;
+    ps_board_cfg_t board;
+    ps_robot_cfg_t robot;
+    ps_scenario_cfg_t scenario;
+    ps_canbus_plan_t plan;
+    ps_sim_t *sim;                /**< NULL on real boards */
+    ps_stand_t stand;
+    ps_ring_t ring;
+    ps_loop_rec_t ring_storage[PS_APP_RING_SLOTS];
+    ps_loop_t loop;
+    struct {
+        ps_sim_t *sim;
+        const ps_clock_t *clock;
+        _Atomic int64_t start_request_ns; /**< 0: none */
+    } op;
+} ps_app_t;
+
+/** Load, check, plan and wire. On a bus budget error the plan in app->plan is
+ *  still filled so the caller can show it.
+ *  @post err holds one line naming the file/field/bus on failure
+ *  @return 0 | -PS_ERR_CONFIG | -PS_ERR_BUS_BUDGET | -ENOENT | -ENOTSUP (linux
+ *          board) | -PS_ERR_PLANT | -ENOMEM  @rt INIT, main thread */
+int ps_app_init(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t err_len);
+
+/** Request START at an absolute loop time (real boards without an operator).
+ *  @rt any thread */
+void ps_app_request_start_at(ps_app_t *app, int64_t t_ns);
+
+/** Free the sim. Safe twice and on a failed init.  @rt INIT */
+void ps_app_deinit(ps_app_t *app);
+
+#endif /* PS_APP_H */

@@ -1,0 +1,537 @@
+#include "ps_loop.h"
+
+#include <math.h>
+#include <string.h>
+
+#include "../drivers/ps_mit.h"
+#include "../policy/ps_servo.h"
+#include "ps_err.h"
+
+static const char *const STAGE_NAMES[PS_STAGE_COUNT] = {
+    [PS_STAGE_WAKE] = "wake",     [PS_STAGE_READ] = "read",   [PS_STAGE_ESTIMATE] = "estimate",
+    [PS_STAGE_POLICY] = "policy", [PS_STAGE_SERVO] = "servo", [PS_STAGE_WRITE] = "write",
+    [PS_STAGE_TICK] = "tick",
+};
+_Static_assert(sizeof(STAGE_NAMES) / sizeof(STAGE_NAMES[0]) == PS_STAGE_COUNT,
+               "one name per stage");
+
+/* DAMPING may end early on stillness only after this long, so that a robot
+ * that is momentarily still at the instant damping starts is still braked. */
+#define MIN_DAMPING_NS (200 * PS_NS_PER_MS)
+
+const char *ps_loop_stage_name(ps_stage_t s)
+{
+    return (s >= 0 && s < PS_STAGE_COUNT) ? STAGE_NAMES[s] : "?";
+}
+
+static void build_reply_table(ps_loop_t *loop)
+{
+    const ps_robot_cfg_t *r = loop->cfg.robot;
+    memset(loop->reply_joint, 0xff, sizeof(loop->reply_joint)); /* all -1 */
+    for (uint32_t j = 0; j < r->n_joints; j++)
+        loop->reply_joint[r->joints[j].bus_idx][r->joints[j].reply_id & PS_CAN_SFF_MASK] =
+            (int16_t)j;
+}
+
+int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg)
+{
+    if (loop == NULL || cfg == NULL || cfg->robot == NULL || cfg->board == NULL ||
+        cfg->plan == NULL || cfg->clock == NULL || cfg->policy.ops == NULL)
+        return -EINVAL;
+    const ps_control_cfg_t *c = &cfg->robot->control;
+    if (c->servo_hz == 0 || c->policy_hz == 0 || c->servo_hz % c->policy_hz != 0 ||
+        cfg->robot->n_joints == 0 || cfg->robot->n_joints > PS_MAX_JOINTS ||
+        cfg->board->n_buses == 0 || cfg->board->n_buses > PS_MAX_BUSES)
+        return -EINVAL;
+    for (uint32_t b = 0; b < cfg->board->n_buses; b++)
+        if (cfg->buses[b].ops == NULL)
+            return -EINVAL;
+
+    memset(loop, 0, sizeof(*loop)); /* also touches every page of the struct */
+    loop->cfg = *cfg;
+    if (loop->cfg.perf_clock == NULL)
+        loop->cfg.perf_clock = cfg->clock;
+    loop->period_ns = PS_NS_PER_S / c->servo_hz;
+    loop->policy_div = c->servo_hz / c->policy_hz;
+    loop->state = PS_SM_STANDBY;
+    loop->meas.n_joints = cfg->robot->n_joints;
+    atomic_init(&loop->external_requests, 0u);
+    atomic_init(&loop->n_stop_requests, 0u);
+    int rc = ps_estimate_init(&loop->estimator, cfg->robot, (float)loop->period_ns * 1e-9f);
+    if (rc < 0)
+        return rc;
+    build_reply_table(loop);
+    ps_imu_msg_rx_init(&loop->imu_rx, cfg->robot->imu.base_id);
+    for (int s = 0; s < PS_STAGE_COUNT; s++)
+        ps_perf_reset(&loop->perf[s]);
+    return ps_pacer_init(&loop->pacer, cfg->clock, loop->period_ns, 0);
+}
+
+void ps_loop_deinit(ps_loop_t *loop)
+{
+    if (loop != NULL)
+        memset(loop, 0, sizeof(*loop));
+}
+
+/* ---- READ ------------------------------------------------------------- */
+
+static void take_reply(ps_loop_t *loop, int joint_idx, const ps_can_frame_t *f)
+{
+    const ps_joint_cfg_t *j = &loop->cfg.robot->joints[joint_idx];
+    ps_mit_reply_t rep;
+    if (ps_mit_decode_reply(&j->wire, f->data, f->len, &rep) < 0 ||
+        rep.motor_id != (j->can_id & 0x0fu) || !isfinite(rep.p_rad)) {
+        loop->counters.n_rx_bad++;
+        return;
+    }
+    ps_joint_meas_t *m = &loop->meas.joints[joint_idx];
+    m->q_rad = rep.p_rad;
+    m->qd_rad_s = rep.v_rad_s;
+    m->tau_nm = rep.i_a * j->kt_nm_a;
+    m->temp_c = (float)(rep.temp_mos_c > rep.temp_rotor_c ? rep.temp_mos_c : rep.temp_rotor_c);
+    m->fault = rep.fault;
+    m->t_ns = loop->t_deadline_ns;
+}
+
+static void take_frame(ps_loop_t *loop, uint32_t bus_idx, const ps_can_frame_t *f)
+{
+    loop->counters.n_rx_frames++;
+    if (!f->is_ext) {
+        int joint_idx = loop->reply_joint[bus_idx][f->id & PS_CAN_SFF_MASK];
+        if (joint_idx >= 0) {
+            take_reply(loop, joint_idx, f);
+            return;
+        }
+    }
+    if (bus_idx != loop->cfg.robot->imu.bus_idx || f->is_ext) {
+        loop->counters.n_rx_unknown++;
+        return;
+    }
+    ps_imu_sample_t sample;
+    int rc = ps_imu_msg_rx_feed(&loop->imu_rx, f, &sample);
+    if (rc == -ENOENT) {
+        loop->counters.n_rx_unknown++;
+    } else if (rc < 0 || (rc == 1 && (sample.status & PS_IMU_STATUS_SELFTEST_FAIL))) {
+        loop->counters.n_rx_bad++;
+    } else if (rc == 1) {
+        ps_imu_meas_t *imu = &loop->meas.imu;
+        memcpy(imu->gyro_body_rad_s, sample.gyro_body_rad_s, sizeof(imu->gyro_body_rad_s));
+        memcpy(imu->accel_body_m_s2, sample.accel_body_m_s2, sizeof(imu->accel_body_m_s2));
+        imu->t_ns = loop->t_deadline_ns;
+    }
+}
+
+static void read_bus(ps_loop_t *loop, uint32_t bus_idx)
+{
+    const ps_can_port_t *port = &loop->cfg.buses[bus_idx];
+    const size_t cap = sizeof(loop->rx_buf) / sizeof(loop->rx_buf[0]);
+    for (;;) { /* bounded: a bus carries at most a tick's worth of frames */
+        int n = ps_can_recv_batch(port, loop->rx_buf, cap);
+        if (n < 0) {
+            loop->counters.n_bus_errors++;
+            return;
+        }
+        for (int i = 0; i < n; i++)
+            take_frame(loop, bus_idx, &loop->rx_buf[i]);
+        if ((size_t)n < cap)
+            return;
+    }
+}
+
+static void read_bus_states(ps_loop_t *loop)
+{
+    loop->bus_off_mask = 0;
+    for (uint32_t b = 0; b < loop->cfg.board->n_buses; b++) {
+        ps_can_state_t st;
+        if (ps_can_get_state(&loop->cfg.buses[b], &st) < 0) {
+            loop->counters.n_bus_errors++;
+            continue;
+        }
+        if (st.mode == PS_CAN_BUS_OFF)
+            loop->bus_off_mask |= 1u << b;
+    }
+}
+
+static void stage_read(ps_loop_t *loop)
+{
+    for (uint32_t b = 0; b < loop->cfg.board->n_buses; b++)
+        read_bus(loop, b);
+    read_bus_states(loop);
+}
+
+/* ---- POLICY ----------------------------------------------------------- */
+
+static bool is_target_valid(const ps_robot_cfg_t *r, const ps_targets_t *t)
+{
+    if (t->n_joints != r->n_joints)
+        return false;
+    for (uint32_t j = 0; j < r->n_joints; j++) {
+        const ps_joint_cfg_t *jc = &r->joints[j];
+        float q = t->q_rad[j];
+        if (!isfinite(q) || q < jc->pos_min_rad || q > jc->pos_max_rad ||
+            !isfinite(t->qd_rad_s[j]) || !isfinite(t->tau_ff_nm[j]))
+            return false;
+    }
+    return true;
+}
+
+static void stage_policy(ps_loop_t *loop, uint64_t tick)
+{
+    if (tick % loop->policy_div != 0)
+        return;
+    const ps_clock_t *clk = loop->cfg.perf_clock;
+    int64_t t0 = ps_clock_now_ns(clk);
+    int rc = loop->cfg.policy.ops->step(loop->cfg.policy.ctx, &loop->meas, &loop->estimator.est,
+                                        &loop->targets);
+    int64_t dt = ps_clock_now_ns(clk) - t0;
+    ps_perf_record(&loop->perf[PS_STAGE_POLICY], dt);
+    loop->counters.n_policy_runs++;
+    loop->has_policy_late = dt > ps_s_to_ns(loop->cfg.robot->control.policy_deadline_s);
+    if (loop->has_policy_late)
+        loop->counters.n_policy_late++;
+    loop->has_target_invalid = rc < 0 || !is_target_valid(loop->cfg.robot, &loop->targets);
+    if (loop->has_target_invalid)
+        loop->counters.n_target_invalid++;
+    else
+        loop->has_targets = true;
+}
+
+/* ---- state machine ---------------------------------------------------- */
+
+static void push_record(ps_loop_t *loop, const ps_loop_rec_t *rec)
+{
+    if (loop->cfg.ring != NULL && ps_ring_push(loop->cfg.ring, rec) < 0)
+        loop->counters.n_ring_dropped++;
+}
+
+static void fill_record(const ps_loop_t *loop, ps_rec_kind_t kind, ps_loop_rec_t *rec)
+{
+    memset(rec, 0, sizeof(*rec));
+    rec->kind = (uint8_t)kind;
+    rec->state = (uint8_t)loop->state;
+    rec->tick = loop->counters.n_ticks;
+    rec->t_ns = loop->t_deadline_ns;
+    rec->n_overruns = loop->pacer.n_overruns;
+    rec->n_policy_runs = loop->counters.n_policy_runs;
+    rec->com_height_m = loop->estimator.est.com_m[2];
+    float roll = loop->estimator.est.roll_rad, pitch = loop->estimator.est.pitch_rad;
+    rec->tilt_rad = sqrtf(roll * roll + pitch * pitch);
+}
+
+static bool is_stale(int64_t t_ns, int64_t now_ns, int64_t timeout_ns)
+{
+    return t_ns == 0 || now_ns - t_ns > timeout_ns;
+}
+
+static uint32_t watchdog_conditions(const ps_loop_t *loop)
+{
+    const ps_robot_cfg_t *r = loop->cfg.robot;
+    const int64_t now = loop->t_deadline_ns;
+    const int64_t reply_timeout = ps_s_to_ns(r->control.reply_timeout_s);
+    uint32_t cond = 0;
+    for (uint32_t j = 0; j < r->n_joints; j++) {
+        const ps_joint_meas_t *m = &loop->meas.joints[j];
+        const ps_joint_cfg_t *jc = &r->joints[j];
+        if (is_stale(m->t_ns, now, reply_timeout + (int64_t)jc->rate_div * loop->period_ns))
+            cond |= PS_SM_C_REPLY_STALE;
+        else if (m->fault != PS_MIT_FAULT_NONE || m->temp_c > jc->temp_max_c)
+            cond |= PS_SM_C_DRIVE_FAULT;
+    }
+    if (is_stale(loop->meas.imu.t_ns, now,
+                 ps_s_to_ns(r->control.imu_timeout_s) + (int64_t)r->imu.rate_div * loop->period_ns))
+        cond |= PS_SM_C_IMU_STALE;
+    if (loop->has_policy_late)
+        cond |= PS_SM_C_POLICY_LATE;
+    if (loop->has_target_invalid)
+        cond |= PS_SM_C_TARGET_INVALID;
+    if (loop->bus_off_mask != 0)
+        cond |= PS_SM_C_BUS_OFF;
+    if (loop->estimator.est.is_fallen)
+        cond |= PS_SM_C_FALL;
+    return cond;
+}
+
+static bool is_still(const ps_loop_t *loop)
+{
+    const float still = loop->cfg.robot->control.still_vel_rad_s;
+    for (uint32_t j = 0; j < loop->meas.n_joints; j++)
+        if (fabsf(loop->meas.joints[j].qd_rad_s) >= still)
+            return false;
+    return true;
+}
+
+static uint32_t timer_conditions(const ps_loop_t *loop)
+{
+    const ps_control_cfg_t *c = &loop->cfg.robot->control;
+    const int64_t in_state = loop->t_deadline_ns - loop->state_since_ns;
+    if (loop->state == PS_SM_RAMP && in_state >= ps_s_to_ns(c->ramp_s))
+        return PS_SM_C_RAMP_DONE;
+    if (loop->state == PS_SM_DAMPING &&
+        (in_state >= ps_s_to_ns(c->damping_s) || (in_state >= MIN_DAMPING_NS && is_still(loop))))
+        return PS_SM_C_DAMP_DONE;
+    return 0;
+}
+
+/* Operator requests are checked one by one so that each refusal is logged
+ * with its reason; accepted ones join the conditions of this tick. */
+static uint32_t take_requests(ps_loop_t *loop, uint32_t cond)
+{
+    uint32_t req = atomic_exchange(&loop->external_requests, 0u);
+    if (loop->cfg.op.take != NULL)
+        req |= loop->cfg.op.take(loop->cfg.op.ctx) & PS_SM_C_REQUESTS;
+    uint32_t accepted = 0;
+    for (uint32_t bit = 1; bit != 0 && bit <= PS_SM_C_REQUESTS; bit <<= 1) {
+        if ((req & bit) == 0)
+            continue;
+        const char *reason = NULL;
+        if (ps_sm_check_request(loop->state, bit, cond, &reason) == 0) {
+            accepted |= bit;
+            continue;
+        }
+        ps_loop_rec_t rec;
+        fill_record(loop, PS_REC_REFUSED, &rec);
+        rec.cond = bit;
+        rec.reason = reason;
+        push_record(loop, &rec);
+        loop->counters.n_refused++;
+    }
+    return accepted;
+}
+
+static void enter_state(ps_loop_t *loop, ps_sm_state_t to)
+{
+    loop->state = to;
+    loop->state_since_ns = loop->t_deadline_ns;
+    if (to == PS_SM_RAMP) {
+        for (uint32_t j = 0; j < loop->meas.n_joints; j++)
+            loop->ramp_from_q_rad[j] = loop->meas.joints[j].q_rad;
+        loop->cfg.policy.ops->reset(loop->cfg.policy.ctx);
+    }
+}
+
+static void stage_state_machine(ps_loop_t *loop)
+{
+    uint32_t cond = watchdog_conditions(loop) | timer_conditions(loop);
+    bool is_estop_pressed = true; /* a GPIO we cannot read counts as pressed */
+    if (ps_gpio_read_estop(&loop->cfg.gpio, &is_estop_pressed) < 0)
+        loop->counters.n_gpio_errors++;
+    if (is_estop_pressed)
+        cond |= PS_SM_C_ESTOP_INPUT;
+    cond |= take_requests(loop, cond);
+    if (loop->state != PS_SM_RAMP && loop->state != PS_SM_ACTIVE)
+        cond &= ~(uint32_t)PS_SM_C_FALL; /* a limp robot on the floor is not news */
+    else if (cond & PS_SM_C_FALL)
+        loop->counters.has_fallen = true;
+
+    ps_sm_state_t next = ps_sm_next(loop->state, cond);
+    if (next == loop->state)
+        return;
+    ps_loop_rec_t rec;
+    fill_record(loop, PS_REC_TRANSITION, &rec);
+    rec.from_state = (uint8_t)loop->state;
+    rec.state = (uint8_t)next;
+    rec.cond = cond;
+    push_record(loop, &rec);
+    loop->counters.n_transitions++;
+    enter_state(loop, next);
+}
+
+/* ---- SERVO and WRITE -------------------------------------------------- */
+
+static void queue_frame(ps_loop_t *loop, uint32_t bus_idx, uint32_t id, const uint8_t *data)
+{
+    ps_can_frame_t *f = &loop->tx_buf[bus_idx][loop->n_tx[bus_idx]++];
+    memset(f, 0, sizeof(*f));
+    f->id = id;
+    f->len = PS_MIT_FRAME_LEN;
+    memcpy(f->data, data, PS_MIT_FRAME_LEN);
+}
+
+/* Drives need ENTER before they obey commands and get EXIT when the robot is
+ * e-stopped, so that a reset starts from a known, disabled driver state. */
+static bool queue_mode_change(ps_loop_t *loop, uint32_t j)
+{
+    const ps_joint_cfg_t *jc = &loop->cfg.robot->joints[j];
+    uint8_t data[PS_MIT_FRAME_LEN];
+    bool want_entered = loop->state != PS_SM_ESTOP;
+    if (loop->is_entered[j] == want_entered)
+        return false;
+    ps_mit_encode_special(want_entered ? PS_MIT_SPECIAL_ENTER : PS_MIT_SPECIAL_EXIT, data);
+    queue_frame(loop, jc->bus_idx, jc->can_id, data);
+    loop->is_entered[j] = want_entered;
+    return true;
+}
+
+static void servo_joint(ps_loop_t *loop, uint32_t j, const ps_servo_mode_t *mode)
+{
+    const ps_robot_cfg_t *r = loop->cfg.robot;
+    const ps_joint_cfg_t *jc = &r->joints[j];
+    ps_mit_cmd_t cmd;
+    if (ps_servo_command(jc, &r->control, mode, j, &loop->targets, &cmd) < 0)
+        loop->counters.n_target_invalid++;
+    if (!ps_servo_is_within_limits(jc, &cmd)) {
+        /* Defence in depth: the servo layer already clamps. */
+        loop->counters.n_cmd_replaced++;
+        memset(&cmd, 0, sizeof(cmd));
+        cmd.p_rad = fminf(fmaxf(loop->meas.joints[j].q_rad, jc->pos_min_rad), jc->pos_max_rad);
+    }
+    uint8_t data[PS_MIT_FRAME_LEN];
+    if (ps_mit_encode_cmd(&jc->wire, &cmd, data) < 0) {
+        loop->counters.n_cmd_replaced++;
+        return;
+    }
+    queue_frame(loop, jc->bus_idx, jc->can_id, data);
+}
+
+static void stage_servo(ps_loop_t *loop, uint64_t tick)
+{
+    const ps_robot_cfg_t *r = loop->cfg.robot;
+    float meas_q[PS_MAX_JOINTS];
+    for (uint32_t j = 0; j < r->n_joints; j++)
+        meas_q[j] = loop->meas.joints[j].q_rad;
+    ps_servo_mode_t mode = {
+        .state = loop->has_targets ? loop->state : PS_SM_DAMPING,
+        .ramp_alpha = 0.0f,
+        .ramp_from_q_rad = loop->ramp_from_q_rad,
+        .meas_q_rad = meas_q,
+    };
+    if (!loop->has_targets && (loop->state == PS_SM_STANDBY || loop->state == PS_SM_ESTOP))
+        mode.state = loop->state;
+    if (loop->state == PS_SM_RAMP) {
+        float alpha = (float)(loop->t_deadline_ns - loop->state_since_ns) /
+                      (float)ps_s_to_ns(r->control.ramp_s);
+        mode.ramp_alpha = fminf(fmaxf(alpha, 0.0f), 1.0f);
+    }
+    for (uint32_t b = 0; b < loop->cfg.board->n_buses; b++)
+        loop->n_tx[b] = 0;
+    for (uint32_t j = 0; j < r->n_joints; j++) {
+        if (!ps_canbus_is_due(tick, r->joints[j].rate_div, loop->cfg.plan->joint_phase[j]))
+            continue;
+        if (!queue_mode_change(loop, j))
+            servo_joint(loop, j, &mode);
+    }
+}
+
+static void stage_write(ps_loop_t *loop)
+{
+    for (uint32_t b = 0; b < loop->cfg.board->n_buses; b++) {
+        if (loop->n_tx[b] == 0)
+            continue;
+        int n = ps_can_send_batch(&loop->cfg.buses[b], loop->tx_buf[b], loop->n_tx[b]);
+        if (n < 0) {
+            loop->counters.n_bus_errors++;
+            continue;
+        }
+        loop->counters.n_tx_frames += (uint64_t)n;
+        loop->counters.n_tx_refused += loop->n_tx[b] - (uint32_t)n;
+    }
+    /* LED: on when the controller is in charge, blinking at 2 Hz in RAMP and
+     * DAMPING, 8 Hz in ESTOP, off in STANDBY. */
+    static const int64_t BLINK_HALF_PERIOD_NS[PS_SM_STATE_COUNT] = {
+        [PS_SM_RAMP] = 250 * PS_NS_PER_MS,
+        [PS_SM_DAMPING] = 250 * PS_NS_PER_MS,
+        [PS_SM_ESTOP] = 62 * PS_NS_PER_MS,
+    };
+    ps_gpio_led_t led = loop->state == PS_SM_ACTIVE ? PS_GPIO_LED_ON : PS_GPIO_LED_OFF;
+    int64_t half = BLINK_HALF_PERIOD_NS[loop->state];
+    if (half > 0)
+        led = ((loop->t_deadline_ns / half) & 1) ? PS_GPIO_LED_ON : PS_GPIO_LED_OFF;
+    if (ps_gpio_set_enable(&loop->cfg.gpio, loop->state != PS_SM_ESTOP) < 0 ||
+        ps_gpio_set_led(&loop->cfg.gpio, led) < 0)
+        loop->counters.n_gpio_errors++;
+}
+
+/* ---- the tick --------------------------------------------------------- */
+
+void ps_loop_tick(ps_loop_t *loop, int64_t deadline_ns)
+{
+    const ps_clock_t *clk = loop->cfg.perf_clock;
+    const uint64_t tick = loop->counters.n_ticks;
+    loop->t_deadline_ns = deadline_ns;
+
+    int64_t t0 = ps_clock_now_ns(clk);
+    stage_read(loop);
+    int64_t t1 = ps_clock_now_ns(clk);
+    ps_estimate_update(&loop->estimator, &loop->meas);
+    int64_t t2 = ps_clock_now_ns(clk);
+    stage_policy(loop, tick);
+    int64_t t3 = ps_clock_now_ns(clk);
+    stage_state_machine(loop);
+    stage_servo(loop, tick);
+    int64_t t4 = ps_clock_now_ns(clk);
+    stage_write(loop);
+    int64_t t5 = ps_clock_now_ns(clk);
+
+    ps_perf_record(&loop->perf[PS_STAGE_READ], t1 - t0);
+    ps_perf_record(&loop->perf[PS_STAGE_ESTIMATE], t2 - t1);
+    ps_perf_record(&loop->perf[PS_STAGE_SERVO], t4 - t3);
+    ps_perf_record(&loop->perf[PS_STAGE_WRITE], t5 - t4);
+    ps_perf_record(&loop->perf[PS_STAGE_TICK], t5 - t0);
+    loop->counters.n_ticks++;
+    if (loop->cfg.status_every != 0 && tick % loop->cfg.status_every == 0) {
+        ps_loop_rec_t rec;
+        fill_record(loop, PS_REC_STATUS, &rec);
+        push_record(loop, &rec);
+    }
+}
+
+void ps_loop_request(ps_loop_t *loop, uint32_t request_bits)
+{
+    atomic_fetch_or(&loop->external_requests, request_bits & PS_SM_C_REQUESTS);
+}
+
+void ps_loop_request_stop(ps_loop_t *loop)
+{
+    atomic_fetch_add(&loop->n_stop_requests, 1u);
+}
+
+/* First stop request (Ctrl-C or end of run): brake through DAMPING; a second
+ * one while stopping: e-stop. */
+static void handle_stop_requests(ps_loop_t *loop)
+{
+    uint32_t n = atomic_load(&loop->n_stop_requests);
+    if (n == loop->n_stops_handled)
+        return;
+    loop->n_stops_handled = n;
+    bool is_running = loop->state == PS_SM_RAMP || loop->state == PS_SM_ACTIVE;
+    ps_loop_request(loop, (n >= 2) ? PS_SM_C_REQ_ESTOP : (is_running ? PS_SM_C_REQ_STOP : 0));
+}
+
+static bool is_at_rest(const ps_loop_t *loop)
+{
+    return loop->state == PS_SM_STANDBY || loop->state == PS_SM_ESTOP;
+}
+
+int ps_loop_start(ps_loop_t *loop, int64_t start_ns)
+{
+    loop->state_since_ns = start_ns;
+    return ps_pacer_init(&loop->pacer, loop->cfg.clock, loop->period_ns, start_ns);
+}
+
+int ps_loop_step(ps_loop_t *loop)
+{
+    int64_t wake = ps_pacer_wait(&loop->pacer);
+    if (wake < 0)
+        return (int)wake;
+    ps_perf_record(&loop->perf[PS_STAGE_WAKE], wake);
+    handle_stop_requests(loop);
+    ps_loop_tick(loop, loop->pacer.next_ns - loop->period_ns); /* this tick's deadline */
+    (void)ps_pacer_end_tick(&loop->pacer); /* the pacer counts overruns itself */
+    return 0;
+}
+
+bool ps_loop_is_stopped(const ps_loop_t *loop)
+{
+    return loop->n_stops_handled > 0 && is_at_rest(loop);
+}
+
+int ps_loop_run(ps_loop_t *loop, int64_t start_ns, int64_t end_ns)
+{
+    int rc = ps_loop_start(loop, start_ns);
+    while (rc == 0 && !ps_loop_is_stopped(loop)) {
+        if (end_ns > 0 && loop->pacer.next_ns >= end_ns && atomic_load(&loop->n_stop_requests) == 0)
+            ps_loop_request_stop(loop);
+        rc = ps_loop_step(loop);
+    }
+    return rc;
+}

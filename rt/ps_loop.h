@@ -1,0 +1,189 @@
+/*
+ * ps_loop: the fixed-step control loop, one tick at a time.
+ *
+ * Each tick: READ (drain every CAN bus, decode actuator replies and IMU
+ * samples, sample the e-stop input) -> ESTIMATE -> POLICY (every
+ * servo_hz / policy_hz ticks) -> safety state machine -> SERVO (a MIT
+ * command for every joint due on this tick per the bus plan) -> WRITE (one
+ * batch per bus, enable output, LED) -> latency accounting. Records for the
+ * non-RT side (status, state transitions, refused requests) go through an
+ * SPSC ring; nothing here prints, allocates, locks or blocks.
+ *
+ * The loop sees only ports (ps_can_port_t, ps_gpio_port_t), a clock and a
+ * policy: it does not know whether it runs on hardware or the simulation.
+ *
+ * Stale-data rule: a joint's reply is stale when older than
+ * control.reply_timeout_s + rate_div servo periods (a joint commanded every
+ * rate_div ticks can only answer that often); the IMU likewise with
+ * imu_timeout_s and imu.rate_div.
+ *
+ * Threads: ps_loop_init/deinit on the main thread, ps_loop_tick and
+ * ps_loop_run on the loop thread, ps_loop_request_stop from any thread
+ * (signal handlers included). Allocation: none; ps_loop_t is caller-owned
+ * (large: keep it static or on the heap, not on a small stack).
+ */
+#ifndef PS_LOOP_H
+#define PS_LOOP_H
+
+#include <stdatomic.h>
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "../drivers/ps_can.h"
+#include "../drivers/ps_canbus.h"
+#include "../drivers/ps_gpio.h"
+#include "../drivers/ps_imu_msg.h"
+#include "../policy/ps_estimate.h"
+#include "../policy/ps_policy.h"
+#include "ps_clock.h"
+#include "ps_config.h"
+#include "ps_pacer.h"
+#include "ps_perf.h"
+#include "ps_ring.h"
+#include "ps_sm.h"
+
+typedef enum {
+    PS_STAGE_WAKE = 0, /**< wake-up latency: actual wake minus deadline */
+    PS_STAGE_READ,
+    PS_STAGE_ESTIMATE,
+    PS_STAGE_POLICY,   /**< recorded on policy ticks only */
+    PS_STAGE_SERVO,    /**< includes the state machine */
+    PS_STAGE_WRITE,
+    PS_STAGE_TICK,     /**< read start to write end */
+    PS_STAGE_COUNT
+} ps_stage_t;
+
+/** Operator requests (PS_SM_C_REQ_* bits) from outside the loop. */
+typedef struct {
+    /** @return request bits that arrived since the last call  @rt RT-SAFE */
+    uint32_t (*take)(void *ctx);
+    void *ctx;
+} ps_operator_t;
+
+typedef struct {
+    const ps_board_cfg_t *board;
+    const ps_robot_cfg_t *robot;
+    const ps_canbus_plan_t *plan;
+    const ps_clock_t *clock;      /**< paces the loop (simulated time in lockstep) */
+    const ps_clock_t *perf_clock; /**< stage timestamps and the policy deadline; NULL: clock.
+                                       In lockstep this is the real clock, so the figures
+                                       are the loop's own compute time */
+    ps_can_port_t buses[PS_MAX_BUSES]; /**< one per board bus */
+    ps_gpio_port_t gpio;
+    ps_policy_t policy;
+    ps_operator_t op;          /**< .take may be NULL: no operator */
+    ps_ring_t *ring;           /**< records to the non-RT side; may be NULL */
+    uint32_t status_every;     /**< ticks between status records (0: never) */
+} ps_loop_cfg_t;
+
+typedef enum {
+    PS_REC_STATUS = 1,
+    PS_REC_TRANSITION,
+    PS_REC_REFUSED,
+} ps_rec_kind_t;
+
+/** Fixed-size record sent to the non-RT side. */
+typedef struct {
+    uint8_t kind;         /**< ps_rec_kind_t */
+    uint8_t state;        /**< ps_sm_state_t after this tick */
+    uint8_t from_state;   /**< TRANSITION: state before */
+    uint8_t pad;
+    uint32_t cond;        /**< TRANSITION: conditions that caused it; REFUSED: the request */
+    uint64_t tick;
+    int64_t t_ns;         /**< loop time of the tick's deadline */
+    uint64_t n_overruns;
+    uint64_t n_policy_runs;
+    float com_height_m;
+    float tilt_rad;
+    const char *reason;   /**< REFUSED: static string */
+} ps_loop_rec_t;
+
+/** Counters of the loop (read-only outside the loop thread; a torn read of one is accepted). */
+typedef struct {
+    uint64_t n_ticks;
+    uint64_t n_policy_runs;
+    uint64_t n_policy_late;
+    uint64_t n_rx_frames;
+    uint64_t n_rx_unknown;      /**< frames with an id nobody expects */
+    uint64_t n_rx_bad;          /**< malformed replies/IMU frames */
+    uint64_t n_tx_frames;
+    uint64_t n_tx_refused;      /**< frames a bus would not queue */
+    uint64_t n_bus_errors;      /**< -errno from a port */
+    uint64_t n_gpio_errors;
+    uint64_t n_target_invalid;  /**< targets refused by the servo layer */
+    uint64_t n_cmd_replaced;    /**< commands outside limits replaced by damping (must stay 0) */
+    uint64_t n_transitions;
+    uint64_t n_refused;         /**< operator requests refused */
+    uint64_t n_ring_dropped;    /**< records the ring had no room for */
+    bool has_fallen;            /**< estimator reported a fall in RAMP or ACTIVE */
+} ps_loop_counters_t;
+
+typedef struct {
+    ps_loop_cfg_t cfg;
+    ps_pacer_t pacer;
+    int64_t period_ns;
+    uint32_t policy_div;
+    ps_sm_state_t state;
+    int64_t state_since_ns;
+    uint32_t pending_requests;   /**< accepted requests waiting for ps_sm_next */
+    atomic_uint external_requests; /**< from ps_loop_request (any thread) */
+    atomic_uint n_stop_requests;   /**< from ps_loop_request_stop (any thread) */
+    uint32_t n_stops_handled;
+    ps_meas_t meas;
+    ps_estimator_t estimator;
+    ps_targets_t targets;
+    bool has_targets;
+    float ramp_from_q_rad[PS_MAX_JOINTS];
+    bool is_entered[PS_MAX_JOINTS]; /**< ENTER sent since the last EXIT */
+    bool has_policy_late;
+    bool has_target_invalid;
+    uint32_t bus_off_mask;
+    int16_t reply_joint[PS_MAX_BUSES][PS_CAN_SFF_MASK + 1]; /**< reply id -> joint, -1 */
+    ps_imu_msg_rx_t imu_rx;
+    ps_can_frame_t rx_buf[64];
+    ps_can_frame_t tx_buf[PS_MAX_BUSES][PS_MAX_JOINTS + 2];
+    uint32_t n_tx[PS_MAX_BUSES];
+    int64_t t_deadline_ns;       /**< deadline of the current tick */
+    ps_perf_hist_t perf[PS_STAGE_COUNT];
+    ps_loop_counters_t counters;
+} ps_loop_t;
+
+/** @pre every pointer in cfg valid and outliving loop; estimator geometry in robot
+ *  @post loop in STANDBY, histograms zeroed and touched (prefaulted)
+ *  @return 0 | -EINVAL | -ENOENT (a leg joint missing for the estimator)  @rt INIT */
+int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg);
+
+/** Run one tick now, at the given deadline (no waiting).  @rt RT-SAFE, loop thread */
+void ps_loop_tick(ps_loop_t *loop, int64_t deadline_ns);
+
+/** Paced loop: ps_loop_start, then ps_loop_step until end_ns (loop time;
+ *  <= 0: no end) or a stop request, then keep ticking through DAMPING until
+ *  the robot is in STANDBY or ESTOP, and return.
+ *  @return 0 | -errno from the clock  @rt RT-SAFE, loop thread */
+int ps_loop_run(ps_loop_t *loop, int64_t start_ns, int64_t end_ns);
+
+/** Set up pacing: tick 0's deadline is start_ns.  @return 0 | -EINVAL  @rt INIT */
+int ps_loop_start(ps_loop_t *loop, int64_t start_ns);
+
+/** Wait for the next deadline, then handle stop requests and run the tick;
+ *  overruns are counted by the pacer. @return 0 | -errno from the clock
+ *  @rt RT-SAFE, loop thread */
+int ps_loop_step(ps_loop_t *loop);
+
+/** @return true once a stop was handled and the robot is in STANDBY or ESTOP  @rt RT-SAFE */
+bool ps_loop_is_stopped(const ps_loop_t *loop);
+
+/** Ask the loop to stop (it goes through DAMPING to STANDBY first); a second
+ *  call while stopping asks for e-stop.  @rt async-signal-safe, any thread */
+void ps_loop_request_stop(ps_loop_t *loop);
+
+/** Post operator request bits (PS_SM_C_REQ_*). @rt async-signal-safe, any thread */
+void ps_loop_request(ps_loop_t *loop, uint32_t request_bits);
+
+/** @return name of a stage, e.g. "wake"  @rt RT-SAFE */
+const char *ps_loop_stage_name(ps_stage_t s);
+
+/** Release nothing (no resources) but zero the struct. Safe twice. @rt INIT */
+void ps_loop_deinit(ps_loop_t *loop);
+
+#endif /* PS_LOOP_H */

@@ -1,0 +1,192 @@
+#include "ps_summary.h"
+
+#include <cjson/cJSON.h>
+#include <errno.h>
+#include <string.h>
+
+#include "ps_err.h"
+#include "ps_rtsetup.h"
+
+static const double QUANTILES[] = {0.5, 0.9, 0.99, 0.999};
+static const char *const QUANTILE_KEYS[] = {"p50_us", "p90_us", "p99_us", "p999_us"};
+
+static cJSON *stage_json(const ps_perf_hist_t *h)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddNumberToObject(o, "n", (double)h->n);
+    cJSON_AddNumberToObject(o, "min_us", h->n ? (double)h->min_ns * 1e-3 : 0.0);
+    cJSON_AddNumberToObject(o, "avg_us", ps_perf_mean_ns(h) * 1e-3);
+    for (size_t i = 0; i < sizeof(QUANTILES) / sizeof(QUANTILES[0]); i++)
+        cJSON_AddNumberToObject(o, QUANTILE_KEYS[i],
+                                (double)ps_perf_quantile_ns(h, QUANTILES[i]) * 1e-3);
+    cJSON_AddNumberToObject(o, "max_us", (double)h->max_ns * 1e-3);
+    return o;
+}
+
+static cJSON *transitions_json(const ps_logger_t *lg)
+{
+    cJSON *a = cJSON_CreateArray();
+    uint32_t n = lg->n_transitions < PS_LOGGER_MAX_TRANSITIONS ? lg->n_transitions
+                                                               : PS_LOGGER_MAX_TRANSITIONS;
+    for (uint32_t i = 0; i < n; i++) {
+        const ps_logger_transition_t *t = &lg->transitions[i];
+        char cond[160];
+        ps_logger_format_cond(t->cond, cond, sizeof(cond));
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddNumberToObject(o, "t_s", t->t_s);
+        cJSON_AddStringToObject(o, "from", ps_sm_state_name((ps_sm_state_t)t->from));
+        cJSON_AddStringToObject(o, "to", ps_sm_state_name((ps_sm_state_t)t->to));
+        cJSON_AddStringToObject(o, "conditions", cond);
+        cJSON_AddItemToArray(a, o);
+    }
+    return a;
+}
+
+static cJSON *buses_json(const ps_summary_t *s)
+{
+    cJSON *a = cJSON_CreateArray();
+    for (uint32_t b = 0; b < s->board->n_buses; b++) {
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddStringToObject(o, "name", s->board->buses[b].ifname);
+        cJSON_AddNumberToObject(o, "bitrate", s->board->buses[b].bitrate);
+        cJSON_AddNumberToObject(o, "planned_peak_tick_load", s->plan->load_peak[b]);
+        cJSON_AddNumberToObject(o, "planned_avg_load", s->plan->load_avg[b]);
+        cJSON_AddNumberToObject(o, "observed_load", s->bus_states[b].load);
+        cJSON_AddNumberToObject(o, "tx_frames", (double)s->bus_states[b].n_tx_frames);
+        cJSON_AddNumberToObject(o, "rx_frames", (double)s->bus_states[b].n_rx_frames);
+        cJSON_AddNumberToObject(o, "late_frames", (double)s->bus_states[b].n_late);
+        cJSON_AddNumberToObject(o, "dropped_frames", (double)(s->bus_states[b].n_tx_dropped +
+                                                              s->bus_states[b].n_rx_dropped));
+        cJSON_AddItemToArray(a, o);
+    }
+    return a;
+}
+
+static cJSON *counters_json(const ps_loop_counters_t *c)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddNumberToObject(o, "policy_runs", (double)c->n_policy_runs);
+    cJSON_AddNumberToObject(o, "policy_late", (double)c->n_policy_late);
+    cJSON_AddNumberToObject(o, "rx_frames", (double)c->n_rx_frames);
+    cJSON_AddNumberToObject(o, "rx_unknown", (double)c->n_rx_unknown);
+    cJSON_AddNumberToObject(o, "rx_bad", (double)c->n_rx_bad);
+    cJSON_AddNumberToObject(o, "tx_frames", (double)c->n_tx_frames);
+    cJSON_AddNumberToObject(o, "tx_refused", (double)c->n_tx_refused);
+    cJSON_AddNumberToObject(o, "bus_errors", (double)c->n_bus_errors);
+    cJSON_AddNumberToObject(o, "gpio_errors", (double)c->n_gpio_errors);
+    cJSON_AddNumberToObject(o, "target_invalid", (double)c->n_target_invalid);
+    cJSON_AddNumberToObject(o, "commands_replaced", (double)c->n_cmd_replaced);
+    cJSON_AddNumberToObject(o, "requests_refused", (double)c->n_refused);
+    cJSON_AddNumberToObject(o, "records_dropped", (double)c->n_ring_dropped);
+    return o;
+}
+
+static cJSON *summary_json(const ps_summary_t *s)
+{
+    const ps_loop_t *loop = s->loop;
+    cJSON *root = cJSON_CreateObject();
+    cJSON_AddStringToObject(root, "board", s->board_path);
+    cJSON_AddStringToObject(root, "robot", s->robot_path);
+    cJSON_AddStringToObject(root, "scenario", s->scenario_path ? s->scenario_path : "");
+    cJSON_AddStringToObject(root, "mode", s->is_lockstep ? "lockstep" : "realtime");
+    cJSON_AddNumberToObject(root, "loop_s", s->loop_s);
+    cJSON_AddNumberToObject(root, "wall_s", s->wall_s);
+    cJSON_AddNumberToObject(root, "ticks", (double)loop->counters.n_ticks);
+    cJSON_AddNumberToObject(root, "overruns", (double)loop->pacer.n_overruns);
+    cJSON_AddNumberToObject(root, "missed_deadlines", (double)loop->pacer.n_missed);
+    cJSON_AddStringToObject(root, "final_state", ps_sm_state_name(loop->state));
+    cJSON *stages = cJSON_AddObjectToObject(root, "latency");
+    for (int st = 0; st < PS_STAGE_COUNT; st++)
+        cJSON_AddItemToObject(stages, ps_loop_stage_name((ps_stage_t)st),
+                              stage_json(&loop->perf[st]));
+    cJSON_AddItemToObject(root, "transitions", transitions_json(s->logger));
+    cJSON *after = cJSON_AddObjectToObject(root, "after_init");
+    cJSON_AddNumberToObject(after, "mallocs", (double)s->guard.n_allocs);
+    cJSON_AddNumberToObject(after, "frees", (double)s->guard.n_frees);
+    cJSON_AddNumberToObject(after, "page_faults", (double)s->guard.n_faults);
+    cJSON_AddBoolToObject(after, "allocations_counted", s->is_guard_exact);
+    char rt[200];
+    ps_rtsetup_describe(s->rt_missing, rt, sizeof(rt));
+    cJSON_AddStringToObject(root, "rt_missing", rt);
+    cJSON_AddItemToObject(root, "buses", buses_json(s));
+    cJSON_AddItemToObject(root, "counters", counters_json(&loop->counters));
+    cJSON_AddBoolToObject(root, "fall_detected", loop->counters.has_fallen);
+    if (s->has_truth) {
+        cJSON *sim = cJSON_AddObjectToObject(root, "sim_truth");
+        cJSON_AddBoolToObject(sim, "fell_while_active", s->truth_fell_while_active);
+        cJSON_AddNumberToObject(sim, "min_com_height_active_m", s->truth_min_com_height_active_m);
+        cJSON_AddNumberToObject(sim, "commands_out_of_limits", (double)s->truth_cmd_out_of_limits);
+        cJSON_AddNumberToObject(sim, "plant_overruns", (double)s->truth_plant_overruns);
+    }
+    return root;
+}
+
+int ps_summary_write_json(const ps_summary_t *s, const char *path, char *err, size_t err_len)
+{
+    cJSON *root = summary_json(s);
+    char *text = root ? cJSON_Print(root) : NULL;
+    cJSON_Delete(root);
+    if (text == NULL) {
+        snprintf(err, err_len, "summary: out of memory building JSON");
+        return -ENOMEM;
+    }
+    FILE *f = fopen(path, "w");
+    int rc = 0;
+    if (f == NULL || fputs(text, f) < 0 || fputc('\n', f) < 0) {
+        rc = -errno;
+        snprintf(err, err_len, "summary: cannot write %s: %s", path, strerror(errno));
+    }
+    if (f != NULL && fclose(f) != 0 && rc == 0) {
+        rc = -errno;
+        snprintf(err, err_len, "summary: cannot write %s: %s", path, strerror(errno));
+    }
+    cJSON_free(text);
+    return rc;
+}
+
+static void print_stage(FILE *out, const char *name, const ps_perf_hist_t *h)
+{
+    fprintf(out, "  %-9s n=%-8llu min=%7.1f avg=%7.1f p50=%7.1f p99=%7.1f p99.9=%7.1f max=%7.1f us\n",
+            name, (unsigned long long)h->n, h->n ? (double)h->min_ns * 1e-3 : 0.0,
+            ps_perf_mean_ns(h) * 1e-3, (double)ps_perf_quantile_ns(h, 0.5) * 1e-3,
+            (double)ps_perf_quantile_ns(h, 0.99) * 1e-3,
+            (double)ps_perf_quantile_ns(h, 0.999) * 1e-3, (double)h->max_ns * 1e-3);
+}
+
+void ps_summary_print(const ps_summary_t *s, FILE *out)
+{
+    const ps_loop_t *loop = s->loop;
+    fprintf(out, "\n== summary (%s) ==\n", s->is_lockstep ? "lockstep" : "real time");
+    fprintf(out, "  loop time %.2f s in %.2f s wall (%.1fx), %llu ticks, %llu overruns "
+                 "(%llu deadlines missed), final state %s\n",
+            s->loop_s, s->wall_s, s->wall_s > 0 ? s->loop_s / s->wall_s : 0.0,
+            (unsigned long long)loop->counters.n_ticks, (unsigned long long)loop->pacer.n_overruns,
+            (unsigned long long)loop->pacer.n_missed, ps_sm_state_name(loop->state));
+    fprintf(out, " latency per stage:\n");
+    for (int st = 0; st < PS_STAGE_COUNT; st++)
+        print_stage(out, ps_loop_stage_name((ps_stage_t)st), &loop->perf[st]);
+    fprintf(out, " buses:\n");
+    for (uint32_t b = 0; b < s->board->n_buses; b++)
+        fprintf(out, "  %-6s planned peak %5.1f%% avg %5.1f%%, observed %5.1f%%, late %llu\n",
+                s->board->buses[b].ifname, s->plan->load_peak[b] * 100, s->plan->load_avg[b] * 100,
+                s->bus_states[b].load * 100, (unsigned long long)s->bus_states[b].n_late);
+    fprintf(out, " after init on the loop thread: %llu mallocs%s, %llu frees, %llu page faults\n",
+            (unsigned long long)s->guard.n_allocs, s->is_guard_exact ? "" : " (not counted)",
+            (unsigned long long)s->guard.n_frees, (unsigned long long)s->guard.n_faults);
+    fprintf(out, " policy runs %llu (late %llu), transitions %llu, requests refused %llu, "
+                 "commands replaced %llu, rx bad %llu, unknown %llu\n",
+            (unsigned long long)loop->counters.n_policy_runs,
+            (unsigned long long)loop->counters.n_policy_late,
+            (unsigned long long)loop->counters.n_transitions,
+            (unsigned long long)loop->counters.n_refused,
+            (unsigned long long)loop->counters.n_cmd_replaced,
+            (unsigned long long)loop->counters.n_rx_bad,
+            (unsigned long long)loop->counters.n_rx_unknown);
+    fprintf(out, " fall detected: %s\n", loop->counters.has_fallen ? "yes" : "no");
+    if (s->has_truth)
+        fprintf(out, " sim truth: fell while active %s, min CoM height while active %.3f m, "
+                     "commands out of limits %llu, plant overruns %llu\n",
+                s->truth_fell_while_active ? "yes" : "no", s->truth_min_com_height_active_m,
+                (unsigned long long)s->truth_cmd_out_of_limits,
+                (unsigned long long)s->truth_plant_overruns);
+}

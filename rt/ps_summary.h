@@ -1,0 +1,45 @@
+/*
+ * ps_summary: the end-of-run summary, printed for people and written as JSON
+ * (cJSON) for tools: ticks, overruns, latency percentiles per stage, state
+ * transitions, allocations and page faults after init, bus loads planned and
+ * observed, fall detected, and the simulation's ground truth when there is one.
+ *
+ * Threads: main thread, after the loop has stopped. Allocation: yes (NON-RT).
+ */
+#ifndef PS_SUMMARY_H
+#define PS_SUMMARY_H
+
+#include <stdbool.h>
+#include <stdio.h>
+
+#include "ps_guard.h"
+#include "ps_logger.h"
+#include "ps_loop.h"
+
+typedef struct {
+    const char *board_path, *robot_path, *scenario_path;
+    bool is_lockstep;
+    double loop_s;            /**< loop time covered */
+    double wall_s;            /**< wall time the loop ran */
+    const ps_loop_t *loop;
+    const ps_logger_t *logger;
+    ps_guard_counts_t guard;  /**< counted on the loop thread after init */
+    bool is_guard_exact;      /**< false under sanitizers (allocations not interposed) */
+    unsigned rt_missing;      /**< ps_rt_missing_t bits */
+    const ps_canbus_plan_t *plan;
+    const ps_board_cfg_t *board;
+    ps_can_state_t bus_states[PS_MAX_BUSES];
+    bool has_truth;           /**< simulation ground truth below is valid */
+    bool truth_fell_while_active;
+    double truth_min_com_height_active_m;
+    uint64_t truth_cmd_out_of_limits;
+    uint64_t truth_plant_overruns;
+} ps_summary_t;
+
+/** @return 0 | -EIO (err says why)  @rt NON-RT */
+int ps_summary_write_json(const ps_summary_t *s, const char *path, char *err, size_t err_len);
+
+/** Human-readable summary.  @rt NON-RT */
+void ps_summary_print(const ps_summary_t *s, FILE *out);
+
+#endif /* PS_SUMMARY_H */

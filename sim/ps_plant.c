@@ -1,0 +1,439 @@
+#include "ps_plant.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <mujoco/mujoco.h>
+
+#include "../rt/ps_err.h"
+
+/* Harness gains: a gantry holding the limp 38 kg robot. 343 N of weight on
+ * 20 kN/m sags 1.7 cm at worst; the damping is near critical for the whole
+ * body on the translational spring (2*sqrt(k*m) = 1.7 kN s/m). */
+#define HARNESS_K_N_M      20000.0
+#define HARNESS_C_N_S_M    1500.0
+#define HARNESS_K_NM_RAD   1500.0
+#define HARNESS_C_NM_S_RAD 100.0
+
+#define IMU_SITE_NAME    "imu"
+#define IMU_GYRO_NAME    "imu_gyro"
+#define IMU_ACCEL_NAME   "imu_accel"
+#define HEAD_BODY_NAME   "head"
+#define FOOT_NAME_SUFFIX "foot"
+
+struct ps_plant {
+    mjModel *m;
+    mjData *d;
+    int n_joints;
+    int qpos_adr[PS_MAX_JOINTS];
+    int dof_adr[PS_MAX_JOINTS];
+    int act_id[PS_MAX_JOINTS];
+    int root_body;     /**< body carrying the free joint (pelvis) */
+    int root_qpos_adr; /**< free joint: 3 position + 4 quaternion */
+    int root_dof_adr;  /**< free joint: 3 linear (world) + 3 angular (local) */
+    int head_body;
+    int gyro_adr, accel_adr; /**< sensordata addresses */
+    bool is_harness_engaged;
+    double anchor_pos_m[3];
+    double anchor_quat[4];
+    double *ext_force_n;    /**< nbody x 3, caller's pushes (world) */
+    unsigned char *is_foot; /**< nbody, 1 for bodies named *foot */
+    int n_bad_warnings;     /**< MuJoCo's bad-qpos/qvel/qacc count at last check */
+};
+
+static void put_err(char *err, size_t err_len, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+
+static void put_err(char *err, size_t err_len, const char *fmt, ...)
+{
+    if (err == NULL || err_len == 0)
+        return;
+    va_list ap;
+    va_start(ap, fmt);
+    (void)vsnprintf(err, err_len, fmt, ap); /* truncation is acceptable */
+    va_end(ap);
+}
+
+/* MuJoCo's parser messages span lines; logs want one line. */
+static void one_line(char *s)
+{
+    size_t n = strlen(s);
+    while (n > 0 && (s[n - 1] == '\n' || s[n - 1] == ' '))
+        s[--n] = '\0';
+    for (size_t i = 0; i < n; i++)
+        if (s[i] == '\n')
+            s[i] = ' ';
+}
+
+/* MuJoCo's default warning handler prints to stdout and appends to
+ * MUJOCO_LOG.TXT in the working directory; the library prints nothing and
+ * detects instability through mjData.warning counters instead. */
+static void quiet_warning(const char *msg)
+{
+    (void)msg;
+}
+
+static int bad_warning_count(const mjData *d)
+{
+    return d->warning[mjWARN_BADQPOS].number + d->warning[mjWARN_BADQVEL].number +
+           d->warning[mjWARN_BADQACC].number;
+}
+
+static bool ends_with(const char *s, const char *suffix)
+{
+    const size_t n = strlen(s);
+    const size_t k = strlen(suffix);
+    return n >= k && strcmp(s + n - k, suffix) == 0;
+}
+
+/* Lowest world z over the corners (boxes) or lowest points (spheres,
+ * capsules) of every geom of a foot body. Needs mj_kinematics. */
+static double foot_min_z(const ps_plant_t *p)
+{
+    const mjModel *m = p->m;
+    const mjData *d = p->d;
+    double min_z = INFINITY;
+    for (int g = 0; g < m->ngeom; g++) {
+        if (!p->is_foot[m->geom_bodyid[g]])
+            continue;
+        const mjtNum *pos = d->geom_xpos + 3 * g;
+        const mjtNum *R = d->geom_xmat + 9 * g; /* row-major, local -> world */
+        const mjtNum *s = m->geom_size + 3 * g;
+        double z;
+        if (m->geom_type[g] == mjGEOM_BOX) {
+            /* lowest corner: each half-extent along the sign that lowers z */
+            z = pos[2] - fabs(R[6]) * s[0] - fabs(R[7]) * s[1] - fabs(R[8]) * s[2];
+        } else if (m->geom_type[g] == mjGEOM_SPHERE) {
+            z = pos[2] - s[0];
+        } else if (m->geom_type[g] == mjGEOM_CAPSULE) {
+            z = pos[2] - fabs(R[8]) * s[1] - s[0];
+        } else {
+            z = pos[2];
+        }
+        if (z < min_z)
+            min_z = z;
+    }
+    return min_z;
+}
+
+static int map_joints(ps_plant_t *p, const ps_robot_cfg_t *robot, char *err, size_t err_len)
+{
+    const mjModel *m = p->m;
+    if (robot->n_joints > PS_MAX_JOINTS) {
+        put_err(err, err_len, "robot has %u joints, at most %u", robot->n_joints, PS_MAX_JOINTS);
+        return -PS_ERR_CONFIG;
+    }
+    p->n_joints = (int)robot->n_joints;
+    for (int i = 0; i < p->n_joints; i++) {
+        const char *name = robot->joints[i].name;
+        const int j = mj_name2id(m, mjOBJ_JOINT, name);
+        if (j < 0) {
+            put_err(err, err_len, "joint '%s' not found in the model", name);
+            return -PS_ERR_CONFIG;
+        }
+        if (m->jnt_type[j] != mjJNT_HINGE) {
+            put_err(err, err_len, "joint '%s' is not a hinge", name);
+            return -PS_ERR_CONFIG;
+        }
+        const int a = mj_name2id(m, mjOBJ_ACTUATOR, name);
+        if (a < 0) {
+            put_err(err, err_len, "actuator '%s' not found in the model", name);
+            return -PS_ERR_CONFIG;
+        }
+        if (m->actuator_trntype[a] != mjTRN_JOINT || m->actuator_trnid[2 * a] != j) {
+            put_err(err, err_len, "actuator '%s' does not drive joint '%s'", name, name);
+            return -PS_ERR_CONFIG;
+        }
+        p->qpos_adr[i] = m->jnt_qposadr[j];
+        p->dof_adr[i] = m->jnt_dofadr[j];
+        p->act_id[i] = a;
+    }
+    return 0;
+}
+
+static int map_bodies(ps_plant_t *p, char *err, size_t err_len)
+{
+    const mjModel *m = p->m;
+    p->root_body = -1;
+    for (int j = 0; j < m->njnt; j++) {
+        if (m->jnt_type[j] == mjJNT_FREE) {
+            p->root_body = m->jnt_bodyid[j];
+            p->root_qpos_adr = m->jnt_qposadr[j];
+            p->root_dof_adr = m->jnt_dofadr[j];
+            break;
+        }
+    }
+    if (p->root_body < 0) {
+        put_err(err, err_len, "model has no free joint (floating base)");
+        return -PS_ERR_CONFIG;
+    }
+    p->head_body = mj_name2id(m, mjOBJ_BODY, HEAD_BODY_NAME);
+    if (p->head_body < 0) {
+        put_err(err, err_len, "body '%s' not found in the model", HEAD_BODY_NAME);
+        return -PS_ERR_CONFIG;
+    }
+    int n_feet = 0;
+    for (int b = 0; b < m->nbody; b++) {
+        const char *name = mj_id2name(m, mjOBJ_BODY, b);
+        p->is_foot[b] = (name != NULL && ends_with(name, FOOT_NAME_SUFFIX)) ? 1u : 0u;
+        n_feet += p->is_foot[b];
+    }
+    if (n_feet == 0) {
+        put_err(err, err_len, "no body named '*%s' in the model", FOOT_NAME_SUFFIX);
+        return -PS_ERR_CONFIG;
+    }
+    const int gyro = mj_name2id(m, mjOBJ_SENSOR, IMU_GYRO_NAME);
+    const int accel = mj_name2id(m, mjOBJ_SENSOR, IMU_ACCEL_NAME);
+    if (gyro < 0 || m->sensor_type[gyro] != mjSENS_GYRO || accel < 0 ||
+        m->sensor_type[accel] != mjSENS_ACCELEROMETER ||
+        mj_name2id(m, mjOBJ_SITE, IMU_SITE_NAME) < 0) {
+        put_err(err, err_len, "model needs site '%s' with gyro '%s' and accelerometer '%s'",
+                IMU_SITE_NAME, IMU_GYRO_NAME, IMU_ACCEL_NAME);
+        return -PS_ERR_CONFIG;
+    }
+    p->gyro_adr = m->sensor_adr[gyro];
+    p->accel_adr = m->sensor_adr[accel];
+    return 0;
+}
+
+/* Joints to the stance, root upright at the origin, soles on the floor. */
+static void place_in_stance(ps_plant_t *p, const ps_robot_cfg_t *robot)
+{
+    mjModel *m = p->m;
+    mjData *d = p->d;
+    mj_resetData(m, d);
+    for (int i = 0; i < p->n_joints; i++)
+        d->qpos[p->qpos_adr[i]] = robot->joints[i].stance_rad;
+    mjtNum *root = d->qpos + p->root_qpos_adr;
+    root[0] = 0.0;
+    root[1] = 0.0;
+    root[3] = 1.0;
+    root[4] = root[5] = root[6] = 0.0;
+    mj_kinematics(m, d);
+    root[2] -= foot_min_z(p);
+    mj_forward(m, d); /* consistent positions, contacts and sensors at t = 0 */
+    for (int k = 0; k < 3; k++)
+        p->anchor_pos_m[k] = root[k];
+    for (int k = 0; k < 4; k++)
+        p->anchor_quat[k] = root[3 + k];
+}
+
+int ps_plant_create(const char *model_path, const ps_robot_cfg_t *robot, ps_plant_t **out,
+                    char *err, size_t err_len)
+{
+    if (model_path == NULL || robot == NULL || out == NULL) {
+        put_err(err, err_len, "ps_plant_create: NULL argument");
+        return -EINVAL;
+    }
+    if (mju_user_warning == NULL)
+        mju_user_warning = quiet_warning;
+
+    int rc;
+    ps_plant_t *p = calloc(1, sizeof(*p));
+    if (p == NULL)
+        return -ENOMEM;
+
+    char mj_err[512] = "";
+    p->m = mj_loadXML(model_path, NULL, mj_err, (int)sizeof(mj_err));
+    if (p->m == NULL) {
+        one_line(mj_err);
+        put_err(err, err_len, "%s: %s", model_path, mj_err[0] ? mj_err : "load failed");
+        rc = -PS_ERR_PLANT;
+        goto fail;
+    }
+    p->d = mj_makeData(p->m);
+    p->ext_force_n = calloc((size_t)p->m->nbody * 3u, sizeof(double));
+    p->is_foot = calloc((size_t)p->m->nbody, 1u);
+    if (p->d == NULL || p->ext_force_n == NULL || p->is_foot == NULL) {
+        put_err(err, err_len, "%s: out of memory", model_path);
+        rc = -ENOMEM;
+        goto fail;
+    }
+    rc = map_joints(p, robot, err, err_len);
+    if (rc < 0)
+        goto fail;
+    rc = map_bodies(p, err, err_len);
+    if (rc < 0)
+        goto fail;
+
+    place_in_stance(p, robot);
+    p->is_harness_engaged = true;
+    p->n_bad_warnings = bad_warning_count(p->d);
+    *out = p;
+    return 0;
+
+fail:
+    ps_plant_destroy(p);
+    return rc;
+}
+
+double ps_plant_timestep_s(const ps_plant_t *p)
+{
+    return p->m->opt.timestep;
+}
+
+void ps_plant_set_torques(ps_plant_t *p, const double *tau_nm)
+{
+    const mjModel *m = p->m;
+    for (int i = 0; i < p->n_joints; i++) {
+        const int a = p->act_id[i];
+        double tau = tau_nm[i];
+        if (!isfinite(tau))
+            tau = 0.0; /* a broken command must not poison the physics */
+        if (m->actuator_ctrllimited[a]) {
+            const double lo = m->actuator_ctrlrange[2 * a];
+            const double hi = m->actuator_ctrlrange[2 * a + 1];
+            tau = tau < lo ? lo : (tau > hi ? hi : tau);
+        }
+        p->d->ctrl[a] = tau;
+    }
+}
+
+void ps_plant_get_joints(const ps_plant_t *p, double *out_q_rad, double *out_qd_rad_s)
+{
+    for (int i = 0; i < p->n_joints; i++) {
+        if (out_q_rad != NULL)
+            out_q_rad[i] = p->d->qpos[p->qpos_adr[i]];
+        if (out_qd_rad_s != NULL)
+            out_qd_rad_s[i] = p->d->qvel[p->dof_adr[i]];
+    }
+}
+
+void ps_plant_get_imu(const ps_plant_t *p, double out_gyro_rad_s[3], double out_accel_m_s2[3])
+{
+    for (int k = 0; k < 3; k++) {
+        out_gyro_rad_s[k] = p->d->sensordata[p->gyro_adr + k];
+        out_accel_m_s2[k] = p->d->sensordata[p->accel_adr + k];
+    }
+}
+
+int ps_plant_find_body(const ps_plant_t *p, const char *name)
+{
+    const int b = mj_name2id(p->m, mjOBJ_BODY, name);
+    return b < 0 ? -ENOENT : b;
+}
+
+void ps_plant_set_external_force(ps_plant_t *p, int body_idx, const double force_n[3])
+{
+    if (body_idx < 0 || body_idx >= p->m->nbody)
+        return;
+    for (int k = 0; k < 3; k++)
+        p->ext_force_n[3 * body_idx + k] = force_n[k];
+}
+
+void ps_plant_set_harness(ps_plant_t *p, bool is_engaged)
+{
+    p->is_harness_engaged = is_engaged;
+}
+
+/* Spring-damper wrench on the root body toward the anchor pose, world frame,
+ * applied at the root's centre of mass (where xfrc_applied acts). */
+static void harness_wrench(const ps_plant_t *p, mjtNum out_f[3], mjtNum out_t[3])
+{
+    const mjData *d = p->d;
+    const mjtNum *pos = d->qpos + p->root_qpos_adr;
+    const mjtNum *quat = d->qpos + p->root_qpos_adr + 3;
+    const mjtNum *vel = d->qvel + p->root_dof_adr;       /* world */
+    const mjtNum *omega = d->qvel + p->root_dof_adr + 3; /* body frame */
+    mjtNum R[9], err_local[3], err_world[3], omega_world[3];
+    mju_quat2Mat(R, quat);
+    mju_subQuat(err_local, p->anchor_quat, quat); /* rotation quat -> anchor, body frame */
+    mju_rotVecMat(err_world, err_local, R);
+    mju_rotVecMat(omega_world, omega, R);
+    for (int k = 0; k < 3; k++) {
+        out_f[k] = HARNESS_K_N_M * (p->anchor_pos_m[k] - pos[k]) - HARNESS_C_N_S_M * vel[k];
+        out_t[k] = HARNESS_K_NM_RAD * err_world[k] - HARNESS_C_NM_S_RAD * omega_world[k];
+    }
+}
+
+int ps_plant_step(ps_plant_t *p)
+{
+    mjModel *m = p->m;
+    mjData *d = p->d;
+    for (int b = 0; b < m->nbody; b++) {
+        mjtNum *x = d->xfrc_applied + 6 * b;
+        for (int k = 0; k < 3; k++) {
+            x[k] = p->ext_force_n[3 * b + k];
+            x[3 + k] = 0.0;
+        }
+    }
+    if (p->is_harness_engaged) {
+        mjtNum f[3], t[3];
+        harness_wrench(p, f, t);
+        mjtNum *x = d->xfrc_applied + 6 * p->root_body;
+        for (int k = 0; k < 3; k++) {
+            x[k] += f[k];
+            x[3 + k] += t[k];
+        }
+    }
+    mj_step(m, d);
+
+    /* MuJoCo resets the data itself when qpos/qvel/qacc go bad and only
+     * warns, so the warning counters catch what a NaN scan would miss. */
+    const int n_bad = bad_warning_count(d);
+    const bool is_reset = n_bad != p->n_bad_warnings;
+    p->n_bad_warnings = n_bad;
+    if (is_reset)
+        return -PS_ERR_PLANT;
+    for (int i = 0; i < m->nq; i++)
+        if (!isfinite(d->qpos[i]))
+            return -PS_ERR_PLANT;
+    for (int i = 0; i < m->nv; i++)
+        if (!isfinite(d->qacc[i]))
+            return -PS_ERR_PLANT;
+    return 0;
+}
+
+static bool touches_floor_off_feet(const ps_plant_t *p)
+{
+    const mjModel *m = p->m;
+    const mjData *d = p->d;
+    for (int c = 0; c < d->ncon; c++) {
+        const int b1 = m->geom_bodyid[d->contact[c].geom1];
+        const int b2 = m->geom_bodyid[d->contact[c].geom2];
+        /* the floor is any geom of the world body */
+        if (b1 == 0 && b2 != 0 && !p->is_foot[b2])
+            return true;
+        if (b2 == 0 && b1 != 0 && !p->is_foot[b1])
+            return true;
+    }
+    return false;
+}
+
+void ps_plant_get_truth(const ps_plant_t *p, ps_plant_truth_t *out)
+{
+    const mjData *d = p->d;
+    out->t_s = d->time;
+    for (int k = 0; k < 3; k++) {
+        out->com_m[k] = d->subtree_com[3 * p->root_body + k];
+        out->pelvis_m[k] = d->qpos[p->root_qpos_adr + k];
+    }
+    out->head_height_m = d->xpos[3 * p->head_body + 2];
+    out->is_fallen = touches_floor_off_feet(p);
+}
+
+double ps_plant_total_mass_kg(const ps_plant_t *p)
+{
+    return p->m->body_subtreemass[p->root_body];
+}
+
+double ps_plant_foot_min_z_m(const ps_plant_t *p)
+{
+    return foot_min_z(p);
+}
+
+void ps_plant_destroy(ps_plant_t *p)
+{
+    if (p == NULL)
+        return;
+    if (p->d != NULL)
+        mj_deleteData(p->d);
+    if (p->m != NULL)
+        mj_deleteModel(p->m);
+    free(p->ext_force_n);
+    free(p->is_foot);
+    free(p);
+}

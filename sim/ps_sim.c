@@ -1,0 +1,555 @@
+#include "ps_sim.h"
+
+#include <pthread.h>
+#include <stdarg.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "../rt/ps_err.h"
+#include "../rt/ps_guard.h"
+#include "../rt/ps_rtsetup.h"
+#include "../rt/ps_sm.h"
+#include "ps_can_sim.h"
+#include "ps_gpio_sim.h"
+#include "ps_plant.h"
+
+/* Frames per bus queue direction: a 12-joint robot puts ~26 frames on a bus
+ * per period; 256 leaves room for a loop that falls several periods behind. */
+#define BUS_QUEUE_LEN 256u
+/* Frames taken from a device end per recv_batch call. */
+#define RX_BATCH 32u
+
+struct ps_sim {
+    ps_board_cfg_t board;
+    ps_robot_cfg_t robot;
+    ps_scenario_cfg_t scenario;
+    bool is_lockstep;
+    int64_t period_ns;
+    int64_t dt_ns; /**< physics timestep */
+    double dt_s;
+
+    ps_plant_t *plant;
+    ps_can_sim_bus_t *bus[PS_MAX_BUSES];
+    ps_can_port_t dev_port[PS_MAX_BUSES];
+    ps_gpio_sim_t gpio;
+    ps_clock_t clock;       /**< lockstep clock; unused in real time */
+    _Atomic int64_t now_ns; /**< lockstep simulated time */
+
+    ps_devices_actuator_t act[PS_MAX_JOINTS];
+    ps_devices_imu_t imu;
+    double q_rad[PS_MAX_JOINTS];
+    double qd_rad_s[PS_MAX_JOINTS];
+    double tau_nm[PS_MAX_JOINTS];
+
+    /* scenario, precomputed at create */
+    int push_slot[PS_MAX_PUSHES];      /**< index into push_body_idx */
+    int64_t push_t0_ns[PS_MAX_PUSHES]; /**< relative to start */
+    int64_t push_t1_ns[PS_MAX_PUSHES];
+    int n_push_bodies;
+    int push_body_idx[PS_MAX_PUSHES]; /**< plant body index per slot */
+    double push_applied_n[PS_MAX_PUSHES][3];
+    int64_t event_t_ns[PS_MAX_EVENTS];
+    int event_joint_idx[PS_MAX_EVENTS]; /**< DROP_REPLIES target */
+    bool is_event_done[PS_MAX_EVENTS];
+    atomic_uint requests;
+
+    /* stepping state: lockstep on the loop thread, real time on the plant thread */
+    bool is_started;
+    int64_t start_ns;
+    int64_t plant_rel_ns; /**< physics time since start */
+    uint64_t n_steps;
+    uint64_t n_unrouted;
+    uint64_t n_dev_tx_dropped;
+    uint64_t n_overruns;
+    int plant_err;
+
+    /* real-time plant thread */
+    pthread_t thread;
+    bool has_thread;
+    atomic_bool is_running;
+
+    pthread_mutex_t truth_mu;
+    bool has_mutex;
+    ps_sim_truth_t truth;
+};
+
+static void put_err(char *err, size_t err_len, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+
+static void put_err(char *err, size_t err_len, const char *fmt, ...)
+{
+    if (err == NULL || err_len == 0)
+        return;
+    va_list ap;
+    va_start(ap, fmt);
+    (void)vsnprintf(err, err_len, fmt, ap); /* truncation is acceptable */
+    va_end(ap);
+}
+
+/* ---- one physics step ------------------------------------------------ */
+
+static void send_dev(ps_sim_t *s, unsigned bus_idx, const ps_can_frame_t *f, size_t n)
+{
+    if (n == 0)
+        return;
+    const int rc = ps_can_send_batch(&s->dev_port[bus_idx], f, n);
+    const size_t sent = rc > 0 ? (size_t)rc : 0u;
+    s->n_dev_tx_dropped += n - sent;
+}
+
+static void run_scenario(ps_sim_t *s, int64_t rel_ns)
+{
+    const ps_scenario_cfg_t *sc = &s->scenario;
+    for (uint32_t e = 0; e < sc->n_events; e++) {
+        if (s->is_event_done[e] || rel_ns < s->event_t_ns[e])
+            continue;
+        s->is_event_done[e] = true;
+        const ps_event_cfg_t *ev = &sc->events[e];
+        switch (ev->kind) {
+        case PS_EVENT_START:
+            atomic_fetch_or(&s->requests, (unsigned)PS_SM_C_REQ_START);
+            break;
+        case PS_EVENT_STOP:
+            atomic_fetch_or(&s->requests, (unsigned)PS_SM_C_REQ_STOP);
+            break;
+        case PS_EVENT_RESET:
+            atomic_fetch_or(&s->requests, (unsigned)PS_SM_C_REQ_RESET);
+            break;
+        case PS_EVENT_ESTOP_PRESS:
+            ps_gpio_sim_set_estop(&s->gpio, true);
+            break;
+        case PS_EVENT_ESTOP_RELEASE:
+            ps_gpio_sim_set_estop(&s->gpio, false);
+            break;
+        case PS_EVENT_HARNESS_RELEASE:
+            ps_plant_set_harness(s->plant, false);
+            break;
+        case PS_EVENT_DROP_REPLIES:
+            /* Device time is start-based in both modes (simulated or monotonic). */
+            s->act[s->event_joint_idx[e]].drop_replies_until_ns =
+                s->start_ns + s->event_t_ns[e] + ps_s_to_ns((double)ev->duration_s);
+            break;
+        case PS_EVENT_COUNT:
+        default:
+            break;
+        }
+    }
+
+    /* Pushes: the sum of the active pushes per body, applied on change only. */
+    double f[PS_MAX_PUSHES][3];
+    memset(f, 0, sizeof f);
+    for (uint32_t p = 0; p < sc->n_pushes; p++) {
+        if (rel_ns >= s->push_t0_ns[p] && rel_ns < s->push_t1_ns[p]) {
+            for (unsigned a = 0; a < 3; a++)
+                f[s->push_slot[p]][a] += (double)sc->pushes[p].force_n[a];
+        }
+    }
+    for (int b = 0; b < s->n_push_bodies; b++) {
+        if (memcmp(f[b], s->push_applied_n[b], sizeof f[b]) != 0) {
+            ps_plant_set_external_force(s->plant, s->push_body_idx[b], f[b]);
+            memcpy(s->push_applied_n[b], f[b], sizeof f[b]);
+        }
+    }
+}
+
+static void route_frames(ps_sim_t *s)
+{
+    for (uint32_t b = 0; b < s->board.n_buses; b++) {
+        ps_can_frame_t rx[RX_BATCH];
+        int n;
+        while ((n = ps_can_recv_batch(&s->dev_port[b], rx, RX_BATCH)) > 0) {
+            ps_can_frame_t tx[RX_BATCH];
+            size_t n_tx = 0;
+            for (int i = 0; i < n; i++) {
+                bool is_routed = false;
+                for (uint32_t j = 0; j < s->robot.n_joints; j++) {
+                    if (s->robot.joints[j].bus_idx != b)
+                        continue;
+                    const int rc = ps_devices_handle_frame(&s->act[j], &rx[i], s->q_rad[j],
+                                                           s->qd_rad_s[j], &tx[n_tx]);
+                    if (rc == -ENOENT)
+                        continue;
+                    is_routed = true;
+                    if (rc == 1)
+                        n_tx++;
+                    break;
+                }
+                if (!is_routed)
+                    s->n_unrouted++;
+            }
+            send_dev(s, b, tx, n_tx);
+            if ((unsigned)n < RX_BATCH)
+                break;
+        }
+    }
+}
+
+/* One physics step starting at device time t_dev_ns, physics time rel_ns after
+ * start: scenario, frames in and out, IMU on the period grid, torques, step. */
+static void substep(ps_sim_t *s, int64_t t_dev_ns, int64_t rel_ns)
+{
+    run_scenario(s, rel_ns);
+    ps_plant_get_joints(s->plant, s->q_rad, s->qd_rad_s);
+    route_frames(s);
+
+    if (rel_ns % s->period_ns == 0) {
+        double gyro[3], accel[3];
+        ps_plant_get_imu(s->plant, gyro, accel);
+        ps_can_frame_t f[2];
+        const uint64_t tick = (uint64_t)(rel_ns / s->period_ns);
+        if (ps_devices_tick_imu(&s->imu, tick, gyro, accel, t_dev_ns, f) == 2)
+            send_dev(s, s->robot.imu.bus_idx, f, 2);
+    }
+
+    for (uint32_t j = 0; j < s->robot.n_joints; j++)
+        s->tau_nm[j] =
+            ps_devices_step_actuator(&s->act[j], s->q_rad[j], s->qd_rad_s[j], t_dev_ns, s->dt_s);
+    if (s->plant_err == 0) {
+        ps_plant_set_torques(s->plant, s->tau_nm);
+        const int rc = ps_plant_step(s->plant);
+        if (rc < 0)
+            s->plant_err = rc; /* NaN or instability: freeze physics, keep the devices */
+        else
+            s->n_steps++;
+    }
+    s->plant_rel_ns += s->dt_ns;
+}
+
+static void update_truth(ps_sim_t *s)
+{
+    ps_plant_truth_t pt;
+    ps_plant_get_truth(s->plant, &pt);
+    ps_sim_truth_t t;
+    memset(&t, 0, sizeof t);
+    t.t_s = pt.t_s;
+    memcpy(t.com_m, pt.com_m, sizeof t.com_m);
+    memcpy(t.pelvis_m, pt.pelvis_m, sizeof t.pelvis_m);
+    t.head_height_m = pt.head_height_m;
+    t.is_fallen = pt.is_fallen;
+    t.n_steps = s->n_steps;
+    t.max_temp_c = s->robot.sim.ambient_c;
+    for (uint32_t j = 0; j < s->robot.n_joints; j++) {
+        const ps_devices_actuator_t *a = &s->act[j];
+        t.n_cmd_frames += a->n_cmd_frames;
+        t.n_cmd_out_of_limits += a->n_cmd_out_of_limits;
+        t.n_bad_frames += a->n_bad_frames;
+        t.n_cmd_ignored += a->n_cmd_ignored;
+        t.n_reply_frames += a->n_replies;
+        if (a->temp_c > t.max_temp_c)
+            t.max_temp_c = a->temp_c;
+    }
+    t.n_bad_frames += s->n_unrouted;
+    t.n_unrouted_frames = s->n_unrouted;
+    t.n_imu_samples = s->imu.n_samples;
+    t.n_dev_tx_dropped = s->n_dev_tx_dropped;
+    t.n_plant_overruns = s->n_overruns;
+    t.plant_err = s->plant_err;
+    /* Held only for the copy, so the plant thread is never delayed for long. */
+    pthread_mutex_lock(&s->truth_mu);
+    s->truth = t;
+    pthread_mutex_unlock(&s->truth_mu);
+}
+
+/* ---- lockstep clock ---------------------------------------------------- */
+
+static int64_t sim_now_ns(void *ctx)
+{
+    ps_sim_t *s = ctx;
+    return atomic_load_explicit(&s->now_ns, memory_order_relaxed);
+}
+
+static int sim_sleep_until_ns(void *ctx, int64_t deadline_ns)
+{
+    ps_sim_t *s = ctx;
+    if (s->is_started) {
+        /* The plant's work runs on the loop thread here but is not the loop's:
+         * keep it out of the allocation and page-fault counts. */
+        ps_guard_pause();
+        bool has_stepped = false;
+        while (s->start_ns + s->plant_rel_ns < deadline_ns) {
+            const int64_t t = s->start_ns + s->plant_rel_ns;
+            atomic_store_explicit(&s->now_ns, t, memory_order_relaxed);
+            substep(s, t, s->plant_rel_ns);
+            has_stepped = true;
+        }
+        if (has_stepped)
+            update_truth(s);
+        ps_guard_resume();
+    }
+    if (deadline_ns > atomic_load_explicit(&s->now_ns, memory_order_relaxed))
+        atomic_store_explicit(&s->now_ns, deadline_ns, memory_order_relaxed);
+    return 0;
+}
+
+/* ---- real-time plant thread ------------------------------------------ */
+
+static void sleep_abs(int64_t t_ns)
+{
+    const struct timespec ts = {.tv_sec = (time_t)(t_ns / PS_NS_PER_S),
+                                .tv_nsec = (long)(t_ns % PS_NS_PER_S)};
+    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, NULL) == EINTR) {
+    }
+}
+
+static void *plant_thread(void *arg)
+{
+    ps_sim_t *s = arg;
+    const unsigned prio = s->board.rt.priority > 1u ? s->board.rt.priority - 1u : 0u;
+    (void)ps_rtsetup_thread(prio, s->board.rt.plant_cpu); /* best effort, like the sim itself */
+    const ps_clock_t *mono = ps_clock_monotonic();
+    const int64_t n_sub = s->period_ns / s->dt_ns;
+    int64_t next_ns = s->start_ns + s->period_ns / 2;
+    while (atomic_load(&s->is_running)) {
+        sleep_abs(next_ns);
+        if (!atomic_load(&s->is_running))
+            break;
+        for (int64_t i = 0; i < n_sub; i++)
+            substep(s, next_ns + i * s->dt_ns, s->plant_rel_ns);
+        update_truth(s);
+        next_ns += s->period_ns;
+        const int64_t now = ps_clock_now_ns(mono);
+        if (now > next_ns) {
+            /* Physics slower than real time: skip to the next future slot of
+             * the grid, like hardware that misses its tick, and count it. */
+            const int64_t missed = (now - next_ns) / s->period_ns + 1;
+            next_ns += missed * s->period_ns;
+            s->n_overruns += (uint64_t)missed;
+        }
+    }
+    return NULL;
+}
+
+/* ---- lifecycle --------------------------------------------------------- */
+
+static int find_joint(const ps_robot_cfg_t *r, const char *name)
+{
+    for (uint32_t j = 0; j < r->n_joints; j++) {
+        if (strncmp(r->joints[j].name, name, PS_NAME_LEN) == 0)
+            return (int)j;
+    }
+    return -ENOENT;
+}
+
+static int setup_scenario(ps_sim_t *s, char *err, size_t err_len)
+{
+    const ps_scenario_cfg_t *sc = &s->scenario;
+    if (sc->n_pushes > PS_MAX_PUSHES || sc->n_events > PS_MAX_EVENTS) {
+        put_err(err, err_len, "scenario %s: too many pushes or events", sc->name);
+        return -PS_ERR_CONFIG;
+    }
+    for (uint32_t p = 0; p < sc->n_pushes; p++) {
+        const ps_push_cfg_t *pc = &sc->pushes[p];
+        const int body = ps_plant_find_body(s->plant, pc->body);
+        if (body < 0) {
+            put_err(err, err_len, "scenario %s: pushes[%u].body: '%.*s' is not a body of the model",
+                    sc->name, p, (int)PS_NAME_LEN, pc->body);
+            return -PS_ERR_CONFIG;
+        }
+        int slot = -1;
+        for (int b = 0; b < s->n_push_bodies; b++) {
+            if (s->push_body_idx[b] == body)
+                slot = b;
+        }
+        if (slot < 0) {
+            slot = s->n_push_bodies++;
+            s->push_body_idx[slot] = body;
+        }
+        s->push_slot[p] = slot;
+        s->push_t0_ns[p] = ps_s_to_ns((double)pc->t_s);
+        s->push_t1_ns[p] = ps_s_to_ns((double)pc->t_s + (double)pc->duration_s);
+    }
+    for (uint32_t e = 0; e < sc->n_events; e++) {
+        const ps_event_cfg_t *ev = &sc->events[e];
+        s->event_t_ns[e] = ps_s_to_ns((double)ev->t_s);
+        s->event_joint_idx[e] = -1;
+        if (ev->kind == PS_EVENT_DROP_REPLIES) {
+            const int j = find_joint(&s->robot, ev->joint);
+            if (j < 0) {
+                put_err(err, err_len, "scenario %s: events[%u].joint: '%.*s' is not a joint of %s",
+                        sc->name, e, (int)PS_NAME_LEN, ev->joint, s->robot.name);
+                return -PS_ERR_CONFIG;
+            }
+            s->event_joint_idx[e] = j;
+        }
+    }
+    return 0;
+}
+
+int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t err_len)
+{
+    if (cfg == NULL || out_sim == NULL || cfg->board == NULL || cfg->robot == NULL ||
+        cfg->model_path == NULL || cfg->period_ns <= 0) {
+        put_err(err, err_len, "sim: missing board, robot, model path or period");
+        return -EINVAL;
+    }
+    ps_sim_t *s = calloc(1, sizeof *s);
+    if (s == NULL) {
+        put_err(err, err_len, "sim: out of memory");
+        return -ENOMEM;
+    }
+    int rc;
+    s->board = *cfg->board;
+    s->robot = *cfg->robot;
+    if (cfg->scenario != NULL)
+        s->scenario = *cfg->scenario;
+    s->is_lockstep = cfg->is_lockstep;
+    s->period_ns = cfg->period_ns;
+    atomic_init(&s->now_ns, 0);
+    atomic_init(&s->requests, 0u);
+    atomic_init(&s->is_running, false);
+    s->clock = (ps_clock_t){.now_ns = sim_now_ns, .sleep_until_ns = sim_sleep_until_ns, .ctx = s};
+
+    if (pthread_mutex_init(&s->truth_mu, NULL) != 0) {
+        put_err(err, err_len, "sim: mutex init failed");
+        free(s);
+        return -ENOMEM;
+    }
+    s->has_mutex = true;
+
+    if (s->robot.n_joints > PS_MAX_JOINTS || s->board.n_buses > PS_MAX_BUSES) {
+        put_err(err, err_len, "sim: too many joints or buses");
+        rc = -PS_ERR_CONFIG;
+        goto fail;
+    }
+    for (uint32_t j = 0; j < s->robot.n_joints; j++) {
+        if (s->robot.joints[j].bus_idx >= s->board.n_buses) {
+            put_err(err, err_len, "sim: joint %s: bus %u not on board %s", s->robot.joints[j].name,
+                    s->robot.joints[j].bus_idx, s->board.name);
+            rc = -PS_ERR_CONFIG;
+            goto fail;
+        }
+    }
+    if (s->robot.imu.bus_idx >= s->board.n_buses) {
+        put_err(err, err_len, "sim: imu bus %u not on board %s", s->robot.imu.bus_idx,
+                s->board.name);
+        rc = -PS_ERR_CONFIG;
+        goto fail;
+    }
+
+    rc = ps_plant_create(cfg->model_path, &s->robot, &s->plant, err, err_len);
+    if (rc < 0)
+        goto fail;
+    s->dt_s = ps_plant_timestep_s(s->plant);
+    s->dt_ns = ps_s_to_ns(s->dt_s);
+    if (s->dt_ns <= 0 || s->period_ns % s->dt_ns != 0) {
+        put_err(err, err_len, "sim: model timestep %g s does not divide the servo period %lld ns",
+                s->dt_s, (long long)s->period_ns);
+        rc = -PS_ERR_CONFIG;
+        goto fail;
+    }
+    rc = setup_scenario(s, err, err_len);
+    if (rc < 0)
+        goto fail;
+
+    const ps_clock_t *bus_clock = s->is_lockstep ? &s->clock : ps_clock_monotonic();
+    for (uint32_t b = 0; b < s->board.n_buses; b++) {
+        rc = ps_can_sim_create(&s->bus[b], s->board.buses[b].ifname, s->board.buses[b].bitrate,
+                               bus_clock, s->period_ns, BUS_QUEUE_LEN);
+        if (rc < 0) {
+            put_err(err, err_len, "sim: bus %s: %s", s->board.buses[b].ifname, ps_strerror(rc));
+            goto fail;
+        }
+        s->dev_port[b] = ps_can_sim_device_port(s->bus[b]);
+    }
+    ps_gpio_sim_init(&s->gpio);
+    for (uint32_t j = 0; j < s->robot.n_joints; j++)
+        ps_devices_init_actuator(&s->act[j], &s->robot.joints[j], &s->robot.sim);
+    ps_devices_init_imu(&s->imu, &s->robot.imu, &s->robot.sim, (uint64_t)s->scenario.seed);
+    update_truth(s);
+    *out_sim = s;
+    return 0;
+
+fail:
+    ps_sim_destroy(s);
+    return rc;
+}
+
+ps_can_port_t ps_sim_can_port(ps_sim_t *s, unsigned bus_idx)
+{
+    if (bus_idx >= s->board.n_buses || s->bus[bus_idx] == NULL) {
+        const ps_can_port_t none = {0};
+        return none;
+    }
+    return ps_can_sim_host_port(s->bus[bus_idx]);
+}
+
+ps_gpio_port_t ps_sim_gpio_port(ps_sim_t *s)
+{
+    return ps_gpio_sim_port(&s->gpio);
+}
+
+const ps_clock_t *ps_sim_clock(ps_sim_t *s)
+{
+    return s->is_lockstep ? &s->clock : ps_clock_monotonic();
+}
+
+int ps_sim_start(ps_sim_t *s, int64_t start_ns)
+{
+    if (s->is_started)
+        return -EBUSY;
+    s->start_ns = start_ns;
+    s->plant_rel_ns = 0;
+    for (uint32_t b = 0; b < s->board.n_buses; b++)
+        ps_can_sim_set_epoch(s->bus[b], start_ns);
+    if (s->is_lockstep) {
+        atomic_store(&s->now_ns, start_ns);
+        s->is_started = true;
+        return 0;
+    }
+    atomic_store(&s->is_running, true);
+    const int rc = pthread_create(&s->thread, NULL, plant_thread, s);
+    if (rc != 0) {
+        atomic_store(&s->is_running, false);
+        return -rc;
+    }
+    s->has_thread = true;
+    s->is_started = true;
+    return 0;
+}
+
+void ps_sim_stop(ps_sim_t *s)
+{
+    if (s == NULL || !s->has_thread)
+        return;
+    atomic_store(&s->is_running, false);
+    (void)pthread_join(s->thread, NULL); /* cannot fail for a joinable thread we own */
+    s->has_thread = false;
+}
+
+void ps_sim_get_truth(ps_sim_t *s, ps_sim_truth_t *out)
+{
+    pthread_mutex_lock(&s->truth_mu);
+    *out = s->truth;
+    pthread_mutex_unlock(&s->truth_mu);
+}
+
+uint32_t ps_sim_take_requests(ps_sim_t *s)
+{
+    return atomic_exchange(&s->requests, 0u);
+}
+
+int ps_sim_get_actuator(ps_sim_t *s, unsigned joint_idx, ps_devices_actuator_t *out)
+{
+    if (joint_idx >= s->robot.n_joints)
+        return -EINVAL;
+    *out = s->act[joint_idx];
+    return 0;
+}
+
+void ps_sim_destroy(ps_sim_t *s)
+{
+    if (s == NULL)
+        return;
+    ps_sim_stop(s);
+    for (uint32_t b = 0; b < PS_MAX_BUSES; b++) {
+        ps_can_sim_destroy(s->bus[b]);
+        s->bus[b] = NULL;
+    }
+    ps_plant_destroy(s->plant);
+    if (s->has_mutex)
+        pthread_mutex_destroy(&s->truth_mu);
+    free(s);
+}

@@ -1,0 +1,506 @@
+/*
+ * The loop against scripted devices and an injected clock: pacing and
+ * overrun accounting, the watchdogs and their state transitions, what goes
+ * on the wire in each state, and the bus schedule. Uses the shipped board
+ * and robot files, so the loop sees the real joint map.
+ */
+#include <math.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <string.h>
+
+#include <cmocka.h>
+
+#include "../drivers/ps_imu_msg.h"
+#include "../drivers/ps_mit.h"
+#include "../rt/ps_err.h"
+#include "../rt/ps_loop.h"
+#include "fakes/ps_clock_fake.h"
+
+#define PERIOD_NS PS_NS_PER_MS
+#define START_NS  PS_NS_PER_S
+#define MAX_SENT  64u
+
+/* ---- scripted devices: answer every command like a healthy drive --------- */
+
+typedef struct {
+    uint32_t bus_idx;
+    ps_can_frame_t sent[MAX_SENT];
+    uint32_t n_sent;
+    ps_can_frame_t pending[MAX_SENT]; /* delivered on the next recv */
+    uint32_t n_pending;
+    bool is_bus_off;
+} fake_bus_t;
+
+typedef struct {
+    ps_clock_fake_t clock;
+    ps_board_cfg_t board;
+    ps_robot_cfg_t robot;
+    ps_canbus_plan_t plan;
+    fake_bus_t buses[PS_MAX_BUSES];
+    bool is_estop_pressed, is_enabled, has_gpio_error;
+    bool is_mute[PS_MAX_JOINTS]; /* joint does not answer */
+    uint8_t fault[PS_MAX_JOINTS];
+    bool is_imu_mute;
+    uint8_t imu_seq;
+    float policy_value;          /* NAN: the policy returns a NaN target */
+    int64_t policy_extra_ns;     /* time the policy takes */
+    ps_ring_t ring;
+    ps_loop_rec_t ring_storage[256];
+    ps_loop_t loop;
+} fixture_t;
+
+static fixture_t *fx;
+
+static int joint_of(const fixture_t *f, uint32_t bus, uint32_t can_id)
+{
+    for (uint32_t j = 0; j < f->robot.n_joints; j++)
+        if (f->robot.joints[j].bus_idx == bus && f->robot.joints[j].can_id == can_id)
+            return (int)j;
+    return -1;
+}
+
+static void answer(fake_bus_t *b, int j)
+{
+    const ps_joint_cfg_t *jc = &fx->robot.joints[j];
+    if (fx->is_mute[j] || b->n_pending >= MAX_SENT)
+        return;
+    ps_mit_reply_t rep = {.motor_id = (uint8_t)(jc->can_id & 0xf),
+                          .fault = fx->fault[j],
+                          .p_rad = jc->stance_rad,
+                          .temp_mos_c = 30,
+                          .temp_rotor_c = 30};
+    ps_can_frame_t *f = &b->pending[b->n_pending++];
+    memset(f, 0, sizeof(*f));
+    f->id = jc->reply_id;
+    f->len = 8;
+    ps_mit_encode_reply(&jc->wire, &rep, f->data);
+}
+
+static int fake_send(void *ctx, const ps_can_frame_t *frames, size_t n)
+{
+    fake_bus_t *b = ctx;
+    for (size_t i = 0; i < n; i++) {
+        if (b->n_sent < MAX_SENT)
+            b->sent[b->n_sent++] = frames[i];
+        int j = joint_of(fx, b->bus_idx, frames[i].id);
+        if (j >= 0)
+            answer(b, j);
+    }
+    return (int)n;
+}
+
+static int fake_recv(void *ctx, ps_can_frame_t *out, size_t max)
+{
+    fake_bus_t *b = ctx;
+    size_t n = 0;
+    if (b->bus_idx == fx->robot.imu.bus_idx && !fx->is_imu_mute && max >= 2) {
+        ps_imu_sample_t s = {.accel_body_m_s2 = {0, 0, 9.81f}, .seq = fx->imu_seq++};
+        ps_imu_msg_encode(fx->robot.imu.base_id, &s, out);
+        n = 2;
+    }
+    for (uint32_t i = 0; i < b->n_pending && n < max; i++)
+        out[n++] = b->pending[i];
+    b->n_pending = 0;
+    return (int)n;
+}
+
+static int fake_state(void *ctx, ps_can_state_t *out)
+{
+    fake_bus_t *b = ctx;
+    memset(out, 0, sizeof(*out));
+    out->mode = b->is_bus_off ? PS_CAN_BUS_OFF : PS_CAN_BUS_ERROR_ACTIVE;
+    return 0;
+}
+
+static const ps_can_ops_t FAKE_BUS_OPS = {
+    .send_batch = fake_send, .recv_batch = fake_recv, .get_state = fake_state};
+
+static int gpio_read(void *ctx, bool *out)
+{
+    (void)ctx;
+    if (fx->has_gpio_error)
+        return -EIO;
+    *out = fx->is_estop_pressed;
+    return 0;
+}
+static int gpio_enable(void *ctx, bool on)
+{
+    (void)ctx;
+    fx->is_enabled = on;
+    return 0;
+}
+static int gpio_led(void *ctx, ps_gpio_led_t led)
+{
+    (void)ctx;
+    (void)led;
+    return 0;
+}
+static const ps_gpio_ops_t FAKE_GPIO_OPS = {
+    .read_estop = gpio_read, .set_enable = gpio_enable, .set_led = gpio_led};
+
+/* A policy that holds the stance, or returns what the test scripts. */
+static int fake_policy_step(void *ctx, const ps_meas_t *m, const ps_estimate_t *e,
+                            ps_targets_t *out)
+{
+    (void)ctx;
+    (void)m;
+    (void)e;
+    out->n_joints = fx->robot.n_joints;
+    for (uint32_t j = 0; j < fx->robot.n_joints; j++) {
+        out->q_rad[j] = isnan(fx->policy_value) ? NAN : fx->robot.joints[j].stance_rad;
+        out->qd_rad_s[j] = 0;
+        out->tau_ff_nm[j] = 0;
+    }
+    ps_clock_fake_advance(&fx->clock, fx->policy_extra_ns);
+    return 0;
+}
+static void fake_policy_reset(void *ctx)
+{
+    (void)ctx;
+}
+static const ps_policy_ops_t FAKE_POLICY = {
+    .name = "fake", .step = fake_policy_step, .reset = fake_policy_reset};
+
+static int setup(void **state)
+{
+    char err[PS_ERR_MSG_LEN];
+    fx = test_calloc(1, sizeof(*fx));
+    assert_non_null(fx);
+    if (ps_config_load_board("boards/sim.yaml", &fx->board, err, sizeof(err)) != 0 ||
+        ps_config_load_robot("robots/ps1.yaml", &fx->robot, err, sizeof(err)) != 0 ||
+        ps_canbus_plan(&fx->board, &fx->robot, &fx->plan, err, sizeof(err)) != 0)
+        fail_msg("config: %s", err);
+    ps_clock_fake_init(&fx->clock, START_NS);
+    assert_int_equal(ps_ring_init(&fx->ring, fx->ring_storage, 256, sizeof(ps_loop_rec_t)), 0);
+    ps_loop_cfg_t lc = {
+        .board = &fx->board,
+        .robot = &fx->robot,
+        .plan = &fx->plan,
+        .clock = &fx->clock.clock,
+        .gpio = {.ops = &FAKE_GPIO_OPS, .ctx = fx},
+        .policy = {.ops = &FAKE_POLICY, .ctx = fx},
+        .ring = &fx->ring,
+        .status_every = 10,
+    };
+    for (uint32_t b = 0; b < fx->board.n_buses; b++) {
+        fx->buses[b].bus_idx = b;
+        lc.buses[b] = (ps_can_port_t){.ops = &FAKE_BUS_OPS, .ctx = &fx->buses[b], .name = "fake"};
+    }
+    assert_int_equal(ps_loop_init(&fx->loop, &lc), 0);
+    assert_int_equal(ps_loop_start(&fx->loop, START_NS), 0);
+    *state = fx;
+    return 0;
+}
+
+static int teardown(void **state)
+{
+    (void)state;
+    ps_loop_deinit(&fx->loop);
+    test_free(fx);
+    fx = NULL;
+    return 0;
+}
+
+static void clear_sent(void)
+{
+    for (uint32_t b = 0; b < fx->board.n_buses; b++)
+        fx->buses[b].n_sent = 0;
+}
+
+static void steps(unsigned n)
+{
+    for (unsigned i = 0; i < n; i++) {
+        clear_sent();
+        assert_int_equal(ps_loop_step(&fx->loop), 0);
+    }
+}
+
+static bool find_refusal(uint32_t request, const char **out_reason)
+{
+    ps_loop_rec_t rec;
+    bool is_found = false;
+    while (ps_ring_pop(&fx->ring, &rec) == 0)
+        if (rec.kind == PS_REC_REFUSED && rec.cond == request) {
+            *out_reason = rec.reason;
+            is_found = true;
+        }
+    return is_found;
+}
+
+/* Bring the robot to ACTIVE: replies fresh, START, ramp. */
+static void go_active(void)
+{
+    steps(20);
+    assert_int_equal(fx->loop.state, PS_SM_STANDBY);
+    ps_loop_request(&fx->loop, PS_SM_C_REQ_START);
+    steps(1);
+    assert_int_equal(fx->loop.state, PS_SM_RAMP);
+    steps((unsigned)(fx->robot.control.ramp_s * 1000) + 1);
+    assert_int_equal(fx->loop.state, PS_SM_ACTIVE);
+}
+
+/* Decode the last command for joint j among this tick's frames. */
+static bool last_command(uint32_t j, ps_mit_cmd_t *out)
+{
+    const ps_joint_cfg_t *jc = &fx->robot.joints[j];
+    const fake_bus_t *b = &fx->buses[jc->bus_idx];
+    for (uint32_t i = 0; i < b->n_sent; i++)
+        if (b->sent[i].id == jc->can_id &&
+            ps_mit_decode_cmd(&jc->wire, b->sent[i].data, b->sent[i].len, out) == 0)
+            return true;
+    return false;
+}
+
+/* ---- pacing ------------------------------------------------------------- */
+
+static void test_loop_step_on_time_sleeps_on_grid(void **state)
+{
+    (void)state;
+    steps(100);
+    assert_int_equal(fx->clock.n_sleep_calls, 100);
+    for (size_t i = 0; i < 100; i++)
+        assert_int_equal(fx->clock.sleep_deadlines_ns[i], START_NS + (int64_t)i * PERIOD_NS);
+    assert_int_equal(fx->loop.pacer.n_overruns, 0);
+    assert_int_equal(fx->loop.perf[PS_STAGE_WAKE].n, 100);
+    assert_int_equal(fx->loop.perf[PS_STAGE_TICK].n, 100);
+}
+
+static void test_loop_step_long_tick_counts_overrun_keeps_grid(void **state)
+{
+    (void)state;
+    steps(10);
+    fx->policy_extra_ns = 3 * PERIOD_NS + PERIOD_NS / 2; /* next policy tick takes 3.5 periods */
+    steps(fx->loop.policy_div); /* reaches a policy tick */
+    fx->policy_extra_ns = 0;
+    steps(5);
+    assert_int_equal(fx->loop.pacer.n_overruns, 1);
+    assert_int_equal(fx->loop.pacer.n_missed, 4); /* 3.5 periods late: 4 deadlines gone */
+    size_t n = fx->clock.n_sleep_calls;
+    for (size_t i = 0; i < n; i++)
+        assert_int_equal((fx->clock.sleep_deadlines_ns[i] - START_NS) % PERIOD_NS, 0);
+}
+
+static void test_loop_policy_runs_at_policy_rate(void **state)
+{
+    (void)state;
+    steps(1000);
+    assert_int_equal(fx->loop.counters.n_policy_runs,
+                     1000 / (fx->robot.control.servo_hz / fx->robot.control.policy_hz));
+}
+
+/* ---- states and watchdogs ----------------------------------------------- */
+
+static void test_loop_start_then_ramp_reaches_active_with_gains(void **state)
+{
+    (void)state;
+    go_active();
+    steps(20);
+    for (uint32_t j = 0; j < fx->robot.n_joints; j++) {
+        ps_mit_cmd_t cmd;
+        if (!last_command(j, &cmd))
+            continue;
+        const ps_joint_cfg_t *jc = &fx->robot.joints[j];
+        float kp_step = jc->wire.kp_max_nm_rad / 4095.0f;
+        assert_float_equal(cmd.kp_nm_rad, jc->kp_nm_rad, kp_step);
+        assert_float_equal(cmd.p_rad, jc->stance_rad, 0.01);
+    }
+    assert_true(fx->is_enabled);
+}
+
+static void test_loop_start_without_replies_refused(void **state)
+{
+    (void)state;
+    for (uint32_t j = 0; j < fx->robot.n_joints; j++)
+        fx->is_mute[j] = true;
+    steps(20);
+    ps_loop_request(&fx->loop, PS_SM_C_REQ_START);
+    steps(1);
+    assert_int_equal(fx->loop.state, PS_SM_STANDBY);
+    const char *reason = NULL;
+    assert_true(find_refusal(PS_SM_C_REQ_START, &reason));
+    assert_non_null(reason);
+    assert_int_equal(fx->loop.counters.n_refused, 1);
+}
+
+static void test_loop_stale_reply_in_active_damps(void **state)
+{
+    (void)state;
+    go_active();
+    fx->is_mute[3] = true;
+    const ps_joint_cfg_t *jc = &fx->robot.joints[3];
+    unsigned timeout_ticks = (unsigned)(jc->rate_div + fx->robot.control.reply_timeout_s * 1000);
+    steps(timeout_ticks - 1);
+    assert_int_equal(fx->loop.state, PS_SM_ACTIVE);
+    steps(3);
+    assert_int_equal(fx->loop.state, PS_SM_DAMPING);
+    steps(fx->robot.joints[0].rate_div);
+    ps_mit_cmd_t cmd;
+    assert_true(last_command(0, &cmd));
+    assert_float_equal(cmd.kp_nm_rad, 0.0f, 1e-6);
+    assert_float_equal(cmd.kd_nm_s_rad, fx->robot.control.damping_kd_nm_s_rad, 0.01);
+}
+
+static void test_loop_stale_imu_in_active_damps(void **state)
+{
+    (void)state;
+    go_active();
+    fx->is_imu_mute = true;
+    steps((unsigned)(fx->robot.control.imu_timeout_s * 1000) + fx->robot.imu.rate_div + 2);
+    assert_int_equal(fx->loop.state, PS_SM_DAMPING);
+}
+
+static void test_loop_nan_target_damps(void **state)
+{
+    (void)state;
+    go_active();
+    fx->policy_value = NAN;
+    steps(fx->loop.policy_div + 1);
+    assert_int_equal(fx->loop.state, PS_SM_DAMPING);
+    assert_true(fx->loop.counters.n_target_invalid > 0);
+    assert_int_equal(fx->loop.counters.n_cmd_replaced, 0);
+}
+
+static void test_loop_policy_late_damps(void **state)
+{
+    (void)state;
+    go_active();
+    fx->policy_extra_ns = ps_s_to_ns(fx->robot.control.policy_deadline_s) + 1000;
+    steps(fx->loop.policy_div + 1);
+    assert_int_equal(fx->loop.state, PS_SM_DAMPING);
+    assert_int_equal(fx->loop.counters.n_policy_late, 1);
+}
+
+static void test_loop_estop_input_latches_estop_sends_exit(void **state)
+{
+    (void)state;
+    go_active();
+    fx->is_estop_pressed = true;
+    uint32_t n_exit = 0;
+    for (unsigned t = 0; t < 20; t++) {
+        steps(1);
+        for (uint32_t b = 0; b < fx->board.n_buses; b++)
+            for (uint32_t i = 0; i < fx->buses[b].n_sent; i++)
+                if (ps_mit_classify_special(fx->buses[b].sent[i].data, 8) == PS_MIT_SPECIAL_EXIT)
+                    n_exit++;
+    }
+    assert_int_equal(fx->loop.state, PS_SM_ESTOP);
+    assert_false(fx->is_enabled);
+    assert_int_equal(n_exit, fx->robot.n_joints);
+    /* reset refused while pressed, accepted once released */
+    ps_loop_request(&fx->loop, PS_SM_C_REQ_RESET);
+    steps(1);
+    const char *reason = NULL;
+    assert_true(find_refusal(PS_SM_C_REQ_RESET, &reason));
+    assert_int_equal(fx->loop.state, PS_SM_ESTOP);
+    fx->is_estop_pressed = false;
+    steps(5);
+    assert_int_equal(fx->loop.state, PS_SM_ESTOP); /* latched */
+    ps_loop_request(&fx->loop, PS_SM_C_REQ_RESET);
+    steps(1);
+    assert_int_equal(fx->loop.state, PS_SM_STANDBY);
+}
+
+static void test_loop_gpio_error_counts_as_estop(void **state)
+{
+    (void)state;
+    go_active();
+    fx->has_gpio_error = true;
+    steps(1);
+    assert_int_equal(fx->loop.state, PS_SM_ESTOP);
+    assert_int_equal(fx->loop.counters.n_gpio_errors, 1);
+}
+
+static void test_loop_drive_fault_estops(void **state)
+{
+    (void)state;
+    go_active();
+    fx->fault[5] = PS_MIT_FAULT_OVERCURRENT;
+    steps(fx->robot.joints[5].rate_div + 2);
+    assert_int_equal(fx->loop.state, PS_SM_ESTOP);
+}
+
+static void test_loop_bus_off_estops(void **state)
+{
+    (void)state;
+    go_active();
+    fx->buses[1].is_bus_off = true;
+    steps(1);
+    assert_int_equal(fx->loop.state, PS_SM_ESTOP);
+}
+
+static void test_loop_run_until_end_goes_through_damping_to_standby(void **state)
+{
+    (void)state;
+    go_active();
+    int64_t end = fx->loop.pacer.next_ns + 100 * PERIOD_NS;
+    assert_int_equal(ps_loop_run(&fx->loop, fx->loop.pacer.next_ns, end), 0);
+    assert_int_equal(fx->loop.state, PS_SM_STANDBY);
+    ps_loop_rec_t rec;
+    ps_sm_state_t seen[8];
+    unsigned n = 0;
+    while (ps_ring_pop(&fx->ring, &rec) == 0)
+        if (rec.kind == PS_REC_TRANSITION && n < 8)
+            seen[n++] = (ps_sm_state_t)rec.state;
+    assert_true(n >= 2);
+    assert_int_equal(seen[n - 2], PS_SM_DAMPING);
+    assert_int_equal(seen[n - 1], PS_SM_STANDBY);
+}
+
+static void test_loop_second_stop_request_estops(void **state)
+{
+    (void)state;
+    go_active();
+    ps_loop_request_stop(&fx->loop);
+    steps(1);
+    assert_int_equal(fx->loop.state, PS_SM_DAMPING);
+    ps_loop_request_stop(&fx->loop);
+    steps(1);
+    assert_int_equal(fx->loop.state, PS_SM_ESTOP);
+    assert_true(ps_loop_is_stopped(&fx->loop));
+}
+
+/* ---- the bus schedule --------------------------------------------------- */
+
+static void test_loop_commands_each_joint_at_its_rate(void **state)
+{
+    (void)state;
+    steps(5); /* ENTER frames go out first */
+    uint32_t n_cmd[PS_MAX_JOINTS] = {0};
+    for (unsigned t = 0; t < 200; t++) {
+        steps(1);
+        for (uint32_t j = 0; j < fx->robot.n_joints; j++) {
+            ps_mit_cmd_t cmd;
+            n_cmd[j] += last_command(j, &cmd) ? 1u : 0u;
+        }
+    }
+    for (uint32_t j = 0; j < fx->robot.n_joints; j++)
+        assert_int_equal(n_cmd[j], 200 / fx->robot.joints[j].rate_div);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+#define T(f) cmocka_unit_test_setup_teardown(f, setup, teardown)
+        T(test_loop_step_on_time_sleeps_on_grid),
+        T(test_loop_step_long_tick_counts_overrun_keeps_grid),
+        T(test_loop_policy_runs_at_policy_rate),
+        T(test_loop_start_then_ramp_reaches_active_with_gains),
+        T(test_loop_start_without_replies_refused),
+        T(test_loop_stale_reply_in_active_damps),
+        T(test_loop_stale_imu_in_active_damps),
+        T(test_loop_nan_target_damps),
+        T(test_loop_policy_late_damps),
+        T(test_loop_estop_input_latches_estop_sends_exit),
+        T(test_loop_gpio_error_counts_as_estop),
+        T(test_loop_drive_fault_estops),
+        T(test_loop_bus_off_estops),
+        T(test_loop_run_until_end_goes_through_damping_to_standby),
+        T(test_loop_second_stop_request_estops),
+        T(test_loop_commands_each_joint_at_its_rate),
+#undef T
+    };
+    return cmocka_run_group_tests_name("loop", tests, NULL, NULL);
+}

@@ -1,0 +1,667 @@
+/*
+ * Tests of sim/ps_plant.c and the ps1 model (sim/models/ps1.xml): loading,
+ * joint mapping, stance placement, standing under an ideal joint PD, falling
+ * when limp, the harness, the IMU, pushes, and the kinematic convention the
+ * estimator relies on. Run from the repo root.
+ */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <mujoco/mujoco.h>
+
+#include "../rt/ps_config.h"
+#include "../rt/ps_err.h"
+#include "../sim/ps_plant.h"
+
+#define MODEL_PATH "sim/models/ps1.xml"
+#define ROBOT_PATH "robots/ps1.yaml"
+
+/* ---- the robot of robots/ps1.yaml, written out (same numbers) ---------- */
+
+typedef struct {
+    const char *name;
+    uint32_t bus, can_id;
+    const ps_mit_range_t *wire;
+    float pos_min, pos_max, torque_max, kp, kd, kp_max, kd_max, stance, kt;
+    uint32_t rate_div;
+} joint_row_t;
+
+static const ps_mit_range_t AK80_9 = {-12.5f, 12.5f,  -50.0f, 50.0f,  500.0f,
+                                      5.0f,   -18.0f, 18.0f,  -30.0f, 30.0f};
+static const ps_mit_range_t AK70_10 = {-12.5f, 12.5f,  -50.0f, 50.0f,  500.0f,
+                                       5.0f,   -25.0f, 25.0f,  -30.0f, 30.0f};
+static const ps_mit_range_t AK60_6 = {-12.5f, 12.5f,  -45.0f, 45.0f,  500.0f,
+                                      5.0f,   -15.0f, 15.0f,  -25.0f, 25.0f};
+
+/* name bus id driver  pos_min pos_max tau_max  kp kd kp_max kd_max stance kt div */
+static const joint_row_t JOINTS[] = {
+    {"l_hip_yaw", 0, 1, &AK80_9, -0.6f, 0.6f, 16, 100, 3, 400, 5, 0.0f, 0.8f, 2},
+    {"l_hip_roll", 0, 2, &AK70_10, -0.35f, 0.6f, 24, 150, 4, 400, 5, 0.0f, 1.0f, 2},
+    {"l_hip_pitch", 0, 3, &AK70_10, -2.0f, 0.8f, 24, 200, 4, 400, 5, -0.28f, 1.0f, 2},
+    {"l_knee", 0, 4, &AK70_10, -0.05f, 2.4f, 24, 300, 4, 400, 5, 0.5f, 1.0f, 2},
+    {"r_hip_yaw", 1, 1, &AK80_9, -0.6f, 0.6f, 16, 100, 3, 400, 5, 0.0f, 0.8f, 2},
+    {"r_hip_roll", 1, 2, &AK70_10, -0.6f, 0.35f, 24, 150, 4, 400, 5, 0.0f, 1.0f, 2},
+    {"r_hip_pitch", 1, 3, &AK70_10, -2.0f, 0.8f, 24, 200, 4, 400, 5, -0.28f, 1.0f, 2},
+    {"r_knee", 1, 4, &AK70_10, -0.05f, 2.4f, 24, 300, 4, 400, 5, 0.5f, 1.0f, 2},
+    {"l_ankle_pitch", 2, 1, &AK70_10, -0.9f, 0.6f, 24, 300, 4, 400, 5, -0.25f, 1.0f, 2},
+    {"l_ankle_roll", 2, 2, &AK80_9, -0.4f, 0.4f, 16, 100, 2, 400, 5, 0.0f, 0.8f, 2},
+    {"r_ankle_pitch", 2, 3, &AK70_10, -0.9f, 0.6f, 24, 300, 4, 400, 5, -0.25f, 1.0f, 2},
+    {"r_ankle_roll", 2, 4, &AK80_9, -0.4f, 0.4f, 16, 100, 2, 400, 5, 0.0f, 0.8f, 2},
+    {"waist_yaw", 3, 1, &AK80_9, -1.0f, 1.0f, 16, 80, 2, 300, 5, 0.0f, 0.8f, 10},
+    {"l_shoulder_pitch", 3, 2, &AK60_6, -3.0f, 1.0f, 9, 30, 1, 100, 3, 0.0f, 0.6f, 10},
+    {"l_shoulder_roll", 3, 3, &AK60_6, -0.3f, 2.5f, 9, 30, 1, 100, 3, 0.15f, 0.6f, 10},
+    {"l_shoulder_yaw", 3, 4, &AK60_6, -1.5f, 1.5f, 9, 30, 1, 100, 3, 0.0f, 0.6f, 10},
+    {"l_elbow", 3, 5, &AK60_6, -2.5f, 0.05f, 9, 30, 1, 100, 3, -0.3f, 0.6f, 10},
+    {"r_shoulder_pitch", 3, 6, &AK60_6, -3.0f, 1.0f, 9, 30, 1, 100, 3, 0.0f, 0.6f, 10},
+    {"r_shoulder_roll", 3, 7, &AK60_6, -2.5f, 0.3f, 9, 30, 1, 100, 3, -0.15f, 0.6f, 10},
+    {"r_shoulder_yaw", 3, 8, &AK60_6, -1.5f, 1.5f, 9, 30, 1, 100, 3, 0.0f, 0.6f, 10},
+    {"r_elbow", 3, 9, &AK60_6, -2.5f, 0.05f, 9, 30, 1, 100, 3, -0.3f, 0.6f, 10},
+};
+#define N_JOINTS ((int)(sizeof(JOINTS) / sizeof(JOINTS[0])))
+
+static const ps_kinematics_cfg_t KIN = {
+    .mass_kg = 37.7f,
+    .hip_offset_y_m = 0.08f,
+    .hip_offset_z_m = 0.06f,
+    .thigh_m = 0.28f,
+    .shank_m = 0.28f,
+    .ankle_height_m = 0.05f,
+    .foot_length_m = 0.20f,
+    .foot_width_m = 0.09f,
+    .foot_offset_x_m = 0.03f,
+    .com_offset_z_m = 0.003f,
+    .fall_tilt_rad = 0.8f,
+    .fall_com_height_m = 0.39f,
+};
+
+static int joint_idx(const char *name)
+{
+    for (int i = 0; i < N_JOINTS; i++)
+        if (strcmp(JOINTS[i].name, name) == 0)
+            return i;
+    fail_msg("no joint %s", name);
+    return -1;
+}
+
+static void build_robot(ps_robot_cfg_t *r)
+{
+    memset(r, 0, sizeof(*r));
+    (void)snprintf(r->name, sizeof(r->name), "ps1");
+    (void)snprintf(r->model, sizeof(r->model), "../sim/models/ps1.xml");
+    r->control = (ps_control_cfg_t){1000, 50, 1.0f, 2.0f, 2.0f, 0.05f, 0.01f, 0.01f, 0.002f};
+    r->imu = (ps_imu_cfg_t){3, 0x080, 1};
+    r->kin = KIN;
+    r->sim =
+        (ps_sim_devices_cfg_t){0.002f, 0.005f, 0.02f, 0.05f, 0.00005f, 1.5f, 60.0f, 0.2f, 25.0f};
+    r->n_joints = (uint32_t)N_JOINTS;
+    for (int i = 0; i < N_JOINTS; i++) {
+        const joint_row_t *row = &JOINTS[i];
+        ps_joint_cfg_t *j = &r->joints[i];
+        (void)snprintf(j->name, sizeof(j->name), "%s", row->name);
+        j->bus_idx = row->bus;
+        j->can_id = row->can_id;
+        j->reply_id = 0x100u + row->can_id;
+        j->protocol = PS_PROTO_MIT;
+        j->wire = *row->wire;
+        j->pos_min_rad = row->pos_min;
+        j->pos_max_rad = row->pos_max;
+        j->vel_max_rad_s = 25.0f;
+        j->torque_max_nm = row->torque_max;
+        j->kp_nm_rad = row->kp;
+        j->kd_nm_s_rad = row->kd;
+        j->kp_max_nm_rad = row->kp_max;
+        j->kd_max_nm_s_rad = row->kd_max;
+        j->stance_rad = row->stance;
+        j->kt_nm_a = row->kt;
+        j->temp_max_c = 90.0f;
+        j->rate_div = row->rate_div;
+    }
+}
+
+/* ---- fixture ----------------------------------------------------------- */
+
+typedef struct {
+    ps_robot_cfg_t robot;
+    ps_plant_t *plant;
+    char err[PS_ERR_MSG_LEN];
+} state_t;
+
+static int setup(void **st)
+{
+    static state_t s;
+    memset(&s, 0, sizeof(s));
+    build_robot(&s.robot);
+    const int rc = ps_plant_create(MODEL_PATH, &s.robot, &s.plant, s.err, sizeof(s.err));
+    if (rc != 0) {
+        fprintf(stderr, "create: %d %s\n", rc, s.err);
+        return -1;
+    }
+    *st = &s;
+    return 0;
+}
+
+static int teardown(void **st)
+{
+    state_t *s = *st;
+    ps_plant_destroy(s->plant);
+    s->plant = NULL;
+    return 0;
+}
+
+/* Ideal joint-space PD to the stance, as the servo layer would do it. */
+static void pd_stance(const state_t *s, double *tau)
+{
+    double q[PS_MAX_JOINTS], qd[PS_MAX_JOINTS];
+    ps_plant_get_joints(s->plant, q, qd);
+    for (int i = 0; i < N_JOINTS; i++) {
+        const ps_joint_cfg_t *j = &s->robot.joints[i];
+        double t = j->kp_nm_rad * (j->stance_rad - q[i]) - j->kd_nm_s_rad * qd[i];
+        const double lim = j->torque_max_nm;
+        tau[i] = t > lim ? lim : (t < -lim ? -lim : t);
+    }
+}
+
+static int steps_for(const state_t *s, double t_s)
+{
+    return (int)lround(t_s / ps_plant_timestep_s(s->plant));
+}
+
+/** Run for t_s with the PD (or limp), return the time of the first fall or -1. */
+static double run(state_t *s, double t_s, bool is_pd)
+{
+    double tau[PS_MAX_JOINTS] = {0};
+    ps_plant_truth_t tr;
+    const int n = steps_for(s, t_s);
+    for (int k = 0; k < n; k++) {
+        if (is_pd)
+            pd_stance(s, tau);
+        ps_plant_set_torques(s->plant, tau);
+        assert_int_equal(ps_plant_step(s->plant), 0);
+        ps_plant_get_truth(s->plant, &tr);
+        if (tr.is_fallen)
+            return tr.t_s;
+    }
+    return -1.0;
+}
+
+static double now_s(void)
+{
+    struct timespec ts;
+    (void)clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* ---- create ------------------------------------------------------------ */
+
+static void test_ps_plant_create_model_maps_all_joints(void **st)
+{
+    state_t *s = *st;
+    double q[PS_MAX_JOINTS], qd[PS_MAX_JOINTS];
+    ps_plant_get_joints(s->plant, q, qd);
+    /* every joint reads back its own stance angle: the map is by name */
+    for (int i = 0; i < N_JOINTS; i++) {
+        assert_float_equal(q[i], s->robot.joints[i].stance_rad, 1e-9);
+        assert_float_equal(qd[i], 0.0, 1e-12);
+    }
+    assert_float_equal(ps_plant_timestep_s(s->plant), 0.0005, 1e-12);
+    /* robot file's mass_kg is the model's mass */
+    assert_float_equal(ps_plant_total_mass_kg(s->plant), s->robot.kin.mass_kg, 0.01);
+    assert_true(ps_plant_find_body(s->plant, "torso") > 0);
+    assert_true(ps_plant_find_body(s->plant, "head") > 0);
+    assert_int_equal(ps_plant_find_body(s->plant, "no_such_body"), -ENOENT);
+}
+
+static void test_ps_plant_create_missing_joint_config_error(void **st)
+{
+    (void)st;
+    ps_robot_cfg_t r;
+    build_robot(&r);
+    (void)snprintf(r.joints[5].name, sizeof(r.joints[5].name), "l_tail");
+    ps_plant_t *p = NULL;
+    char err[PS_ERR_MSG_LEN] = "";
+    assert_int_equal(ps_plant_create(MODEL_PATH, &r, &p, err, sizeof(err)), -PS_ERR_CONFIG);
+    assert_null(p);
+    assert_non_null(strstr(err, "l_tail"));
+}
+
+static void test_ps_plant_create_missing_actuator_config_error(void **st)
+{
+    (void)st;
+    /* a joint without a motor of the same name */
+    const char *path = "/tmp/test_plant_noact.xml";
+    FILE *f = fopen(path, "w");
+    assert_non_null(f);
+    fputs("<mujoco><worldbody><geom type='plane' size='1 1 .1'/>"
+          "<body name='pelvis' pos='0 0 1'><freejoint/><site name='imu'/>"
+          "<geom type='sphere' size='.1'/><body name='head'><geom type='sphere' size='.05'/>"
+          "</body><body name='foot'><joint name='j' axis='0 1 0'/>"
+          "<geom type='box' pos='0 0 -.5' size='.1 .1 .1'/></body></body></worldbody>"
+          "<sensor><gyro name='imu_gyro' site='imu'/>"
+          "<accelerometer name='imu_accel' site='imu'/></sensor></mujoco>",
+          f);
+    assert_int_equal(fclose(f), 0);
+    ps_robot_cfg_t r;
+    build_robot(&r);
+    r.n_joints = 1;
+    (void)snprintf(r.joints[0].name, sizeof(r.joints[0].name), "j");
+    ps_plant_t *p = NULL;
+    char err[PS_ERR_MSG_LEN] = "";
+    assert_int_equal(ps_plant_create(path, &r, &p, err, sizeof(err)), -PS_ERR_CONFIG);
+    assert_null(p);
+    assert_non_null(strstr(err, "actuator 'j'"));
+    (void)unlink(path);
+}
+
+static void test_ps_plant_create_bad_path_plant_error(void **st)
+{
+    (void)st;
+    ps_robot_cfg_t r;
+    build_robot(&r);
+    ps_plant_t *p = NULL;
+    char err[PS_ERR_MSG_LEN] = "";
+    assert_int_equal(ps_plant_create("sim/models/nope.xml", &r, &p, err, sizeof(err)),
+                     -PS_ERR_PLANT);
+    assert_null(p);
+    assert_non_null(strstr(err, "nope.xml"));
+    assert_true(strlen(err) > strlen("sim/models/nope.xml: "));
+}
+
+static void test_ps_plant_create_stance_soles_on_floor(void **st)
+{
+    state_t *s = *st;
+    const double z = ps_plant_foot_min_z_m(s->plant);
+    assert_true(fabs(z) < 0.002);
+    ps_plant_truth_t tr;
+    ps_plant_get_truth(s->plant, &tr);
+    assert_false(tr.is_fallen);
+    /* ~1.3 m robot: head centre between 1.1 and 1.3 m */
+    assert_true(tr.head_height_m > 1.1 && tr.head_height_m < 1.3);
+    /* the robot file's CoM numbers are the model's, measured in stance */
+    const ps_kinematics_cfg_t *k = &s->robot.kin;
+    printf("  stance: CoM %.4f %.4f %.4f m, pelvis z %.4f m\n", tr.com_m[0], tr.com_m[1],
+           tr.com_m[2], tr.pelvis_m[2]);
+    assert_float_equal(tr.com_m[2] - tr.pelvis_m[2], k->com_offset_z_m, 0.005);
+    assert_float_equal(0.6 * tr.com_m[2], k->fall_com_height_m, 0.02);
+    /* CoM over the support polygon: between heels and toes, between the feet */
+    assert_true(tr.com_m[0] > k->foot_offset_x_m - 0.5 * k->foot_length_m);
+    assert_true(tr.com_m[0] < k->foot_offset_x_m + 0.5 * k->foot_length_m);
+    assert_float_equal(tr.com_m[1], 0.0, 0.01);
+}
+
+/* ---- standing, falling, harness ----------------------------------------- */
+
+static void test_ps_plant_step_pd_stance_stands_10s(void **st)
+{
+    state_t *s = *st;
+    ps_plant_truth_t tr0, tr;
+    ps_plant_get_truth(s->plant, &tr0);
+    ps_plant_set_harness(s->plant, false);
+    double tau[PS_MAX_JOINTS];
+    double max_dev_m = 0.0;
+    const int n = steps_for(s, 10.0);
+    const double t0 = now_s();
+    for (int k = 0; k < n; k++) {
+        pd_stance(s, tau);
+        ps_plant_set_torques(s->plant, tau);
+        assert_int_equal(ps_plant_step(s->plant), 0);
+        ps_plant_get_truth(s->plant, &tr);
+        assert_false(tr.is_fallen);
+        const double dev = fabs(tr.head_height_m - tr0.head_height_m);
+        if (dev > max_dev_m)
+            max_dev_m = dev;
+    }
+    const double wall_s = now_s() - t0;
+    printf("  stand 10 s: %d steps in %.3f s wall (%.0f steps/s incl. PD), head dev %.4f m\n", n,
+           wall_s, n / wall_s, max_dev_m);
+    assert_true(max_dev_m < 0.05);
+    assert_true(fabs(ps_plant_foot_min_z_m(s->plant)) < 0.005);
+}
+
+static void test_ps_plant_step_limp_no_harness_falls(void **st)
+{
+    state_t *s = *st;
+    ps_plant_set_harness(s->plant, false);
+    const double t_fall = run(s, 3.0, false);
+    printf("  limp, no harness: fallen at t = %.3f s\n", t_fall);
+    assert_true(t_fall > 0.0);
+}
+
+static void test_ps_plant_step_limp_harness_holds(void **st)
+{
+    state_t *s = *st;
+    ps_plant_truth_t tr0, tr;
+    ps_plant_get_truth(s->plant, &tr0);
+    assert_true(run(s, 3.0, false) < 0.0);
+    ps_plant_get_truth(s->plant, &tr);
+    const double dz = tr.pelvis_m[2] - tr0.pelvis_m[2];
+    printf("  limp in harness: pelvis moved %.4f m vertically\n", dz);
+    assert_true(fabs(dz) < 0.03);
+    assert_true(fabs(tr.pelvis_m[0] - tr0.pelvis_m[0]) < 0.03);
+}
+
+static void test_ps_plant_step_huge_force_plant_error(void **st)
+{
+    state_t *s = *st;
+    const double f[3] = {1e30, 0.0, 0.0};
+    ps_plant_set_external_force(s->plant, ps_plant_find_body(s->plant, "torso"), f);
+    assert_int_equal(ps_plant_step(s->plant), -PS_ERR_PLANT);
+}
+
+/* ---- torques ----------------------------------------------------------- */
+
+static void test_ps_plant_set_torques_clamps_and_zeroes_nan(void **st)
+{
+    state_t *s = *st;
+    ps_plant_t *ref = NULL;
+    assert_int_equal(ps_plant_create(MODEL_PATH, &s->robot, &ref, s->err, sizeof(s->err)), 0);
+    const int w = joint_idx("waist_yaw");
+    double big[PS_MAX_JOINTS] = {0}, lim[PS_MAX_JOINTS] = {0};
+    big[w] = 1e6;                              /* far beyond ctrlrange */
+    lim[w] = s->robot.joints[w].torque_max_nm; /* exactly the ctrlrange */
+    big[0] = NAN;                              /* must act as 0 */
+    for (int k = 0; k < 200; k++) {
+        ps_plant_set_torques(s->plant, big);
+        ps_plant_set_torques(ref, lim);
+        assert_int_equal(ps_plant_step(s->plant), 0);
+        assert_int_equal(ps_plant_step(ref), 0);
+    }
+    double q1[PS_MAX_JOINTS], q2[PS_MAX_JOINTS];
+    ps_plant_get_joints(s->plant, q1, NULL);
+    ps_plant_get_joints(ref, q2, NULL);
+    assert_true(fabs(q1[w] - s->robot.joints[w].stance_rad) > 0.01); /* it did turn */
+    for (int i = 0; i < N_JOINTS; i++)
+        assert_float_equal(q1[i], q2[i], 1e-12);
+    ps_plant_destroy(ref);
+}
+
+/* ---- IMU ---------------------------------------------------------------- */
+
+static void test_ps_plant_get_imu_standing_reads_gravity(void **st)
+{
+    state_t *s = *st;
+    ps_plant_set_harness(s->plant, false);
+    assert_true(run(s, 3.0, true) < 0.0); /* the whole-body sway settles */
+    double gyro[3], acc[3];
+    ps_plant_get_imu(s->plant, gyro, acc);
+    printf("  IMU standing: gyro %.4f %.4f %.4f  accel %.3f %.3f %.3f\n", gyro[0], gyro[1], gyro[2],
+           acc[0], acc[1], acc[2]);
+    assert_float_equal(acc[0], 0.0, 0.3);
+    assert_float_equal(acc[1], 0.0, 0.3);
+    assert_float_equal(acc[2], 9.81, 0.3);
+    for (int k = 0; k < 3; k++)
+        assert_float_equal(gyro[k], 0.0, 0.05);
+}
+
+static void test_ps_plant_get_imu_rotating_reads_rate(void **st)
+{
+    /* a gyro that always reads 0 would pass the test above: spin the waist
+     * in the harness and the pelvis gyro must see the reaction yaw rate */
+    state_t *s = *st;
+    double tau[PS_MAX_JOINTS] = {0};
+    tau[joint_idx("waist_yaw")] = 16.0;
+    double max_wz = 0.0;
+    for (int k = 0; k < 100; k++) {
+        ps_plant_set_torques(s->plant, tau);
+        assert_int_equal(ps_plant_step(s->plant), 0);
+        double gyro[3], acc[3];
+        ps_plant_get_imu(s->plant, gyro, acc);
+        if (fabs(gyro[2]) > max_wz)
+            max_wz = fabs(gyro[2]);
+    }
+    assert_true(max_wz > 0.01);
+}
+
+/* ---- pushes ------------------------------------------------------------- */
+
+static void test_ps_plant_set_external_force_short_push_moves_pelvis(void **st)
+{
+    state_t *s = *st;
+    ps_plant_t *ref = NULL;
+    assert_int_equal(ps_plant_create(MODEL_PATH, &s->robot, &ref, s->err, sizeof(s->err)), 0);
+    state_t r = *s;
+    r.plant = ref;
+    ps_plant_set_harness(s->plant, false);
+    ps_plant_set_harness(ref, false);
+    assert_true(run(s, 0.5, true) < 0.0);
+    assert_true(run(&r, 0.5, true) < 0.0);
+    const int torso = ps_plant_find_body(s->plant, "torso");
+    assert_true(torso > 0);
+    const double f[3] = {60.0, 0.0, 0.0}, zero[3] = {0.0, 0.0, 0.0};
+    ps_plant_set_external_force(s->plant, torso, f);
+    (void)run(s, 0.1, true);
+    ps_plant_set_external_force(s->plant, torso, zero);
+    (void)run(s, 0.2, true);
+    (void)run(&r, 0.3, true);
+    ps_plant_truth_t a, b;
+    ps_plant_get_truth(s->plant, &a);
+    ps_plant_get_truth(ref, &b);
+    printf("  60 N x 0.1 s: pelvis dx %.4f m vs unpushed\n", a.pelvis_m[0] - b.pelvis_m[0]);
+    assert_true(a.pelvis_m[0] - b.pelvis_m[0] > 0.005);
+    ps_plant_destroy(ref);
+}
+
+static void test_ps_plant_set_external_force_sustained_push_falls(void **st)
+{
+    state_t *s = *st;
+    ps_plant_set_harness(s->plant, false);
+    const double f[3] = {300.0, 0.0, 0.0};
+    ps_plant_set_external_force(s->plant, ps_plant_find_body(s->plant, "torso"), f);
+    const double t_fall = run(s, 3.0, true);
+    printf("  300 N sustained: fallen at t = %.3f s\n", t_fall);
+    assert_true(t_fall > 0.0);
+}
+
+/* ---- kinematic convention ------------------------------------------------ */
+
+static void mat_mul(double out[9], const double a[9], const double b[9])
+{
+    for (int r = 0; r < 3; r++)
+        for (int c = 0; c < 3; c++)
+            out[3 * r + c] = a[3 * r] * b[c] + a[3 * r + 1] * b[3 + c] + a[3 * r + 2] * b[6 + c];
+}
+
+static void rot(double out[9], int axis, double a)
+{
+    const double c = cos(a), s = sin(a);
+    const double rx[9] = {1, 0, 0, 0, c, -s, 0, s, c};
+    const double ry[9] = {c, 0, s, 0, 1, 0, -s, 0, c};
+    const double rz[9] = {c, -s, 0, s, c, 0, 0, 0, 1};
+    memcpy(out, axis == 0 ? rx : (axis == 1 ? ry : rz), sizeof(rx));
+}
+
+static void mat_vec_add(double acc[3], const double m[9], const double v[3])
+{
+    for (int r = 0; r < 3; r++)
+        acc[r] += m[3 * r] * v[0] + m[3 * r + 1] * v[1] + m[3 * r + 2] * v[2];
+}
+
+/** Hand-written FK of the left sole centre in the pelvis frame, from the
+ *  robot file's kinematics: q = hip yaw, roll, pitch, knee, ankle pitch, roll. */
+static void sole_fk(const ps_kinematics_cfg_t *k, const double q[6], double out[3])
+{
+    double R[9], T[9], A[9];
+    out[0] = 0.0;
+    out[1] = k->hip_offset_y_m;
+    out[2] = -k->hip_offset_z_m;
+    rot(R, 2, q[0]);
+    rot(A, 0, q[1]);
+    mat_mul(T, R, A);
+    rot(A, 1, q[2]);
+    mat_mul(R, T, A);
+    const double thigh[3] = {0, 0, -k->thigh_m};
+    mat_vec_add(out, R, thigh);
+    rot(A, 1, q[3]);
+    mat_mul(T, R, A);
+    const double shank[3] = {0, 0, -k->shank_m};
+    mat_vec_add(out, T, shank);
+    rot(A, 1, q[4]);
+    mat_mul(R, T, A);
+    rot(A, 0, q[5]);
+    mat_mul(T, R, A);
+    const double foot[3] = {k->foot_offset_x_m, 0, -k->ankle_height_m};
+    mat_vec_add(out, T, foot);
+}
+
+static void test_model_kinematics_match_convention(void **st)
+{
+    (void)st;
+    char err[512] = "";
+    mjModel *m = mj_loadXML(MODEL_PATH, NULL, err, (int)sizeof(err));
+    assert_non_null(m);
+    mjData *d = mj_makeData(m);
+    assert_non_null(d);
+    static const char *const NAMES[6] = {"l_hip_yaw", "l_hip_roll",    "l_hip_pitch",
+                                         "l_knee",    "l_ankle_pitch", "l_ankle_roll"};
+    const double POSES[][6] = {
+        {0, 0, 0, 0, 0, 0},
+        {0, 0, 0, M_PI / 2, 0, 0},
+        {0, 0, -0.25, 0.5, -0.25, 0},
+        {0.3, 0.2, -0.7, 1.1, -0.3, 0.15},
+        {-0.4, -0.3, 0.5, 0.2, 0.4, -0.35},
+    };
+    const int g = mj_name2id(m, mjOBJ_GEOM, "l_foot_geom");
+    const int pelvis = mj_name2id(m, mjOBJ_BODY, "pelvis");
+    assert_true(g >= 0 && pelvis >= 0);
+    /* foot box matches the robot file */
+    assert_float_equal(2.0 * m->geom_size[3 * g], KIN.foot_length_m, 1e-6);
+    assert_float_equal(2.0 * m->geom_size[3 * g + 1], KIN.foot_width_m, 1e-6);
+    for (size_t n = 0; n < sizeof(POSES) / sizeof(POSES[0]); n++) {
+        mj_resetData(m, d);
+        /* tilt and move the pelvis: the result must be in the pelvis frame */
+        d->qpos[0] = 0.3;
+        d->qpos[2] = 1.2;
+        d->qpos[3] = cos(0.2);
+        d->qpos[4] = sin(0.2) * 0.6;
+        d->qpos[6] = sin(0.2) * 0.8;
+        for (int i = 0; i < 6; i++) {
+            const int j = mj_name2id(m, mjOBJ_JOINT, NAMES[i]);
+            assert_true(j >= 0);
+            d->qpos[m->jnt_qposadr[j]] = POSES[n][i];
+        }
+        mj_kinematics(m, d);
+        const double *gp = d->geom_xpos + 3 * g;
+        const double *gR = d->geom_xmat + 9 * g;
+        const double hz = m->geom_size[3 * g + 2];
+        const double sole_w[3] = {gp[0] - gR[2] * hz, gp[1] - gR[5] * hz, gp[2] - gR[8] * hz};
+        const double *pp = d->xpos + 3 * pelvis;
+        const double *pR = d->xmat + 9 * pelvis;
+        double rel[3] = {0};
+        for (int r = 0; r < 3; r++)
+            for (int c = 0; c < 3; c++)
+                rel[r] += pR[3 * c + r] * (sole_w[c] - pp[c]);
+        double fk[3];
+        sole_fk(&KIN, POSES[n], fk);
+        for (int k = 0; k < 3; k++)
+            assert_float_equal(rel[k], fk[k], 0.001);
+    }
+    /* zero pose, spelled out */
+    double fk0[3];
+    const double zero[6] = {0};
+    sole_fk(&KIN, zero, fk0);
+    assert_float_equal(fk0[2], -(0.06 + 0.28 + 0.28 + 0.05), 1e-6);
+    mj_deleteData(d);
+    mj_deleteModel(m);
+}
+
+/* ---- physics speed -------------------------------------------------------- */
+
+static void test_ps_plant_step_speed_report(void **st)
+{
+    state_t *s = *st;
+    double tau[PS_MAX_JOINTS];
+    pd_stance(s, tau);
+    ps_plant_set_torques(s->plant, tau);
+    const double t0 = now_s();
+    for (int k = 0; k < 20000; k++)
+        assert_int_equal(ps_plant_step(s->plant), 0);
+    const double wall_s = now_s() - t0;
+    printf("  20000 steps in %.3f s: %.0f physics steps per wall second (%.1fx real time)\n",
+           wall_s, 20000.0 / wall_s, 20000.0 * ps_plant_timestep_s(s->plant) / wall_s);
+    assert_true(wall_s > 0.0);
+}
+
+/* ---- the robot file -------------------------------------------------------- */
+
+static void test_ps_config_load_robot_ps1_matches_model(void **st)
+{
+    (void)st;
+#if __has_include("../rt/ps_config.c")
+    ps_robot_cfg_t loaded, ref;
+    char err[PS_ERR_MSG_LEN] = "";
+    const int rc = ps_config_load_robot(ROBOT_PATH, &loaded, err, sizeof(err));
+    if (rc != 0)
+        fprintf(stderr, "load: %s\n", err);
+    assert_int_equal(rc, 0);
+    build_robot(&ref);
+    assert_int_equal(loaded.n_joints, ref.n_joints);
+    assert_float_equal(loaded.kin.mass_kg, ref.kin.mass_kg, 1e-4);
+    assert_float_equal(loaded.kin.com_offset_z_m, ref.kin.com_offset_z_m, 1e-4);
+    assert_float_equal(loaded.kin.fall_com_height_m, ref.kin.fall_com_height_m, 1e-4);
+    for (uint32_t i = 0; i < ref.n_joints; i++) {
+        const int li = ps_config_find_joint(&loaded, ref.joints[i].name);
+        assert_true(li >= 0);
+        const ps_joint_cfg_t *a = &loaded.joints[li], *b = &ref.joints[i];
+        assert_int_equal(a->bus_idx, b->bus_idx);
+        assert_int_equal(a->can_id, b->can_id);
+        assert_int_equal(a->reply_id, b->reply_id);
+        assert_int_equal(a->rate_div, b->rate_div);
+        assert_float_equal(a->pos_min_rad, b->pos_min_rad, 1e-5);
+        assert_float_equal(a->pos_max_rad, b->pos_max_rad, 1e-5);
+        assert_float_equal(a->torque_max_nm, b->torque_max_nm, 1e-5);
+        assert_float_equal(a->kp_nm_rad, b->kp_nm_rad, 1e-5);
+        assert_float_equal(a->kd_nm_s_rad, b->kd_nm_s_rad, 1e-5);
+        assert_float_equal(a->stance_rad, b->stance_rad, 1e-5);
+        assert_float_equal(a->wire.t_max_nm, b->wire.t_max_nm, 1e-5);
+    }
+    /* and the model it names loads with it */
+    char model[2 * PS_PATH_LEN];
+    if (loaded.model[0] == '/' || access(loaded.model, R_OK) == 0)
+        (void)snprintf(model, sizeof(model), "%s", loaded.model);
+    else
+        (void)snprintf(model, sizeof(model), "robots/%s", loaded.model);
+    ps_plant_t *p = NULL;
+    assert_int_equal(ps_plant_create(model, &loaded, &p, err, sizeof(err)), 0);
+    ps_plant_destroy(p);
+#else
+    skip(); /* rt/ps_config.c not written yet */
+#endif
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test_setup_teardown(test_ps_plant_create_model_maps_all_joints, setup,
+                                        teardown),
+        cmocka_unit_test(test_ps_plant_create_missing_joint_config_error),
+        cmocka_unit_test(test_ps_plant_create_missing_actuator_config_error),
+        cmocka_unit_test(test_ps_plant_create_bad_path_plant_error),
+        cmocka_unit_test_setup_teardown(test_ps_plant_create_stance_soles_on_floor, setup,
+                                        teardown),
+        cmocka_unit_test_setup_teardown(test_ps_plant_step_pd_stance_stands_10s, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_ps_plant_step_limp_no_harness_falls, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_ps_plant_step_limp_harness_holds, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_ps_plant_step_huge_force_plant_error, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_ps_plant_set_torques_clamps_and_zeroes_nan, setup,
+                                        teardown),
+        cmocka_unit_test_setup_teardown(test_ps_plant_get_imu_standing_reads_gravity, setup,
+                                        teardown),
+        cmocka_unit_test_setup_teardown(test_ps_plant_get_imu_rotating_reads_rate, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_ps_plant_set_external_force_short_push_moves_pelvis,
+                                        setup, teardown),
+        cmocka_unit_test_setup_teardown(test_ps_plant_set_external_force_sustained_push_falls,
+                                        setup, teardown),
+        cmocka_unit_test(test_model_kinematics_match_convention),
+        cmocka_unit_test_setup_teardown(test_ps_plant_step_speed_report, setup, teardown),
+        cmocka_unit_test(test_ps_config_load_robot_ps1_matches_model),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
