@@ -323,8 +323,8 @@ void ps_estimate_update(ps_estimator_t *e, const ps_meas_t *m)
      *      -> px = +tau_pitch / F_z  (toe pressed down = positive pitch torque)
      *   x: tau_roll + (r_y F_z - r_z F_y) = tau_roll + py F_z = 0
      *      -> py = -tau_roll / F_z   (positive roll torque presses the right edge)
-     * The header's "x = -tau_pitch/F_z, y = tau_roll/F_z" is the same relation
-     * written for the reaction torque on the shank. The offset is clamped to
+     * (The opposite signs hold for the reaction torque on the shank.) Checked
+     * in MuJoCo 2.2.2, see docs/estimation.md. The offset is clamped to
      * the sole rectangle, placed with the foot's orientation, then the feet
      * are averaged weighted by load. */
     const float f_z = k->mass_kg * PS_ESTIMATE_G_M_S2 / (float)(n_contacts > 0 ? n_contacts : 1);

@@ -7,17 +7,16 @@
  * file) rotated by the trunk tilt. Contact: a foot is in contact when its sole
  * is within a threshold of the lowest sole. CoM: lumped trunk model, the
  * pelvis plus com_offset_z_m along the trunk axis, placed above the contact
- * feet. CoP: from the ankle torques of the feet in contact (x = -tau_pitch /
- * F_z, y = tau_roll / F_z per foot, weight shared by contact), clamped to the
- * support polygon. Fallen: tilt beyond fall_tilt_rad or CoM below
- * fall_com_height_m.
+ * feet. CoP: from the ankle torques of the feet in contact (x = +tau_pitch /
+ * F_z, y = -tau_roll / F_z from the ankle per foot, weight shared by contact),
+ * each clamped to its sole rectangle, then load-weighted. Fallen: tilt beyond
+ * fall_tilt_rad or CoM below fall_com_height_m.
  *
  * Sign conventions, limits of the lumped model and the sources followed are in
  * docs/estimation.md. Joint torques are read as the actuator torque on the
  * child link about the joint's positive axis (MIT reply, MuJoCo
- * qfrc_actuator); with that convention a foot's CoP offset from its ankle is
- * x = +tau_pitch / F_z, y = -tau_roll / F_z (the signs above describe the
- * reaction torque on the shank; see ps_estimate.c for the derivation).
+ * qfrc_actuator); the signs above hold for that convention (derivation in
+ * ps_estimate.c, checked against MuJoCo contact forces in docs/estimation.md).
  *
  * Threads: loop thread. Allocation: none.
  */

@@ -187,27 +187,38 @@ typedef struct {
 /* ---- loading ---------------------------------------------------------- */
 
 /** Load and check a board file. @pre path != NULL
- *  @post *out fully written on success; err holds a one-line message on failure
- *  @return 0 | -PS_ERR_CONFIG | -ENOENT  @rt INIT, main thread */
+ *  @post *out fully written on success, untouched on failure; err (if not NULL)
+ *        holds a one-line message "FILE[:LINE]: [FIELD: ]problem" on failure
+ *  @return 0 | -PS_ERR_CONFIG | -ENOENT | -EINVAL (NULL path/out) | -ENOMEM
+ *  @rt INIT, main thread */
 int ps_config_load_board(const char *path, ps_board_cfg_t *out, char *err, size_t err_len);
 
-/** Load and check a robot file (joint map, ranges, gains, limits).
- *  @return 0 | -PS_ERR_CONFIG | -ENOENT  @rt INIT */
+/** Load and check a robot file (joint map, ranges, gains, limits). Each
+ *  joint's `driver` is resolved by name and its ranges copied into `wire`;
+ *  `model` is stored as written (relative to the robot file; the caller resolves).
+ *  @pre path != NULL  @post as ps_config_load_board
+ *  @return 0 | -PS_ERR_CONFIG | -ENOENT | -EINVAL | -ENOMEM  @rt INIT */
 int ps_config_load_robot(const char *path, ps_robot_cfg_t *out, char *err, size_t err_len);
 
-/** Load and check a scenario file. @return 0 | -PS_ERR_CONFIG | -ENOENT  @rt INIT */
+/** Load and check a scenario file. @pre path != NULL  @post as ps_config_load_board
+ *  @return 0 | -PS_ERR_CONFIG | -ENOENT | -EINVAL | -ENOMEM  @rt INIT */
 int ps_config_load_scenario(const char *path, ps_scenario_cfg_t *out, char *err, size_t err_len);
 
-/** Cross-file checks: every joint's bus exists on the board, ids unique per
- *  bus, rates divide, scenario joints/bodies name real joints.
- *  @return 0 | -PS_ERR_CONFIG  @rt INIT */
+/** Cross-file checks: every joint's bus and the IMU's bus exist on the board,
+ *  every drop_replies joint of the scenario is a joint of the robot. (Ids per
+ *  bus and rates are already checked by ps_config_load_robot; push bodies name
+ *  model bodies, which only the sim can check.)
+ *  @pre b, r loaded; s may be NULL (no scenario)  @post err holds a message on failure
+ *  @return 0 | -PS_ERR_CONFIG | -EINVAL (b or r NULL)  @rt INIT */
 int ps_config_check_pair(const ps_board_cfg_t *b, const ps_robot_cfg_t *r,
                          const ps_scenario_cfg_t *s, char *err, size_t err_len);
 
-/** @return joint index with that name, or -ENOENT  @rt RT-SAFE O(n) */
+/** @return joint index with that name, or -ENOENT (also for r or name NULL)
+ *  @rt RT-SAFE O(n) */
 int ps_config_find_joint(const ps_robot_cfg_t *r, const char *name);
 
-/** Name of an event kind, for logs. @rt RT-SAFE */
+/** Name of an event kind as written in scenario files, for logs; "unknown"
+ *  outside the enum. @rt RT-SAFE */
 const char *ps_config_event_name(ps_event_kind_t k);
 
 #endif /* PS_CONFIG_H */

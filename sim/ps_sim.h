@@ -87,13 +87,21 @@ typedef struct {
 } ps_sim_truth_t;
 
 /** Load the model, build devices and buses, apply the scenario's initial
- *  state (robot in stance, harness engaged unless the scenario says otherwise).
- *  @post *out_sim owned by the caller until ps_sim_destroy
- *  @return 0 | -PS_ERR_PLANT (err says why) | -PS_ERR_CONFIG (joint missing
- *          in the model) | -ENOMEM  @rt INIT */
+ *  state (robot in stance, harness engaged unless the scenario says otherwise:
+ *  a harness_release event at t 0 acts on the first physics step).
+ *  cfg->board, robot and scenario are copied; scenario may be NULL (none).
+ *  IMU noise and bias are seeded from scenario->seed.
+ *  @post *out_sim owned by the caller until ps_sim_destroy; untouched on error
+ *  @return 0 | -EINVAL (cfg, board, robot, model_path NULL or period_ns <= 0)
+ *          | -PS_ERR_PLANT (err says why) | -PS_ERR_CONFIG (joint missing in
+ *          the model; a joint's or the IMU's bus not on the board; the model
+ *          timestep does not divide period_ns; a push body not in the model or
+ *          a drop_replies joint not in the robot, err names it) | -ENOMEM
+ *  @rt INIT */
 int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t err_len);
 
-/** @return the CAN port of bus bus_idx (loop side)  @rt INIT */
+/** @return the CAN port of bus bus_idx (loop side); a zeroed port (ops NULL)
+ *  when bus_idx is not on the board  @rt INIT */
 ps_can_port_t ps_sim_can_port(ps_sim_t *s, unsigned bus_idx);
 
 /** @return the GPIO port (loop side)  @rt INIT */
@@ -102,8 +110,12 @@ ps_gpio_port_t ps_sim_gpio_port(ps_sim_t *s);
 /** @return the clock the loop must use (simulated in lockstep)  @rt INIT */
 const ps_clock_t *ps_sim_clock(ps_sim_t *s);
 
-/** Real-time mode: start the plant thread at start_ns, pacing at period_ns.
- *  Lockstep: set simulated time to start_ns. @return 0 | -errno  @rt INIT */
+/** Real-time mode: start the plant thread, which runs period k at
+ *  start_ns + period_ns/2 + k period_ns (SCHED_FIFO at board rt.priority - 1
+ *  on rt.plant_cpu when permitted, else as it can). Lockstep: set simulated
+ *  time to start_ns. Scenario times count from start_ns. Also sets every
+ *  bus's tick epoch to start_ns.
+ *  @return 0 | -EBUSY already started | -errno (pthread_create)  @rt INIT */
 int ps_sim_start(ps_sim_t *s, int64_t start_ns);
 
 /** Stop the plant thread (no-op in lockstep). Safe to call twice. @rt INIT */

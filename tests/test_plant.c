@@ -275,6 +275,20 @@ static void test_ps_plant_create_bad_path_plant_error(void **st)
     assert_true(strlen(err) > strlen("sim/models/nope.xml: "));
 }
 
+static void test_ps_plant_create_null_argument_einval(void **st)
+{
+    (void)st;
+    ps_robot_cfg_t r;
+    build_robot(&r);
+    ps_plant_t *p = NULL;
+    char err[PS_ERR_MSG_LEN] = "";
+    assert_int_equal(ps_plant_create(NULL, &r, &p, err, sizeof(err)), -EINVAL);
+    assert_int_equal(ps_plant_create(MODEL_PATH, NULL, &p, err, sizeof(err)), -EINVAL);
+    assert_int_equal(ps_plant_create(MODEL_PATH, &r, NULL, err, sizeof(err)), -EINVAL);
+    assert_null(p);
+    ps_plant_destroy(NULL); /* safe on NULL */
+}
+
 static void test_ps_plant_create_stance_soles_on_floor(void **st)
 {
     state_t *s = *st;
@@ -644,6 +658,7 @@ int main(void)
         cmocka_unit_test(test_ps_plant_create_missing_joint_config_error),
         cmocka_unit_test(test_ps_plant_create_missing_actuator_config_error),
         cmocka_unit_test(test_ps_plant_create_bad_path_plant_error),
+        cmocka_unit_test(test_ps_plant_create_null_argument_einval),
         cmocka_unit_test_setup_teardown(test_ps_plant_create_stance_soles_on_floor, setup,
                                         teardown),
         cmocka_unit_test_setup_teardown(test_ps_plant_step_pd_stance_stands_10s, setup, teardown),

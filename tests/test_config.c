@@ -1,0 +1,917 @@
+/*
+ * Tests for rt/ps_config: the shipped boards and scenarios, the fixtures in
+ * tests/data/config/, and rejection cases. Each rejection case copies a valid
+ * fixture into a temp dir with one edit and checks the whole message; the
+ * expected line number is measured in the edited text, not typed in.
+ * Run from the repository root.
+ */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "../rt/ps_config.h"
+#include "../rt/ps_err.h"
+
+#define FIXTURES    "tests/data/config/"
+#define ROBOT_OK    FIXTURES "robot_ok.yaml"
+#define BOARD_OK    FIXTURES "board_ok.yaml"
+#define SCENARIO_OK FIXTURES "scenario_ok.yaml"
+#define TEXT_MAX    16384
+
+typedef struct {
+    char dir[64];
+    char path[128];   /* the edited copy */
+    char text[TEXT_MAX]; /* its content */
+    char err[PS_ERR_MSG_LEN];
+    char want[PS_ERR_MSG_LEN];
+    ps_board_cfg_t board;
+    ps_robot_cfg_t robot;
+    ps_scenario_cfg_t scenario;
+} fx_t;
+
+static int setup(void **state)
+{
+    fx_t *f = calloc(1, sizeof(*f));
+    if (f == NULL)
+        return -1;
+    (void)snprintf(f->dir, sizeof(f->dir), "/tmp/ps_test_config.XXXXXX");
+    if (mkdtemp(f->dir) == NULL) {
+        free(f);
+        return -1;
+    }
+    *state = f;
+    return 0;
+}
+
+static int teardown(void **state)
+{
+    fx_t *f = *state;
+    if (f->path[0] != '\0')
+        (void)unlink(f->path); /* may not exist when a test failed early */
+    (void)rmdir(f->dir);
+    free(f);
+    return 0;
+}
+
+static void read_text(const char *path, char *out, size_t out_len)
+{
+    FILE *fp = fopen(path, "rb");
+    assert_non_null(fp);
+    const size_t n = fread(out, 1, out_len - 1u, fp);
+    assert_int_equal(ferror(fp), 0);
+    assert_true(n < out_len - 1u);
+    out[n] = '\0';
+    assert_int_equal(fclose(fp), 0);
+}
+
+/* Copies src to the temp dir with the first `from` replaced by `to`. */
+static const char *edit(fx_t *f, const char *src, const char *from, const char *to)
+{
+    char orig[TEXT_MAX];
+    read_text(src, orig, sizeof(orig));
+    const char *at = strstr(orig, from);
+    assert_non_null(at);
+    const size_t head = (size_t)(at - orig);
+    const int n = snprintf(f->text, sizeof(f->text), "%.*s%s%s", (int)head, orig, to,
+                           at + strlen(from));
+    assert_true(n > 0 && (size_t)n < sizeof(f->text));
+    (void)snprintf(f->path, sizeof(f->path), "%s/edited.yaml", f->dir);
+    FILE *fp = fopen(f->path, "wb");
+    assert_non_null(fp);
+    assert_int_equal(fwrite(f->text, 1, (size_t)n, fp), (size_t)n);
+    assert_int_equal(fclose(fp), 0);
+    return f->path;
+}
+
+/* 1-based line of the first occurrence of needle in the edited text. */
+static int line_of(const fx_t *f, const char *needle)
+{
+    const char *at = strstr(f->text, needle);
+    assert_non_null(at);
+    int line = 1;
+    for (const char *p = f->text; p < at; p++)
+        line += *p == '\n';
+    return line;
+}
+
+static void want(fx_t *f, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void want(fx_t *f, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    (void)vsnprintf(f->want, sizeof(f->want), fmt, ap);
+    va_end(ap);
+}
+
+static void expect_board_error(fx_t *f)
+{
+    assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    assert_string_equal(f->err, f->want);
+}
+
+static void expect_robot_error(fx_t *f)
+{
+    assert_int_equal(ps_config_load_robot(f->path, &f->robot, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    assert_string_equal(f->err, f->want);
+}
+
+static void expect_scenario_error(fx_t *f)
+{
+    assert_int_equal(ps_config_load_scenario(f->path, &f->scenario, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    assert_string_equal(f->err, f->want);
+}
+
+/* ---- shipped files ---------------------------------------------------- */
+
+static void test_load_board_shipped_boards_ok(void **state)
+{
+    fx_t *f = *state;
+    static const char *const LINUX_BOARDS[] = {"boards/rpi4.yaml", "boards/rpi5.yaml",
+                                               "boards/jetson-orin.yaml", "boards/bbai64.yaml"};
+    for (size_t i = 0; i < sizeof(LINUX_BOARDS) / sizeof(LINUX_BOARDS[0]); i++) {
+        memset(&f->board, 0, sizeof(f->board));
+        const int rc = ps_config_load_board(LINUX_BOARDS[i], &f->board, f->err, sizeof(f->err));
+        if (rc != 0)
+            print_error("%s\n", f->err);
+        assert_int_equal(rc, 0);
+        assert_int_equal(f->board.kind, PS_BOARD_LINUX);
+        assert_int_equal(f->board.n_buses, 4);
+        for (uint32_t b = 0; b < f->board.n_buses; b++)
+            assert_int_equal(f->board.buses[b].bitrate, 1000000);
+        assert_true(f->board.rt.loop_cpu > 0);
+    }
+}
+
+static void test_load_board_sim_exact_values(void **state)
+{
+    fx_t *f = *state;
+    assert_int_equal(ps_config_load_board("boards/sim.yaml", &f->board, f->err, sizeof(f->err)),
+                     0);
+    const ps_board_cfg_t *b = &f->board;
+    assert_string_equal(b->name, "sim");
+    assert_int_equal(b->kind, PS_BOARD_SIM);
+    assert_int_equal(b->n_buses, 4);
+    static const char *const IFNAMES[] = {"can0", "can1", "can2", "can3"};
+    for (uint32_t i = 0; i < 4; i++) {
+        assert_string_equal(b->buses[i].ifname, IFNAMES[i]);
+        assert_int_equal(b->buses[i].bitrate, 1000000);
+    }
+    assert_true(b->bus_budget == 0.8f);
+    assert_string_equal(b->gpio.chip, "sim");
+    assert_true(b->gpio.is_estop_active_low);
+    assert_int_equal(b->rt.priority, 80);
+    assert_int_equal(b->rt.loop_cpu, 1);
+    assert_int_equal(b->rt.plant_cpu, 0);
+    assert_int_equal(b->rt.worker_cpu, 0);
+}
+
+static void test_load_board_optional_absent_default_applied(void **state)
+{
+    fx_t *f = *state;
+    assert_int_equal(ps_config_load_board(BOARD_OK, &f->board, f->err, sizeof(f->err)), 0);
+    const ps_board_cfg_t *b = &f->board;
+    assert_string_equal(b->name, "bench");
+    assert_int_equal(b->kind, PS_BOARD_LINUX);
+    assert_true(b->bus_budget == 0.8f);
+    assert_int_equal(b->n_buses, 2);
+    assert_string_equal(b->buses[1].ifname, "vcan1");
+    assert_int_equal(b->buses[0].bitrate, 500000);
+    assert_string_equal(b->gpio.chip, "gpiochip0");
+    assert_false(b->gpio.is_estop_active_low);
+    assert_int_equal(b->gpio.estop_line, 4);
+    assert_int_equal(b->gpio.enable_line, 5);
+    assert_int_equal(b->gpio.led_line, 6);
+    assert_int_equal(b->rt.priority, 0);
+    assert_int_equal(b->rt.loop_cpu, -1);
+    assert_int_equal(b->rt.plant_cpu, -1);
+    assert_int_equal(b->rt.worker_cpu, -1);
+}
+
+static void test_load_scenario_shipped_scenarios_ok(void **state)
+{
+    fx_t *f = *state;
+    ps_scenario_cfg_t *s = &f->scenario;
+
+    assert_int_equal(ps_config_load_scenario("scenarios/stand.yaml", s, f->err, sizeof(f->err)),
+                     0);
+    assert_string_equal(s->name, "stand");
+    assert_true(s->duration_s == 20.0f);
+    assert_int_equal(s->n_pushes, 0);
+    assert_int_equal(s->n_events, 2);
+    assert_int_equal(s->events[0].kind, PS_EVENT_START);
+    assert_true(s->events[0].t_s == 0.2f);
+    assert_int_equal(s->events[1].kind, PS_EVENT_HARNESS_RELEASE);
+    assert_true(s->events[1].t_s == 2.0f);
+
+    assert_int_equal(ps_config_load_scenario("scenarios/push.yaml", s, f->err, sizeof(f->err)), 0);
+    assert_true(s->n_pushes >= 2);
+    for (uint32_t i = 0; i < s->n_pushes; i++) {
+        assert_string_equal(s->pushes[i].body, "torso");
+        assert_true(s->pushes[i].t_s > 4.0f);
+        assert_true(s->pushes[i].duration_s > 0.0f);
+    }
+
+    assert_int_equal(ps_config_load_scenario("scenarios/estop.yaml", s, f->err, sizeof(f->err)),
+                     0);
+    static const ps_event_kind_t ESTOP_KINDS[] = {
+        PS_EVENT_START,         PS_EVENT_HARNESS_RELEASE, PS_EVENT_ESTOP_PRESS,
+        PS_EVENT_ESTOP_RELEASE, PS_EVENT_RESET,           PS_EVENT_START};
+    static const float ESTOP_T_S[] = {0.2f, 2.0f, 4.0f, 5.0f, 6.0f, 6.5f};
+    assert_int_equal(s->n_events, 6);
+    for (uint32_t i = 0; i < 6; i++) {
+        assert_int_equal(s->events[i].kind, ESTOP_KINDS[i]);
+        assert_true(s->events[i].t_s == ESTOP_T_S[i]);
+    }
+
+    assert_int_equal(
+        ps_config_load_scenario("scenarios/fault-drop.yaml", s, f->err, sizeof(f->err)), 0);
+    const ps_event_cfg_t *drop = &s->events[s->n_events - 1u];
+    assert_int_equal(drop->kind, PS_EVENT_DROP_REPLIES);
+    assert_string_equal(drop->joint, "l_knee");
+    assert_true(drop->t_s == 4.0f);
+    assert_true(drop->duration_s == 0.05f);
+}
+
+static void test_load_scenario_fixture_defaults_applied(void **state)
+{
+    fx_t *f = *state;
+    ps_scenario_cfg_t *s = &f->scenario;
+    assert_int_equal(ps_config_load_scenario(SCENARIO_OK, s, f->err, sizeof(f->err)), 0);
+    assert_string_equal(s->name, "mixed");
+    assert_true(s->duration_s == 0.0f);
+    assert_int_equal(s->seed, 42);
+    assert_int_equal(s->n_events, 3);
+    assert_string_equal(s->events[0].joint, ""); /* optional, absent */
+    assert_true(s->events[1].duration_s == 0.0f); /* optional, absent: rest of the run */
+    assert_string_equal(s->events[2].joint, "r_knee");
+    assert_true(s->events[2].duration_s == 0.25f);
+    assert_int_equal(s->n_pushes, 1);
+    assert_true(s->pushes[0].force_n[0] == 10.0f);
+    assert_true(s->pushes[0].force_n[1] == -20.5f);
+    assert_true(s->pushes[0].force_n[2] == 0.0f);
+}
+
+/* ---- robot fixture ---------------------------------------------------- */
+
+static void test_load_robot_fixture_exact_values(void **state)
+{
+    fx_t *f = *state;
+    ps_robot_cfg_t *r = &f->robot;
+    assert_int_equal(ps_config_load_robot(ROBOT_OK, r, f->err, sizeof(f->err)), 0);
+    assert_string_equal(r->name, "tiny");
+    assert_string_equal(r->model, "../models/tiny.xml"); /* stored as given */
+    assert_int_equal(r->control.servo_hz, 1000);
+    assert_int_equal(r->control.policy_hz, 50);
+    assert_true(r->control.policy_deadline_s == 0.002f);
+    assert_int_equal(r->imu.bus_idx, 1);
+    assert_int_equal(r->imu.base_id, 0x80); /* hex in the file */
+    assert_int_equal(r->imu.rate_div, 1);
+    assert_true(r->kin.mass_kg == 32.0f);
+    assert_true(r->kin.fall_com_height_m == 0.4f);
+    assert_true(r->sim.reply_latency_s == 0.00005f);
+    assert_true(r->sim.ambient_c == 25.0f);
+
+    assert_int_equal(r->n_joints, 3);
+    const ps_joint_cfg_t *j0 = &r->joints[0];
+    assert_string_equal(j0->name, "l_hip_yaw");
+    assert_int_equal(j0->bus_idx, 0);
+    assert_int_equal(j0->can_id, 0x01);
+    assert_int_equal(j0->reply_id, 0x101);
+    assert_int_equal(j0->protocol, PS_PROTO_MIT);
+    assert_true(j0->pos_min_rad == -0.6f);
+    assert_true(j0->kd_nm_s_rad == 1.5f);
+    assert_true(j0->kt_nm_a == 0.6f);
+    assert_int_equal(j0->rate_div, 2);
+    /* ak80-9 ranges copied into the joint */
+    assert_true(j0->wire.p_min_rad == -12.5f);
+    assert_true(j0->wire.v_max_rad_s == 50.0f);
+    assert_true(j0->wire.kd_max_nm_s_rad == 5.0f);
+    assert_true(j0->wire.t_max_nm == 18.0f);
+    assert_true(j0->wire.i_min_a == -30.0f);
+    /* ak70-10 ranges for the knees */
+    for (uint32_t i = 1; i < 3; i++) {
+        assert_true(r->joints[i].wire.v_min_rad_s == -30.0f);
+        assert_true(r->joints[i].wire.t_min_nm == -25.0f);
+        assert_true(r->joints[i].wire.i_max_a == 40.0f);
+    }
+    assert_int_equal(r->joints[2].bus_idx, 1);
+}
+
+static void test_load_robot_ps1_when_present_ok(void **state)
+{
+    fx_t *f = *state;
+    if (access("robots/ps1.yaml", R_OK) != 0)
+        skip(); /* written with the MuJoCo model by another change */
+    const int rc = ps_config_load_robot("robots/ps1.yaml", &f->robot, f->err, sizeof(f->err));
+    if (rc != 0)
+        print_error("%s\n", f->err);
+    assert_int_equal(rc, 0);
+    assert_true(f->robot.n_joints >= 1);
+}
+
+/* ---- errors common to all loaders -------------------------------------- */
+
+static void test_load_missing_file_enoent(void **state)
+{
+    fx_t *f = *state;
+    const char *path = FIXTURES "no_such_file.yaml";
+    assert_int_equal(ps_config_load_board(path, &f->board, f->err, sizeof(f->err)), -ENOENT);
+    want(f, "%s: cannot open: %s", path, strerror(ENOENT));
+    assert_string_equal(f->err, f->want);
+    assert_int_equal(ps_config_load_robot(path, &f->robot, f->err, sizeof(f->err)), -ENOENT);
+    assert_int_equal(ps_config_load_scenario(path, &f->scenario, f->err, sizeof(f->err)),
+                     -ENOENT);
+}
+
+static void test_load_null_args_einval(void **state)
+{
+    fx_t *f = *state;
+    assert_int_equal(ps_config_load_board(NULL, &f->board, f->err, sizeof(f->err)), -EINVAL);
+    assert_int_equal(ps_config_load_board(BOARD_OK, NULL, f->err, sizeof(f->err)), -EINVAL);
+    assert_int_equal(ps_config_load_robot(NULL, &f->robot, f->err, sizeof(f->err)), -EINVAL);
+    assert_int_equal(ps_config_load_scenario(SCENARIO_OK, NULL, f->err, sizeof(f->err)),
+                     -EINVAL);
+    assert_int_equal(ps_config_check_pair(NULL, &f->robot, NULL, f->err, sizeof(f->err)),
+                     -EINVAL);
+}
+
+static void test_load_board_failure_out_untouched(void **state)
+{
+    fx_t *f = *state;
+    edit(f, "boards/sim.yaml", "bitrate: 1000000", "bitrate: 5");
+    memset(&f->board, 0xa5, sizeof(f->board));
+    ps_board_cfg_t before;
+    memcpy(&before, &f->board, sizeof(before));
+    assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    assert_memory_equal(&f->board, &before, sizeof(before));
+}
+
+static void test_load_board_small_or_null_err_truncated(void **state)
+{
+    fx_t *f = *state;
+    edit(f, "boards/sim.yaml", "bitrate: 1000000", "bitrate: 5");
+    assert_int_equal(ps_config_load_board(f->path, &f->board, NULL, 0), -PS_ERR_CONFIG);
+    char small[8];
+    memset(small, 'x', sizeof(small));
+    assert_int_equal(ps_config_load_board(f->path, &f->board, small, sizeof(small)),
+                     -PS_ERR_CONFIG);
+    assert_int_equal(strlen(small), sizeof(small) - 1u);
+    assert_memory_equal(small, f->path, sizeof(small) - 1u);
+}
+
+/* ---- board rejections --------------------------------------------------- */
+
+static void test_load_board_top_field_missing_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, "boards/sim.yaml", "\nbuses:\n", "\nbusses:\n");
+    want(f, "%s:%d: unknown key \"busses\"", f->path, line_of(f, "busses:"));
+    expect_board_error(f);
+
+    /* Without the misspelt key the field is plainly missing: no line for the root. */
+    edit(f, "boards/sim.yaml", "name: sim\n", "");
+    want(f, "%s: missing field \"name\"", f->path);
+    expect_board_error(f);
+}
+
+static void test_load_board_nested_field_missing_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, "boards/sim.yaml", "chip: sim, ", "");
+    want(f, "%s:%d: gpio: missing field \"chip\"", f->path, line_of(f, "gpio:"));
+    expect_board_error(f);
+}
+
+static void test_load_board_string_for_number_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, "boards/sim.yaml", "{ifname: can1, bitrate: 1000000}", "{ifname: can1, bitrate: fast}");
+    /* libcyaml's own text after file, line and field */
+    char prefix[256];
+    (void)snprintf(prefix, sizeof(prefix), "%s:%d: buses[1].bitrate: ", f->path,
+                   line_of(f, "bitrate: fast"));
+    assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    assert_memory_equal(f->err, prefix, strlen(prefix));
+    assert_non_null(strstr(f->err, "Invalid"));
+    assert_non_null(strstr(f->err, "'fast'"));
+}
+
+static void test_load_board_bitrate_high_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, "boards/sim.yaml", "{ifname: can1, bitrate: 1000000}",
+         "{ifname: can1, bitrate: 2000000}");
+    want(f, "%s:%d: buses[1].bitrate: value 2000000 outside [10000, 1000000]", f->path,
+         line_of(f, "2000000"));
+    expect_board_error(f);
+}
+
+static void test_load_board_bitrate_low_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, "boards/sim.yaml", "{ifname: can3, bitrate: 1000000}", "{ifname: can3, bitrate: 9999}");
+    want(f, "%s:%d: buses[3].bitrate: value 9999 outside [10000, 1000000]", f->path,
+         line_of(f, "9999"));
+    expect_board_error(f);
+}
+
+static void test_load_board_budget_zero_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, "boards/sim.yaml", "bus_budget: 0.8", "bus_budget: 0");
+    want(f, "%s:%d: bus_budget: value 0 outside (0, 1]", f->path, line_of(f, "bus_budget"));
+    expect_board_error(f);
+}
+
+static void test_load_board_cpu_below_minus_one_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, "boards/sim.yaml", "loop_cpu: 1", "loop_cpu: -2");
+    want(f, "%s:%d: rt.loop_cpu: value -2 outside [-1, 1023]", f->path, line_of(f, "loop_cpu"));
+    expect_board_error(f);
+}
+
+static void test_load_board_unknown_nested_key_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, "boards/sim.yaml", "priority: 80,", "priority: 80, prio: 3,");
+    want(f, "%s:%d: rt: unknown key \"prio\"", f->path, line_of(f, "prio:"));
+    expect_board_error(f);
+}
+
+static void test_load_board_unknown_kind_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, "boards/sim.yaml", "kind: sim", "kind: simulator");
+    want(f, "%s:%d: kind: unknown value \"simulator\" (allowed: sim, linux)", f->path,
+         line_of(f, "kind:"));
+    expect_board_error(f);
+
+    /* A number is not an enum value either (libcyaml would take 1 as linux). */
+    edit(f, "boards/sim.yaml", "kind: sim", "kind: 1");
+    want(f, "%s:%d: kind: unknown value \"1\" (allowed: sim, linux)", f->path,
+         line_of(f, "kind:"));
+    expect_board_error(f);
+}
+
+static void test_load_board_bool_typo_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, "boards/sim.yaml", "estop_active_low: true", "estop_active_low: off");
+    want(f, "%s:%d: gpio.estop_active_low: unknown value \"off\" (allowed: true, false)", f->path,
+         line_of(f, "estop_active_low"));
+    expect_board_error(f);
+}
+
+static void test_load_board_too_many_buses_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, "boards/sim.yaml", "  - {ifname: can3, bitrate: 1000000}\n",
+         "  - {ifname: can3, bitrate: 1000000}\n  - {ifname: can4, bitrate: 1000000}\n"
+         "  - {ifname: can5, bitrate: 1000000}\n  - {ifname: can6, bitrate: 1000000}\n"
+         "  - {ifname: can7, bitrate: 1000000}\n  - {ifname: can8, bitrate: 1000000}\n");
+    want(f, "%s:%d: buses: 9 entries outside [1, 8]", f->path, line_of(f, "  - {ifname: can0"));
+    expect_board_error(f);
+}
+
+static void test_load_board_long_ifname_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, "boards/sim.yaml", "ifname: can2", "ifname: can_interface_with_a_very_long_name");
+    want(f,
+         "%s:%d: buses[2].ifname: string \"can_interface_with_a_very_long_name\" length 35 "
+         "outside [1, 31]",
+         f->path, line_of(f, "very_long"));
+    expect_board_error(f);
+}
+
+static void test_load_board_duplicate_ifname_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, "boards/sim.yaml", "ifname: can3", "ifname: \"can0\"");
+    want(f, "%s:%d: buses[3].ifname: duplicate interface \"can0\" (also buses[0])", f->path,
+         line_of(f, "\"can0\""));
+    expect_board_error(f);
+}
+
+static void test_load_board_duplicate_key_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, "boards/sim.yaml", "bus_budget: 0.8\n", "bus_budget: 0.8\nbus_budget: 0.5\n");
+    want(f, "%s:%d: duplicate key \"bus_budget\"", f->path, line_of(f, "bus_budget: 0.5"));
+    expect_board_error(f);
+}
+
+static void test_load_board_syntax_error_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, "boards/sim.yaml", "{ifname: can1, bitrate: 1000000}", "{ifname: can1, bitrate: 1");
+    const int open_line = line_of(f, "{ifname: can1");
+    assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    /* libyaml notices the missing '}' on the next line and names the opener */
+    want(f, "%s:%d: YAML syntax error: ", f->path, open_line + 1);
+    assert_memory_equal(f->err, f->want, strlen(f->want));
+    want(f, "(while parsing a flow mapping at line %d)", open_line);
+    assert_non_null(strstr(f->err, f->want));
+}
+
+static void test_load_board_gpio_line_reused_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, "boards/sim.yaml", "led_line: 2", "led_line: 0");
+    want(f, "%s:%d: gpio.led_line: line 0 already used by gpio.estop_line", f->path,
+         line_of(f, "led_line"));
+    expect_board_error(f);
+}
+
+/* ---- robot rejections --------------------------------------------------- */
+
+static void test_load_robot_string_for_number_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "servo_hz: 1000", "servo_hz: fast");
+    char prefix[256];
+    (void)snprintf(prefix, sizeof(prefix), "%s:%d: control.servo_hz: ", f->path,
+                   line_of(f, "servo_hz"));
+    assert_int_equal(ps_config_load_robot(f->path, &f->robot, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    assert_memory_equal(f->err, prefix, strlen(prefix));
+    assert_non_null(strstr(f->err, "'fast'"));
+}
+
+static void test_load_robot_missing_field_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "kt_nm_a: 0.6, ", "");
+    want(f, "%s:%d: joints[0]: missing field \"kt_nm_a\"", f->path, line_of(f, "l_hip_yaw"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_duplicate_can_id_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "{name: r_knee, bus: 1,", "{name: r_knee, bus: 0,");
+    want(f, "%s:%d: joints[2].can_id: id 0x002 on bus 0 already used by joints[1].can_id",
+         f->path, line_of(f, "r_knee"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_reply_id_on_imu_rejected(void **state)
+{
+    fx_t *f = *state;
+    /* the IMU listens on 0x080 and 0x081 of bus 1, where r_knee sits */
+    edit(f, ROBOT_OK, "{name: r_knee, bus: 1, can_id: 0x02, reply_id: 0x102",
+         "{name: r_knee, bus: 1, can_id: 0x02, reply_id: 0x081");
+    want(f, "%s:%d: joints[2].reply_id: id 0x081 on bus 1 already used by imu.base_id+1", f->path,
+         line_of(f, "r_knee"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_can_id_high_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "can_id: 0x01", "can_id: 0x800");
+    want(f, "%s:%d: joints[0].can_id: value 0x800 outside [0x1, 0x7ff]", f->path,
+         line_of(f, "0x800"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_unknown_driver_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "driver: ak70-10,", "driver: ak10,");
+    want(f, "%s:%d: joints[1].driver: unknown driver \"ak10\" (known: ak80-9, ak70-10)", f->path,
+         line_of(f, "driver: ak10"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_servo_not_multiple_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "policy_hz: 50", "policy_hz: 30");
+    want(f, "%s:%d: control.policy_hz: servo_hz 1000 is not a multiple of policy_hz 30", f->path,
+         line_of(f, "policy_hz"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_pos_outside_wire_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "pos_max_rad: 0.6", "pos_max_rad: 13");
+    want(f, "%s:%d: joints[0].pos_max_rad: value 13 outside driver \"ak80-9\" wire range "
+            "[-12.5, 12.5]",
+         f->path, line_of(f, "pos_max_rad: 13"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_pos_min_not_below_max_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "pos_min_rad: -0.6", "pos_min_rad: 0.6");
+    want(f, "%s:%d: joints[0].pos_max_rad: value 0.6 not above pos_min_rad 0.6", f->path,
+         line_of(f, "pos_max_rad"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_kp_above_max_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "kp_nm_rad: 60", "kp_nm_rad: 250");
+    want(f, "%s:%d: joints[0].kp_nm_rad: value 250 above kp_max_nm_rad 200", f->path,
+         line_of(f, "kp_nm_rad: 250"));
+    expect_robot_error(f);
+
+    edit(f, ROBOT_OK, "kd_max_nm_s_rad: 4,", "kd_max_nm_s_rad: 6,");
+    want(f, "%s:%d: joints[0].kd_max_nm_s_rad: value 6 above driver \"ak80-9\" kd_max_nm_s_rad 5",
+         f->path, line_of(f, "kd_max_nm_s_rad: 6"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_torque_outside_driver_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "torque_max_nm: 15", "torque_max_nm: 19");
+    want(f, "%s:%d: joints[0].torque_max_nm: +/-19 outside driver \"ak80-9\" wire range [-18, 18]",
+         f->path, line_of(f, "torque_max_nm: 19"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_duplicate_names_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "name: r_knee", "name: l_knee");
+    want(f, "%s:%d: joints[2].name: duplicate joint name \"l_knee\" (also joints[1])", f->path,
+         line_of(f, "bus: 1, can_id"));
+    expect_robot_error(f);
+
+    edit(f, ROBOT_OK, "{name: ak70-10,", "{name: \"ak80-9\",");
+    want(f, "%s:%d: drivers[1].name: duplicate driver name \"ak80-9\" (also drivers[0])", f->path,
+         line_of(f, "\"ak80-9\""));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_driver_min_not_below_max_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "t_max_nm: 18", "t_max_nm: -19");
+    want(f, "%s:%d: drivers[0].t_max_nm: value -19 not above t_min_nm -18", f->path,
+         line_of(f, "t_max_nm: -19"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_rate_div_not_dividing_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "rate_div: 2}", "rate_div: 3}");
+    want(f, "%s:%d: joints[0].rate_div: value 3 does not divide servo_hz/policy_hz = 20", f->path,
+         line_of(f, "rate_div: 3"));
+    expect_robot_error(f);
+
+    edit(f, ROBOT_OK, "rate_div: 2}", "rate_div: 0}");
+    want(f, "%s:%d: joints[0].rate_div: value 0 outside [1, 64]", f->path,
+         line_of(f, "rate_div: 0"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_unknown_protocol_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "protocol: mit, driver: ak80-9", "protocol: canopen, driver: ak80-9");
+    want(f, "%s:%d: joints[0].protocol: unknown value \"canopen\" (allowed: mit)", f->path,
+         line_of(f, "canopen"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_mass_zero_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "mass_kg: 32", "mass_kg: 0");
+    want(f, "%s:%d: kinematics.mass_kg: value 0 outside (0, 500]", f->path,
+         line_of(f, "mass_kg"));
+    expect_robot_error(f);
+}
+
+/* ---- scenario rejections ------------------------------------------------ */
+
+static void test_load_scenario_unknown_key_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, SCENARIO_OK, "duration_s: 0\n", "durration: 0\n");
+    want(f, "%s:%d: unknown key \"durration\"", f->path, line_of(f, "durration"));
+    expect_scenario_error(f);
+}
+
+static void test_load_scenario_unknown_event_kind_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, SCENARIO_OK, "kind: start}", "kind: begin}");
+    want(f,
+         "%s:%d: events[0].kind: unknown value \"begin\" (allowed: start, stop, estop_press, "
+         "estop_release, reset, harness_release, drop_replies)",
+         f->path, line_of(f, "begin"));
+    expect_scenario_error(f);
+}
+
+static void test_load_scenario_force_not_three_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, SCENARIO_OK, "force_n: [10, -20.5, 0]", "force_n: [10, -20.5]");
+    want(f, "%s:%d: pushes[0].force_n: 2 entries, need exactly 3", f->path,
+         line_of(f, "force_n"));
+    expect_scenario_error(f);
+}
+
+static void test_load_scenario_force_too_large_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, SCENARIO_OK, "force_n: [10, -20.5, 0]", "force_n: [10, -2500, 0]");
+    want(f, "%s:%d: pushes[0].force_n[1]: value -2500 outside [-2000, 2000]", f->path,
+         line_of(f, "force_n"));
+    expect_scenario_error(f);
+
+    /* each component in range, the magnitude not */
+    edit(f, SCENARIO_OK, "force_n: [10, -20.5, 0]", "force_n: [1500, -1500, 0]");
+    want(f, "%s:%d: pushes[0].force_n: magnitude 2121.32 N outside [0, 2000]", f->path,
+         line_of(f, "force_n"));
+    expect_scenario_error(f);
+}
+
+static void test_load_scenario_drop_without_joint_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, SCENARIO_OK, ", joint: l_knee}", "}");
+    want(f, "%s:%d: events[1]: drop_replies needs a \"joint\"", f->path,
+         line_of(f, "kind: drop_replies}"));
+    expect_scenario_error(f);
+
+    edit(f, SCENARIO_OK, "kind: start}", "kind: start, duration_s: 1}");
+    want(f, "%s:%d: events[0].duration_s: only drop_replies takes a duration, not start", f->path,
+         line_of(f, "kind: start"));
+    expect_scenario_error(f);
+}
+
+static void test_load_scenario_duration_high_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, SCENARIO_OK, "duration_s: 0\n", "duration_s: 86401\n");
+    want(f, "%s:%d: duration_s: value 86401 outside [0, 86400]", f->path,
+         line_of(f, "duration_s: 86401"));
+    expect_scenario_error(f);
+
+    edit(f, SCENARIO_OK, "duration_s: 0\n", "duration_s: 2\n");
+    want(f, "%s:%d: events[2].t_s: value 3 after the end of the run (duration_s 2)", f->path,
+         line_of(f, "t_s: 3"));
+    expect_scenario_error(f);
+}
+
+/* ---- cross-file checks and look-ups ------------------------------------ */
+
+static void load_pair(fx_t *f)
+{
+    assert_int_equal(ps_config_load_board(BOARD_OK, &f->board, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_load_robot(ROBOT_OK, &f->robot, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_load_scenario(SCENARIO_OK, &f->scenario, f->err, sizeof(f->err)),
+                     0);
+}
+
+static void test_check_pair_consistent_ok(void **state)
+{
+    fx_t *f = *state;
+    load_pair(f);
+    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, &f->scenario, f->err,
+                                          sizeof(f->err)),
+                     0);
+    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, NULL, f->err, sizeof(f->err)),
+                     0);
+}
+
+static void test_check_pair_joint_bus_missing_rejected(void **state)
+{
+    fx_t *f = *state;
+    load_pair(f);
+    f->robot.joints[2].bus_idx = 2; /* board_ok has buses 0 and 1 */
+    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, NULL, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    assert_string_equal(f->err, "robot tiny: joints[2].bus: bus 2 not on board bench (buses 0..1)");
+}
+
+static void test_check_pair_imu_bus_missing_rejected(void **state)
+{
+    fx_t *f = *state;
+    load_pair(f);
+    f->board.n_buses = 1;
+    f->robot.joints[2].bus_idx = 0;
+    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, NULL, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    assert_string_equal(f->err, "robot tiny: imu.bus: bus 1 not on board bench (buses 0..0)");
+}
+
+static void test_check_pair_drop_joint_unknown_rejected(void **state)
+{
+    fx_t *f = *state;
+    load_pair(f);
+    (void)snprintf(f->scenario.events[2].joint, PS_NAME_LEN, "%s", "r_ankle");
+    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, &f->scenario, f->err,
+                                          sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    assert_string_equal(f->err, "scenario mixed: events[2].joint: no joint \"r_ankle\" in robot tiny");
+}
+
+static void test_find_joint_name_index_or_enoent(void **state)
+{
+    fx_t *f = *state;
+    assert_int_equal(ps_config_load_robot(ROBOT_OK, &f->robot, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_find_joint(&f->robot, "l_hip_yaw"), 0);
+    assert_int_equal(ps_config_find_joint(&f->robot, "r_knee"), 2);
+    assert_int_equal(ps_config_find_joint(&f->robot, "r_kne"), -ENOENT);
+    assert_int_equal(ps_config_find_joint(&f->robot, NULL), -ENOENT);
+}
+
+static void test_event_name_every_kind_named(void **state)
+{
+    (void)state;
+    static const char *const NAMES[PS_EVENT_COUNT] = {
+        "start", "stop", "estop_press", "estop_release", "reset", "harness_release",
+        "drop_replies"};
+    for (int k = 0; k < (int)PS_EVENT_COUNT; k++)
+        assert_string_equal(ps_config_event_name((ps_event_kind_t)k), NAMES[k]);
+    assert_string_equal(ps_config_event_name(PS_EVENT_COUNT), "unknown");
+}
+
+#define T(fn) cmocka_unit_test_setup_teardown(fn, setup, teardown)
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        T(test_load_board_shipped_boards_ok),
+        T(test_load_board_sim_exact_values),
+        T(test_load_board_optional_absent_default_applied),
+        T(test_load_scenario_shipped_scenarios_ok),
+        T(test_load_scenario_fixture_defaults_applied),
+        T(test_load_robot_fixture_exact_values),
+        T(test_load_robot_ps1_when_present_ok),
+        T(test_load_missing_file_enoent),
+        T(test_load_null_args_einval),
+        T(test_load_board_failure_out_untouched),
+        T(test_load_board_small_or_null_err_truncated),
+        T(test_load_board_top_field_missing_rejected),
+        T(test_load_board_nested_field_missing_rejected),
+        T(test_load_board_string_for_number_rejected),
+        T(test_load_board_bitrate_high_rejected),
+        T(test_load_board_bitrate_low_rejected),
+        T(test_load_board_budget_zero_rejected),
+        T(test_load_board_cpu_below_minus_one_rejected),
+        T(test_load_board_unknown_nested_key_rejected),
+        T(test_load_board_unknown_kind_rejected),
+        T(test_load_board_bool_typo_rejected),
+        T(test_load_board_too_many_buses_rejected),
+        T(test_load_board_long_ifname_rejected),
+        T(test_load_board_duplicate_ifname_rejected),
+        T(test_load_board_duplicate_key_rejected),
+        T(test_load_board_syntax_error_rejected),
+        T(test_load_board_gpio_line_reused_rejected),
+        T(test_load_robot_string_for_number_rejected),
+        T(test_load_robot_missing_field_rejected),
+        T(test_load_robot_duplicate_can_id_rejected),
+        T(test_load_robot_reply_id_on_imu_rejected),
+        T(test_load_robot_can_id_high_rejected),
+        T(test_load_robot_unknown_driver_rejected),
+        T(test_load_robot_servo_not_multiple_rejected),
+        T(test_load_robot_pos_outside_wire_rejected),
+        T(test_load_robot_pos_min_not_below_max_rejected),
+        T(test_load_robot_kp_above_max_rejected),
+        T(test_load_robot_torque_outside_driver_rejected),
+        T(test_load_robot_duplicate_names_rejected),
+        T(test_load_robot_driver_min_not_below_max_rejected),
+        T(test_load_robot_rate_div_not_dividing_rejected),
+        T(test_load_robot_unknown_protocol_rejected),
+        T(test_load_robot_mass_zero_rejected),
+        T(test_load_scenario_unknown_key_rejected),
+        T(test_load_scenario_unknown_event_kind_rejected),
+        T(test_load_scenario_force_not_three_rejected),
+        T(test_load_scenario_force_too_large_rejected),
+        T(test_load_scenario_drop_without_joint_rejected),
+        T(test_load_scenario_duration_high_rejected),
+        T(test_check_pair_consistent_ok),
+        T(test_check_pair_joint_bus_missing_rejected),
+        T(test_check_pair_imu_bus_missing_rejected),
+        T(test_check_pair_drop_joint_unknown_rejected),
+        T(test_find_joint_name_index_or_enoent),
+        T(test_event_name_every_kind_named),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
