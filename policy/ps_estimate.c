@@ -194,8 +194,8 @@ static void update_tilt(ps_estimator_t *e, const ps_imu_meas_t *imu)
     float acc_roll = 0.0f, acc_pitch = 0.0f;
     const bool is_acc_ok = accel_tilt(imu->accel_body_m_s2, &acc_roll, &acc_pitch);
     const int64_t gap_ns = imu->t_ns - e->last_imu_t_ns;
-    const bool is_reinit = !e->has_tilt || e->last_imu_t_ns == 0 ||
-                           gap_ns > (int64_t)(PS_ESTIMATE_IMU_GAP_S * 1e9f);
+    const bool is_reinit =
+        !e->has_tilt || e->last_imu_t_ns == 0 || gap_ns > (int64_t)(PS_ESTIMATE_IMU_GAP_S * 1e9f);
 
     if (is_reinit) {
         /* First sample or a long gap: the integrated state is meaningless,

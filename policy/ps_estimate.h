@@ -26,8 +26,15 @@
 #include "ps_state.h"
 
 /** Leg joints in chain order, hip yaw to ankle roll. */
-enum { PS_LEG_HIP_YAW, PS_LEG_HIP_ROLL, PS_LEG_HIP_PITCH, PS_LEG_KNEE, PS_LEG_ANKLE_PITCH,
-       PS_LEG_ANKLE_ROLL, PS_LEG_N_JOINTS };
+enum {
+    PS_LEG_HIP_YAW,
+    PS_LEG_HIP_ROLL,
+    PS_LEG_HIP_PITCH,
+    PS_LEG_KNEE,
+    PS_LEG_ANKLE_PITCH,
+    PS_LEG_ANKLE_ROLL,
+    PS_LEG_N_JOINTS
+};
 
 #define PS_ESTIMATE_FILTER_TAU_S 0.5f  /**< default complementary filter time constant */
 #define PS_ESTIMATE_CONTACT_M    0.02f /**< sole within this of the lowest sole: contact */
@@ -40,9 +47,9 @@ typedef struct {
     const ps_robot_cfg_t *robot;
     int leg_idx[2][PS_LEG_N_JOINTS]; /**< joint index of each leg joint, [0] left */
     float dt_s;
-    float filter_tau_s;  /**< complementary filter time constant; user may modify */
-    bool has_tilt;       /**< read-only: a valid accelerometer sample has set the tilt */
-    ps_estimate_t est;   /**< read-only: the latest estimate */
+    float filter_tau_s; /**< complementary filter time constant; user may modify */
+    bool has_tilt;      /**< read-only: a valid accelerometer sample has set the tilt */
+    ps_estimate_t est;  /**< read-only: the latest estimate */
     float prev_com_m[3];
     int64_t last_imu_t_ns; /**< time of the last IMU sample used; 0: none */
     bool has_prev_com;     /**< prev_com_m holds the previous update's CoM */

@@ -107,8 +107,7 @@ static void add_target(const ps_joint_cfg_t *j, float *q, float delta_rad)
     *q = v;
 }
 
-static int stand_step(void *ctx, const ps_meas_t *meas, const ps_estimate_t *est,
-                      ps_targets_t *out)
+static int stand_step(void *ctx, const ps_meas_t *meas, const ps_estimate_t *est, ps_targets_t *out)
 {
     (void)meas; /* everything needed is in the estimate */
     const ps_stand_t *st = ctx;

@@ -18,8 +18,8 @@
 typedef struct {
     const ps_robot_cfg_t *robot;
     int idx_ankle_pitch[2], idx_ankle_roll[2]; /**< [0] left, [1] right, -1 if absent */
-    float k_tilt;     /**< ankle angle per rad of trunk tilt */
-    float k_com;      /**< ankle angle per m of CoM offset */
+    float k_tilt;                              /**< ankle angle per rad of trunk tilt */
+    float k_com;                               /**< ankle angle per m of CoM offset */
 } ps_stand_t;
 
 /** Finds l/r_ankle_pitch and l/r_ankle_roll by name (-1 if absent: that

@@ -30,15 +30,15 @@
 
 #include "ps_err.h"
 
-#define MAX_FILE_BYTES  (1024u * 1024u) /* configs are small; refuse anything odd */
-#define MAX_DEPTH       32u
-#define FIELD_PATH_LEN  128u
-#define CYAML_LOG_BYTES 2048u
+#define MAX_FILE_BYTES     (1024u * 1024u) /* configs are small; refuse anything odd */
+#define MAX_DEPTH          32u
+#define FIELD_PATH_LEN     128u
+#define CYAML_LOG_BYTES    2048u
 #define DEFAULT_BUS_BUDGET 0.8f
-#define MAX_DRIVERS     8u
-#define MAX_GPIO_LINE   1023u
-#define MAX_RATE_DIV    64u
-#define MAX_CAN_ID      0x7ffu
+#define MAX_DRIVERS        8u
+#define MAX_GPIO_LINE      1023u
+#define MAX_RATE_DIV       64u
+#define MAX_CAN_ID         0x7ffu
 
 /* ====================================================================== */
 /* node tree built with libyaml: positions for every value and every key  */
@@ -270,8 +270,8 @@ static int tree_build(ytree_t *t, const unsigned char *buf, size_t len, size_t *
             break;
         }
         if (is_node) {
-            const bool is_key = depth > 0 && t->nodes[stack[depth - 1]].type == YN_MAP &&
-                                expect_key[depth - 1];
+            const bool is_key =
+                depth > 0 && t->nodes[stack[depth - 1]].type == YN_MAP && expect_key[depth - 1];
             if (is_key && type == YN_SCALAR) {
                 pending_key = dup_bytes(ev.data.scalar.value, ev.data.scalar.length);
                 pending_key_line = ev.start_mark.line;
@@ -284,7 +284,8 @@ static int tree_build(ytree_t *t, const unsigned char *buf, size_t len, size_t *
                 *out_problem = "mapping keys must be plain strings";
                 rc = -PS_ERR_CONFIG;
             } else {
-                const int idx = tree_add(t, type, depth > 0 ? stack[depth - 1] : -1, &ev.start_mark);
+                const int idx =
+                    tree_add(t, type, depth > 0 ? stack[depth - 1] : -1, &ev.start_mark);
                 if (idx < 0) {
                     rc = idx;
                 } else {
@@ -377,8 +378,8 @@ static void cyaml_capture(cyaml_log_t level, void *vctx, const char *fmt, va_lis
     (void)level;
     if (c->cyaml_log == NULL || c->cyaml_log_used + 1u >= CYAML_LOG_BYTES)
         return;
-    const int w = vsnprintf(c->cyaml_log + c->cyaml_log_used, CYAML_LOG_BYTES - c->cyaml_log_used,
-                            fmt, args);
+    const int w =
+        vsnprintf(c->cyaml_log + c->cyaml_log_used, CYAML_LOG_BYTES - c->cyaml_log_used, fmt, args);
     if (w > 0)
         c->cyaml_log_used += (size_t)w;
     if (c->cyaml_log_used >= CYAML_LOG_BYTES)
@@ -423,8 +424,8 @@ static bool explain_walk(ctx_t *c, const cyaml_schema_value_t *sv, int node_idx)
             if ((f->value.flags & CYAML_FLAG_OPTIONAL) == 0 &&
                 tree_child_by_key(t, node_idx, f->key, strlen(f->key)) < 0) {
                 /* The document root has no useful line; nested ones do. */
-                (void)fail_at(c, node_idx == 0 ? 0u : n->line + 1u, field,
-                              "missing field \"%s\"", f->key);
+                (void)fail_at(c, node_idx == 0 ? 0u : n->line + 1u, field, "missing field \"%s\"",
+                              f->key);
                 return true;
             }
         }
@@ -439,8 +440,8 @@ static bool explain_walk(ctx_t *c, const cyaml_schema_value_t *sv, int node_idx)
                 (void)fail_at(c, n->line + 1u, field, "%u entries, need exactly %u", n->n_children,
                               sv->sequence.min);
             else
-                (void)fail_at(c, n->line + 1u, field, "%u entries outside [%u, %u]",
-                              n->n_children, sv->sequence.min, sv->sequence.max);
+                (void)fail_at(c, n->line + 1u, field, "%u entries outside [%u, %u]", n->n_children,
+                              sv->sequence.min, sv->sequence.max);
             return true;
         }
         for (int ch = n->first_child_idx; ch >= 0; ch = t->nodes[ch].next_idx) {
@@ -473,8 +474,7 @@ static bool explain_walk(ctx_t *c, const cyaml_schema_value_t *sv, int node_idx)
         /* libcyaml 1.3.1 reads every string but false/no/disable/0 as true,
          * so "off" or a typo would arm the opposite polarity: allow only
          * the two YAML 1.2 spellings. */
-        if (n->type != YN_SCALAR || strcmp(n->value, "true") == 0 ||
-            strcmp(n->value, "false") == 0)
+        if (n->type != YN_SCALAR || strcmp(n->value, "true") == 0 || strcmp(n->value, "false") == 0)
             return false;
         (void)fail_at(c, n->line + 1u, field, "unknown value \"%s\" (allowed: true, false)",
                       n->value);
@@ -605,10 +605,10 @@ enum {
 
 /* An array of the work struct that rows may refer to. */
 typedef struct {
-    const char *name;   /* YAML key of the sequence */
-    size_t off;         /* offset of element 0 in the work struct */
-    size_t stride;      /* sizeof one element */
-    size_t count_off;   /* offset of the uint32_t entry count */
+    const char *name; /* YAML key of the sequence */
+    size_t off;       /* offset of element 0 in the work struct */
+    size_t stride;    /* sizeof one element */
+    size_t count_off; /* offset of the uint32_t entry count */
 } range_array_t;
 
 /* One numeric field: YAML path, where it lives, its type and bounds. */
@@ -920,8 +920,7 @@ static const cyaml_schema_field_t CONTROL_FIELDS[] = {
     CYAML_FIELD_FLOAT("still_vel_rad_s", CYAML_FLAG_DEFAULT, ps_control_cfg_t, still_vel_rad_s),
     CYAML_FIELD_FLOAT("reply_timeout_s", CYAML_FLAG_DEFAULT, ps_control_cfg_t, reply_timeout_s),
     CYAML_FIELD_FLOAT("imu_timeout_s", CYAML_FLAG_DEFAULT, ps_control_cfg_t, imu_timeout_s),
-    CYAML_FIELD_FLOAT("policy_deadline_s", CYAML_FLAG_DEFAULT, ps_control_cfg_t,
-                      policy_deadline_s),
+    CYAML_FIELD_FLOAT("policy_deadline_s", CYAML_FLAG_DEFAULT, ps_control_cfg_t, policy_deadline_s),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_field_t IMU_FIELDS[] = {
@@ -939,8 +938,7 @@ static const cyaml_schema_field_t KIN_FIELDS[] = {
     CYAML_FIELD_FLOAT("ankle_height_m", CYAML_FLAG_DEFAULT, ps_kinematics_cfg_t, ankle_height_m),
     CYAML_FIELD_FLOAT("foot_length_m", CYAML_FLAG_DEFAULT, ps_kinematics_cfg_t, foot_length_m),
     CYAML_FIELD_FLOAT("foot_width_m", CYAML_FLAG_DEFAULT, ps_kinematics_cfg_t, foot_width_m),
-    CYAML_FIELD_FLOAT("foot_offset_x_m", CYAML_FLAG_DEFAULT, ps_kinematics_cfg_t,
-                      foot_offset_x_m),
+    CYAML_FIELD_FLOAT("foot_offset_x_m", CYAML_FLAG_DEFAULT, ps_kinematics_cfg_t, foot_offset_x_m),
     CYAML_FIELD_FLOAT("com_offset_z_m", CYAML_FLAG_DEFAULT, ps_kinematics_cfg_t, com_offset_z_m),
     CYAML_FIELD_FLOAT("fall_tilt_rad", CYAML_FLAG_DEFAULT, ps_kinematics_cfg_t, fall_tilt_rad),
     CYAML_FIELD_FLOAT("fall_com_height_m", CYAML_FLAG_DEFAULT, ps_kinematics_cfg_t,
@@ -950,14 +948,11 @@ static const cyaml_schema_field_t KIN_FIELDS[] = {
 static const cyaml_schema_field_t SIM_FIELDS[] = {
     CYAML_FIELD_FLOAT("gyro_noise_rad_s", CYAML_FLAG_DEFAULT, ps_sim_devices_cfg_t,
                       gyro_noise_rad_s),
-    CYAML_FIELD_FLOAT("gyro_bias_rad_s", CYAML_FLAG_DEFAULT, ps_sim_devices_cfg_t,
-                      gyro_bias_rad_s),
+    CYAML_FIELD_FLOAT("gyro_bias_rad_s", CYAML_FLAG_DEFAULT, ps_sim_devices_cfg_t, gyro_bias_rad_s),
     CYAML_FIELD_FLOAT("accel_noise_m_s2", CYAML_FLAG_DEFAULT, ps_sim_devices_cfg_t,
                       accel_noise_m_s2),
-    CYAML_FIELD_FLOAT("accel_bias_m_s2", CYAML_FLAG_DEFAULT, ps_sim_devices_cfg_t,
-                      accel_bias_m_s2),
-    CYAML_FIELD_FLOAT("reply_latency_s", CYAML_FLAG_DEFAULT, ps_sim_devices_cfg_t,
-                      reply_latency_s),
+    CYAML_FIELD_FLOAT("accel_bias_m_s2", CYAML_FLAG_DEFAULT, ps_sim_devices_cfg_t, accel_bias_m_s2),
+    CYAML_FIELD_FLOAT("reply_latency_s", CYAML_FLAG_DEFAULT, ps_sim_devices_cfg_t, reply_latency_s),
     CYAML_FIELD_FLOAT("thermal_r_c_w", CYAML_FLAG_DEFAULT, ps_sim_devices_cfg_t, thermal_r_c_w),
     CYAML_FIELD_FLOAT("thermal_tau_s", CYAML_FLAG_DEFAULT, ps_sim_devices_cfg_t, thermal_tau_s),
     CYAML_FIELD_FLOAT("winding_r_ohm", CYAML_FLAG_DEFAULT, ps_sim_devices_cfg_t, winding_r_ohm),
@@ -1039,12 +1034,12 @@ static const range_rule_t ROBOT_RANGES[] = {
     {0, NUM_F32, 0, "control.damping_kd_nm_s_rad", R_OFF(cfg.control.damping_kd_nm_s_rad), 0.0,
      100.0},
     {0, NUM_F32, 0, "control.still_vel_rad_s", R_OFF(cfg.control.still_vel_rad_s), 0.0, 10.0},
-    {0, NUM_F32, RANGE_OPEN_MIN, "control.reply_timeout_s", R_OFF(cfg.control.reply_timeout_s),
-     0.0, 1.0},
+    {0, NUM_F32, RANGE_OPEN_MIN, "control.reply_timeout_s", R_OFF(cfg.control.reply_timeout_s), 0.0,
+     1.0},
     {0, NUM_F32, RANGE_OPEN_MIN, "control.imu_timeout_s", R_OFF(cfg.control.imu_timeout_s), 0.0,
      1.0},
-    {0, NUM_F32, RANGE_OPEN_MIN, "control.policy_deadline_s",
-     R_OFF(cfg.control.policy_deadline_s), 0.0, 1.0},
+    {0, NUM_F32, RANGE_OPEN_MIN, "control.policy_deadline_s", R_OFF(cfg.control.policy_deadline_s),
+     0.0, 1.0},
     {0, NUM_U32, 0, "imu.bus", R_OFF(cfg.imu.bus_idx), 0.0, PS_MAX_BUSES - 1u},
     {0, NUM_U32, RANGE_HEX, "imu.base_id", R_OFF(cfg.imu.base_id), 1.0, MAX_CAN_ID - 1u},
     {0, NUM_U32, 0, "imu.rate_div", R_OFF(cfg.imu.rate_div), 1.0, MAX_RATE_DIV},
@@ -1056,8 +1051,7 @@ static const range_rule_t ROBOT_RANGES[] = {
     {0, NUM_F32, 0, "kinematics.ankle_height_m", R_OFF(cfg.kin.ankle_height_m), 0.0, 1.0},
     {0, NUM_F32, RANGE_OPEN_MIN, "kinematics.foot_length_m", R_OFF(cfg.kin.foot_length_m), 0.0,
      1.0},
-    {0, NUM_F32, RANGE_OPEN_MIN, "kinematics.foot_width_m", R_OFF(cfg.kin.foot_width_m), 0.0,
-     1.0},
+    {0, NUM_F32, RANGE_OPEN_MIN, "kinematics.foot_width_m", R_OFF(cfg.kin.foot_width_m), 0.0, 1.0},
     {0, NUM_F32, 0, "kinematics.foot_offset_x_m", R_OFF(cfg.kin.foot_offset_x_m), -0.5, 0.5},
     {0, NUM_F32, 0, "kinematics.com_offset_z_m", R_OFF(cfg.kin.com_offset_z_m), -1.0, 1.0},
     {0, NUM_F32, RANGE_OPEN_MIN, "kinematics.fall_tilt_rad", R_OFF(cfg.kin.fall_tilt_rad), 0.0,
@@ -1069,8 +1063,7 @@ static const range_rule_t ROBOT_RANGES[] = {
     {0, NUM_F32, 0, "sim.accel_bias_m_s2", R_OFF(cfg.sim.accel_bias_m_s2), 0.0, 10.0},
     {0, NUM_F32, 0, "sim.reply_latency_s", R_OFF(cfg.sim.reply_latency_s), 0.0, 0.01},
     {0, NUM_F32, RANGE_OPEN_MIN, "sim.thermal_r_c_w", R_OFF(cfg.sim.thermal_r_c_w), 0.0, 100.0},
-    {0, NUM_F32, RANGE_OPEN_MIN, "sim.thermal_tau_s", R_OFF(cfg.sim.thermal_tau_s), 0.0,
-     10000.0},
+    {0, NUM_F32, RANGE_OPEN_MIN, "sim.thermal_tau_s", R_OFF(cfg.sim.thermal_tau_s), 0.0, 10000.0},
     {0, NUM_F32, RANGE_OPEN_MIN, "sim.winding_r_ohm", R_OFF(cfg.sim.winding_r_ohm), 0.0, 100.0},
     {0, NUM_F32, 0, "sim.ambient_c", R_OFF(cfg.sim.ambient_c), -40.0, 85.0},
     {RA_DRIVERS, NUM_F32, 0, "p_min_rad", D_OFF(r.p_min_rad), -1000.0, 1000.0},
@@ -1078,8 +1071,7 @@ static const range_rule_t ROBOT_RANGES[] = {
     {RA_DRIVERS, NUM_F32, 0, "v_min_rad_s", D_OFF(r.v_min_rad_s), -10000.0, 10000.0},
     {RA_DRIVERS, NUM_F32, 0, "v_max_rad_s", D_OFF(r.v_max_rad_s), -10000.0, 10000.0},
     {RA_DRIVERS, NUM_F32, RANGE_OPEN_MIN, "kp_max_nm_rad", D_OFF(r.kp_max_nm_rad), 0.0, 5000.0},
-    {RA_DRIVERS, NUM_F32, RANGE_OPEN_MIN, "kd_max_nm_s_rad", D_OFF(r.kd_max_nm_s_rad), 0.0,
-     500.0},
+    {RA_DRIVERS, NUM_F32, RANGE_OPEN_MIN, "kd_max_nm_s_rad", D_OFF(r.kd_max_nm_s_rad), 0.0, 500.0},
     {RA_DRIVERS, NUM_F32, 0, "t_min_nm", D_OFF(r.t_min_nm), -1000.0, 1000.0},
     {RA_DRIVERS, NUM_F32, 0, "t_max_nm", D_OFF(r.t_max_nm), -1000.0, 1000.0},
     {RA_DRIVERS, NUM_F32, 0, "i_min_a", D_OFF(r.i_min_a), -1000.0, 1000.0},
@@ -1187,18 +1179,17 @@ static int check_joint_limits(ctx_t *c, const robot_work_t *w, uint32_t i)
         return fail_field(c, JFIELD("stance_rad"), "value %g outside joint limits [%g, %g]",
                           (double)j->stance_rad, (double)j->pos_min_rad, (double)j->pos_max_rad);
     if (-j->vel_max_rad_s < r->v_min_rad_s || j->vel_max_rad_s > r->v_max_rad_s)
-        return fail_field(c, JFIELD("vel_max_rad_s"),
-                          "+/-%g outside driver \"%s\" wire range [%g, %g]",
-                          (double)j->vel_max_rad_s, drv, (double)r->v_min_rad_s,
-                          (double)r->v_max_rad_s);
+        return fail_field(
+            c, JFIELD("vel_max_rad_s"), "+/-%g outside driver \"%s\" wire range [%g, %g]",
+            (double)j->vel_max_rad_s, drv, (double)r->v_min_rad_s, (double)r->v_max_rad_s);
     if (-j->torque_max_nm < r->t_min_nm || j->torque_max_nm > r->t_max_nm)
         return fail_field(c, JFIELD("torque_max_nm"),
                           "+/-%g outside driver \"%s\" wire range [%g, %g]",
                           (double)j->torque_max_nm, drv, (double)r->t_min_nm, (double)r->t_max_nm);
     if (j->kp_max_nm_rad > r->kp_max_nm_rad)
         return fail_field(c, JFIELD("kp_max_nm_rad"),
-                          "value %g above driver \"%s\" kp_max_nm_rad %g",
-                          (double)j->kp_max_nm_rad, drv, (double)r->kp_max_nm_rad);
+                          "value %g above driver \"%s\" kp_max_nm_rad %g", (double)j->kp_max_nm_rad,
+                          drv, (double)r->kp_max_nm_rad);
     if (j->kd_max_nm_s_rad > r->kd_max_nm_s_rad)
         return fail_field(c, JFIELD("kd_max_nm_s_rad"),
                           "value %g above driver \"%s\" kd_max_nm_s_rad %g",
@@ -1210,10 +1201,9 @@ static int check_joint_limits(ctx_t *c, const robot_work_t *w, uint32_t i)
         return fail_field(c, JFIELD("kd_nm_s_rad"), "value %g above kd_max_nm_s_rad %g",
                           (double)j->kd_nm_s_rad, (double)j->kd_max_nm_s_rad);
     if (w->cfg.control.damping_kd_nm_s_rad > j->kd_max_nm_s_rad)
-        return fail_field(c, "control.damping_kd_nm_s_rad",
-                          "value %g above joints[%u].kd_max_nm_s_rad %g",
-                          (double)w->cfg.control.damping_kd_nm_s_rad, i,
-                          (double)j->kd_max_nm_s_rad);
+        return fail_field(
+            c, "control.damping_kd_nm_s_rad", "value %g above joints[%u].kd_max_nm_s_rad %g",
+            (double)w->cfg.control.damping_kd_nm_s_rad, i, (double)j->kd_max_nm_s_rad);
 #undef JFIELD
     return 0;
 }
@@ -1223,8 +1213,8 @@ static int claim_id(ctx_t *c, id_use_t *uses, uint32_t *n_uses, uint32_t bus_idx
 {
     for (uint32_t k = 0; k < *n_uses; k++) {
         if (uses[k].bus_idx == bus_idx && uses[k].id == id)
-            return fail_field(c, yaml_field, "id 0x%03x on bus %u already used by %s", id,
-                              bus_idx, uses[k].field);
+            return fail_field(c, yaml_field, "id 0x%03x on bus %u already used by %s", id, bus_idx,
+                              uses[k].field);
     }
     uses[*n_uses].bus_idx = bus_idx;
     uses[*n_uses].id = id;
@@ -1378,8 +1368,8 @@ static const cyaml_schema_field_t PUSH_FIELDS[] = {
     CYAML_FIELD_FLOAT("t_s", CYAML_FLAG_DEFAULT, ps_push_cfg_t, t_s),
     CYAML_FIELD_FLOAT("duration_s", CYAML_FLAG_DEFAULT, ps_push_cfg_t, duration_s),
     CYAML_FIELD_STRING("body", CYAML_FLAG_DEFAULT, ps_push_cfg_t, body, 1),
-    CYAML_FIELD_SEQUENCE_FIXED("force_n", CYAML_FLAG_DEFAULT, ps_push_cfg_t, force_n,
-                               &FLOAT_SCHEMA, 3),
+    CYAML_FIELD_SEQUENCE_FIXED("force_n", CYAML_FLAG_DEFAULT, ps_push_cfg_t, force_n, &FLOAT_SCHEMA,
+                               3),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_value_t PUSH_SCHEMA = {
@@ -1399,7 +1389,7 @@ static const cyaml_schema_value_t SCENARIO_SCHEMA = {
     CYAML_VALUE_MAPPING(CYAML_FLAG_POINTER, scenario_raw_t, SCENARIO_FIELDS),
 };
 
-#define S_OFF(m) offsetof(ps_scenario_cfg_t, m)
+#define S_OFF(m)         offsetof(ps_scenario_cfg_t, m)
 #define MAX_PUSH_FORCE_N 2000.0
 #define MAX_RUN_S        86400.0
 static const range_array_t SCENARIO_ARRAYS[] = {
@@ -1456,9 +1446,9 @@ static int check_scenario(ctx_t *c, const ps_scenario_cfg_t *s)
     }
     for (uint32_t i = 0; i < s->n_pushes; i++) {
         const ps_push_cfg_t *p = &s->pushes[i];
-        const double f = sqrt((double)p->force_n[0] * p->force_n[0] +
-                              (double)p->force_n[1] * p->force_n[1] +
-                              (double)p->force_n[2] * p->force_n[2]);
+        const double f =
+            sqrt((double)p->force_n[0] * p->force_n[0] + (double)p->force_n[1] * p->force_n[1] +
+                 (double)p->force_n[2] * p->force_n[2]);
         if (f > MAX_PUSH_FORCE_N) {
             (void)snprintf(field, sizeof(field), "pushes[%u].force_n", i);
             return fail_field(c, field, "magnitude %g N outside [0, %g]", f, MAX_PUSH_FORCE_N);
@@ -1548,8 +1538,8 @@ int ps_config_check_pair(const ps_board_cfg_t *b, const ps_robot_cfg_t *r,
         const ps_event_cfg_t *e = &s->events[i];
         if (e->kind == PS_EVENT_DROP_REPLIES && ps_config_find_joint(r, e->joint) < 0)
             return pair_fail(err, err_len,
-                             "scenario %s: events[%u].joint: no joint \"%s\" in robot %s",
-                             s->name, i, e->joint, r->name);
+                             "scenario %s: events[%u].joint: no joint \"%s\" in robot %s", s->name,
+                             i, e->joint, r->name);
     }
     /* Push bodies name bodies of the MuJoCo model, which only the sim knows. */
     return 0;

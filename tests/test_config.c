@@ -28,7 +28,7 @@
 
 typedef struct {
     char dir[64];
-    char path[128];   /* the edited copy */
+    char path[128];      /* the edited copy */
     char text[TEXT_MAX]; /* its content */
     char err[PS_ERR_MSG_LEN];
     char want[PS_ERR_MSG_LEN];
@@ -80,8 +80,8 @@ static const char *edit(fx_t *f, const char *src, const char *from, const char *
     const char *at = strstr(orig, from);
     assert_non_null(at);
     const size_t head = (size_t)(at - orig);
-    const int n = snprintf(f->text, sizeof(f->text), "%.*s%s%s", (int)head, orig, to,
-                           at + strlen(from));
+    const int n =
+        snprintf(f->text, sizeof(f->text), "%.*s%s%s", (int)head, orig, to, at + strlen(from));
     assert_true(n > 0 && (size_t)n < sizeof(f->text));
     (void)snprintf(f->path, sizeof(f->path), "%s/edited.yaml", f->dir);
     FILE *fp = fopen(f->path, "wb");
@@ -156,8 +156,7 @@ static void test_load_board_shipped_boards_ok(void **state)
 static void test_load_board_sim_exact_values(void **state)
 {
     fx_t *f = *state;
-    assert_int_equal(ps_config_load_board("boards/sim.yaml", &f->board, f->err, sizeof(f->err)),
-                     0);
+    assert_int_equal(ps_config_load_board("boards/sim.yaml", &f->board, f->err, sizeof(f->err)), 0);
     const ps_board_cfg_t *b = &f->board;
     assert_string_equal(b->name, "sim");
     assert_int_equal(b->kind, PS_BOARD_SIM);
@@ -203,8 +202,7 @@ static void test_load_scenario_shipped_scenarios_ok(void **state)
     fx_t *f = *state;
     ps_scenario_cfg_t *s = &f->scenario;
 
-    assert_int_equal(ps_config_load_scenario("scenarios/stand.yaml", s, f->err, sizeof(f->err)),
-                     0);
+    assert_int_equal(ps_config_load_scenario("scenarios/stand.yaml", s, f->err, sizeof(f->err)), 0);
     assert_string_equal(s->name, "stand");
     assert_true(s->duration_s == 20.0f);
     assert_int_equal(s->n_pushes, 0);
@@ -222,11 +220,10 @@ static void test_load_scenario_shipped_scenarios_ok(void **state)
         assert_true(s->pushes[i].duration_s > 0.0f);
     }
 
-    assert_int_equal(ps_config_load_scenario("scenarios/estop.yaml", s, f->err, sizeof(f->err)),
-                     0);
-    static const ps_event_kind_t ESTOP_KINDS[] = {
-        PS_EVENT_START,         PS_EVENT_HARNESS_RELEASE, PS_EVENT_ESTOP_PRESS,
-        PS_EVENT_ESTOP_RELEASE, PS_EVENT_RESET,           PS_EVENT_START};
+    assert_int_equal(ps_config_load_scenario("scenarios/estop.yaml", s, f->err, sizeof(f->err)), 0);
+    static const ps_event_kind_t ESTOP_KINDS[] = {PS_EVENT_START,       PS_EVENT_HARNESS_RELEASE,
+                                                  PS_EVENT_ESTOP_PRESS, PS_EVENT_ESTOP_RELEASE,
+                                                  PS_EVENT_RESET,       PS_EVENT_START};
     static const float ESTOP_T_S[] = {0.2f, 2.0f, 4.0f, 5.0f, 6.0f, 6.5f};
     assert_int_equal(s->n_events, 6);
     for (uint32_t i = 0; i < 6; i++) {
@@ -252,7 +249,7 @@ static void test_load_scenario_fixture_defaults_applied(void **state)
     assert_true(s->duration_s == 0.0f);
     assert_int_equal(s->seed, 42);
     assert_int_equal(s->n_events, 3);
-    assert_string_equal(s->events[0].joint, ""); /* optional, absent */
+    assert_string_equal(s->events[0].joint, "");  /* optional, absent */
     assert_true(s->events[1].duration_s == 0.0f); /* optional, absent: rest of the run */
     assert_string_equal(s->events[2].joint, "r_knee");
     assert_true(s->events[2].duration_s == 0.25f);
@@ -313,11 +310,23 @@ static void test_load_robot_ps1_when_present_ok(void **state)
     fx_t *f = *state;
     if (access("robots/ps1.yaml", R_OK) != 0)
         skip(); /* written with the MuJoCo model by another change */
-    const int rc = ps_config_load_robot("robots/ps1.yaml", &f->robot, f->err, sizeof(f->err));
+    int rc = ps_config_load_robot("robots/ps1.yaml", &f->robot, f->err, sizeof(f->err));
     if (rc != 0)
         print_error("%s\n", f->err);
     assert_int_equal(rc, 0);
     assert_true(f->robot.n_joints >= 1);
+    /* the shipped sim board and scenarios fit it */
+    assert_int_equal(ps_config_load_board("boards/sim.yaml", &f->board, f->err, sizeof(f->err)), 0);
+    static const char *const SCENARIOS[] = {"scenarios/stand.yaml", "scenarios/push.yaml",
+                                            "scenarios/estop.yaml", "scenarios/fault-drop.yaml"};
+    for (size_t i = 0; i < sizeof(SCENARIOS) / sizeof(SCENARIOS[0]); i++) {
+        assert_int_equal(
+            ps_config_load_scenario(SCENARIOS[i], &f->scenario, f->err, sizeof(f->err)), 0);
+        rc = ps_config_check_pair(&f->board, &f->robot, &f->scenario, f->err, sizeof(f->err));
+        if (rc != 0)
+            print_error("%s\n", f->err);
+        assert_int_equal(rc, 0);
+    }
 }
 
 /* ---- errors common to all loaders -------------------------------------- */
@@ -330,8 +339,7 @@ static void test_load_missing_file_enoent(void **state)
     want(f, "%s: cannot open: %s", path, strerror(ENOENT));
     assert_string_equal(f->err, f->want);
     assert_int_equal(ps_config_load_robot(path, &f->robot, f->err, sizeof(f->err)), -ENOENT);
-    assert_int_equal(ps_config_load_scenario(path, &f->scenario, f->err, sizeof(f->err)),
-                     -ENOENT);
+    assert_int_equal(ps_config_load_scenario(path, &f->scenario, f->err, sizeof(f->err)), -ENOENT);
 }
 
 static void test_load_null_args_einval(void **state)
@@ -340,10 +348,8 @@ static void test_load_null_args_einval(void **state)
     assert_int_equal(ps_config_load_board(NULL, &f->board, f->err, sizeof(f->err)), -EINVAL);
     assert_int_equal(ps_config_load_board(BOARD_OK, NULL, f->err, sizeof(f->err)), -EINVAL);
     assert_int_equal(ps_config_load_robot(NULL, &f->robot, f->err, sizeof(f->err)), -EINVAL);
-    assert_int_equal(ps_config_load_scenario(SCENARIO_OK, NULL, f->err, sizeof(f->err)),
-                     -EINVAL);
-    assert_int_equal(ps_config_check_pair(NULL, &f->robot, NULL, f->err, sizeof(f->err)),
-                     -EINVAL);
+    assert_int_equal(ps_config_load_scenario(SCENARIO_OK, NULL, f->err, sizeof(f->err)), -EINVAL);
+    assert_int_equal(ps_config_check_pair(NULL, &f->robot, NULL, f->err, sizeof(f->err)), -EINVAL);
 }
 
 static void test_load_board_failure_out_untouched(void **state)
@@ -462,8 +468,7 @@ static void test_load_board_unknown_kind_rejected(void **state)
 
     /* A number is not an enum value either (libcyaml would take 1 as linux). */
     edit(f, "boards/sim.yaml", "kind: sim", "kind: 1");
-    want(f, "%s:%d: kind: unknown value \"1\" (allowed: sim, linux)", f->path,
-         line_of(f, "kind:"));
+    want(f, "%s:%d: kind: unknown value \"1\" (allowed: sim, linux)", f->path, line_of(f, "kind:"));
     expect_board_error(f);
 }
 
@@ -565,8 +570,8 @@ static void test_load_robot_duplicate_can_id_rejected(void **state)
 {
     fx_t *f = *state;
     edit(f, ROBOT_OK, "{name: r_knee, bus: 1,", "{name: r_knee, bus: 0,");
-    want(f, "%s:%d: joints[2].can_id: id 0x002 on bus 0 already used by joints[1].can_id",
-         f->path, line_of(f, "r_knee"));
+    want(f, "%s:%d: joints[2].can_id: id 0x002 on bus 0 already used by joints[1].can_id", f->path,
+         line_of(f, "r_knee"));
     expect_robot_error(f);
 }
 
@@ -612,8 +617,9 @@ static void test_load_robot_pos_outside_wire_rejected(void **state)
 {
     fx_t *f = *state;
     edit(f, ROBOT_OK, "pos_max_rad: 0.6", "pos_max_rad: 13");
-    want(f, "%s:%d: joints[0].pos_max_rad: value 13 outside driver \"ak80-9\" wire range "
-            "[-12.5, 12.5]",
+    want(f,
+         "%s:%d: joints[0].pos_max_rad: value 13 outside driver \"ak80-9\" wire range "
+         "[-12.5, 12.5]",
          f->path, line_of(f, "pos_max_rad: 13"));
     expect_robot_error(f);
 }
@@ -700,8 +706,7 @@ static void test_load_robot_mass_zero_rejected(void **state)
 {
     fx_t *f = *state;
     edit(f, ROBOT_OK, "mass_kg: 32", "mass_kg: 0");
-    want(f, "%s:%d: kinematics.mass_kg: value 0 outside (0, 500]", f->path,
-         line_of(f, "mass_kg"));
+    want(f, "%s:%d: kinematics.mass_kg: value 0 outside (0, 500]", f->path, line_of(f, "mass_kg"));
     expect_robot_error(f);
 }
 
@@ -730,8 +735,7 @@ static void test_load_scenario_force_not_three_rejected(void **state)
 {
     fx_t *f = *state;
     edit(f, SCENARIO_OK, "force_n: [10, -20.5, 0]", "force_n: [10, -20.5]");
-    want(f, "%s:%d: pushes[0].force_n: 2 entries, need exactly 3", f->path,
-         line_of(f, "force_n"));
+    want(f, "%s:%d: pushes[0].force_n: 2 entries, need exactly 3", f->path, line_of(f, "force_n"));
     expect_scenario_error(f);
 }
 
@@ -784,19 +788,16 @@ static void load_pair(fx_t *f)
 {
     assert_int_equal(ps_config_load_board(BOARD_OK, &f->board, f->err, sizeof(f->err)), 0);
     assert_int_equal(ps_config_load_robot(ROBOT_OK, &f->robot, f->err, sizeof(f->err)), 0);
-    assert_int_equal(ps_config_load_scenario(SCENARIO_OK, &f->scenario, f->err, sizeof(f->err)),
-                     0);
+    assert_int_equal(ps_config_load_scenario(SCENARIO_OK, &f->scenario, f->err, sizeof(f->err)), 0);
 }
 
 static void test_check_pair_consistent_ok(void **state)
 {
     fx_t *f = *state;
     load_pair(f);
-    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, &f->scenario, f->err,
-                                          sizeof(f->err)),
-                     0);
-    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, NULL, f->err, sizeof(f->err)),
-                     0);
+    assert_int_equal(
+        ps_config_check_pair(&f->board, &f->robot, &f->scenario, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, NULL, f->err, sizeof(f->err)), 0);
 }
 
 static void test_check_pair_joint_bus_missing_rejected(void **state)
@@ -825,10 +826,11 @@ static void test_check_pair_drop_joint_unknown_rejected(void **state)
     fx_t *f = *state;
     load_pair(f);
     (void)snprintf(f->scenario.events[2].joint, PS_NAME_LEN, "%s", "r_ankle");
-    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, &f->scenario, f->err,
-                                          sizeof(f->err)),
-                     -PS_ERR_CONFIG);
-    assert_string_equal(f->err, "scenario mixed: events[2].joint: no joint \"r_ankle\" in robot tiny");
+    assert_int_equal(
+        ps_config_check_pair(&f->board, &f->robot, &f->scenario, f->err, sizeof(f->err)),
+        -PS_ERR_CONFIG);
+    assert_string_equal(f->err,
+                        "scenario mixed: events[2].joint: no joint \"r_ankle\" in robot tiny");
 }
 
 static void test_find_joint_name_index_or_enoent(void **state)
@@ -844,9 +846,9 @@ static void test_find_joint_name_index_or_enoent(void **state)
 static void test_event_name_every_kind_named(void **state)
 {
     (void)state;
-    static const char *const NAMES[PS_EVENT_COUNT] = {
-        "start", "stop", "estop_press", "estop_release", "reset", "harness_release",
-        "drop_replies"};
+    static const char *const NAMES[PS_EVENT_COUNT] = {"start",         "stop",  "estop_press",
+                                                      "estop_release", "reset", "harness_release",
+                                                      "drop_replies"};
     for (int k = 0; k < (int)PS_EVENT_COUNT; k++)
         assert_string_equal(ps_config_event_name((ps_event_kind_t)k), NAMES[k]);
     assert_string_equal(ps_config_event_name(PS_EVENT_COUNT), "unknown");

@@ -23,7 +23,7 @@ static const char *const NAMES[12] = {
     "r_hip_yaw", "r_hip_roll", "r_hip_pitch", "r_knee", "r_ankle_pitch", "r_ankle_roll",
 };
 /* A slightly crouched stance; distinct values so a swapped index shows. */
-static const float STANCE[12] = {0.01f, 0.02f, -0.2f, 0.4f, -0.2f, 0.03f,
+static const float STANCE[12] = {0.01f,  0.02f,  -0.2f,  0.4f,  -0.2f,  0.03f,
                                  -0.01f, -0.02f, -0.21f, 0.41f, -0.19f, -0.03f};
 enum { L_AP = 4, L_AR = 5, R_AP = 10, R_AR = 11 };
 
@@ -51,11 +51,16 @@ static int setup(void **state)
         r->joints[i].pos_min_rad = -2.0f;
         r->joints[i].pos_max_rad = 2.0f;
     }
-    r->kin = (ps_kinematics_cfg_t){.mass_kg = 32.0f, .hip_offset_y_m = 0.08f,
-                                   .hip_offset_z_m = 0.08f, .thigh_m = 0.3f,
-                                   .shank_m = 0.3f, .ankle_height_m = 0.05f,
-                                   .foot_length_m = 0.22f, .foot_width_m = 0.1f,
-                                   .foot_offset_x_m = 0.03f, .com_offset_z_m = 0.15f};
+    r->kin = (ps_kinematics_cfg_t){.mass_kg = 32.0f,
+                                   .hip_offset_y_m = 0.08f,
+                                   .hip_offset_z_m = 0.08f,
+                                   .thigh_m = 0.3f,
+                                   .shank_m = 0.3f,
+                                   .ankle_height_m = 0.05f,
+                                   .foot_length_m = 0.22f,
+                                   .foot_width_m = 0.1f,
+                                   .foot_offset_x_m = 0.03f,
+                                   .com_offset_z_m = 0.15f};
     assert_int_equal(ps_stand_init(&f.st, r), 0);
     ps_stand_as_policy(&f.st, &f.pol);
     /* Upright, both feet down at (0, +-0.08), CoM 0.85 m above their midpoint. */
