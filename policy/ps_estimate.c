@@ -2,7 +2,7 @@
  * ps_estimate: trunk tilt, foot positions, contact, lumped CoM and CoP.
  *
  * CoM / CoP / base-of-support definitions follow the Push-and-Step seed paper
- * (/work/shared/seeds/000_caaeae2d90dfe8b5.txt, "2. Stage 1: Encoding
+ * (seed 000_caaeae2d90dfe8b5.txt, "2. Stage 1: Encoding
  * Biomechanical Balance Principles into Rewards"): the CoM is compared with the
  * centre of the base of support (the contact feet) at resting height, the CoP
  * is the point where the vertical ground reaction acts. Details and limits in

@@ -17,17 +17,21 @@
  *
  * The support centre is the centre of the base of support, the mean of the
  * contact soles, as the Push-and-Step seed paper sets its CoM target
- * (/work/shared/seeds/000_caaeae2d90dfe8b5.txt, "2. Stage 1: Encoding
+ * (seed 000_caaeae2d90dfe8b5.txt, "2. Stage 1: Encoding
  * Biomechanical Balance Principles into Rewards": "The target CoM is set at
  * the center of the BoS at a resting height").
  *
- * Default gains. For a rigid lean about the ankles com_x - support_x is about
- * H * pitch, H ~ 0.8 m (ankle to CoM), so k_com = 1 rad/m contributes ~0.8 rad
- * per rad of lean and k_tilt = 0.5 adds 0.5: the ankle servo acts ~2.3x as
- * stiff against a lean as the bare stance hold. k_tilt is kept smaller than
- * k_com because trunk tilt also comes from hip flexion, which the ankles
- * cannot undo; the CoM term measures what matters for balance. 1 cm of CoM
- * offset -> 0.01 rad (0.6 deg), far from the 0.15 rad clamp for small pushes.
+ * A CoM velocity term, k_vel * com_vel, damps the whole-body sway (period
+ * about 2 s on ps1) that joint damping cannot reach; its sign follows the
+ * position term's.
+ *
+ * Default gains, chosen by measurement in the lockstep simulation (ps1,
+ * scenarios stand and push, plus 80 N pushes; the sweep is in
+ * docs/estimation.md): k_tilt = 0.5, k_vel = 0.25 rad per m/s, k_com = 0.
+ * The CoM position term is off by default because the lumped-CoM estimate
+ * is biased on ps1 (4.8 cm behind the sole centres at the stance): with
+ * k_com = 1 the robot leans on that bias and falls under pushes that it
+ * survives without the term. Tilt and velocity carry no such bias.
  */
 #include "ps_stand.h"
 
@@ -57,6 +61,7 @@ int ps_stand_init(ps_stand_t *st, const ps_robot_cfg_t *robot)
     st->idx_ankle_roll[1] = find_joint(robot, "r_ankle_roll");
     st->k_tilt = PS_STAND_K_TILT_DEFAULT;
     st->k_com = PS_STAND_K_COM_DEFAULT;
+    st->k_vel = PS_STAND_K_VEL_DEFAULT;
     return 0;
 }
 
@@ -91,8 +96,10 @@ static void ankle_correction(const ps_stand_t *st, const ps_estimate_t *est, flo
     }
     sx /= (float)n;
     sy /= (float)n;
-    const float cp = st->k_tilt * est->pitch_rad + st->k_com * (est->com_m[0] - sx);
-    const float cr = st->k_tilt * est->roll_rad - st->k_com * (est->com_m[1] - sy);
+    const float cp = st->k_tilt * est->pitch_rad + st->k_com * (est->com_m[0] - sx) +
+                     st->k_vel * est->com_vel_m_s[0];
+    const float cr = st->k_tilt * est->roll_rad - st->k_com * (est->com_m[1] - sy) -
+                     st->k_vel * est->com_vel_m_s[1];
     if (!isfinite(cp) || !isfinite(cr))
         return; /* NaN anywhere in the inputs or gains: fall back to stance */
     *out_pitch_rad = clampf(cp, -PS_STAND_CORR_MAX_RAD, PS_STAND_CORR_MAX_RAD);

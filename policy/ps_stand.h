@@ -12,7 +12,8 @@
 #include "ps_policy.h"
 
 #define PS_STAND_K_TILT_DEFAULT 0.5f  /**< rad of ankle per rad of trunk tilt */
-#define PS_STAND_K_COM_DEFAULT  1.0f  /**< rad of ankle per m of CoM offset */
+#define PS_STAND_K_COM_DEFAULT  0.0f  /**< rad of ankle per m of CoM offset (see ps_stand.c) */
+#define PS_STAND_K_VEL_DEFAULT  0.25f /**< rad of ankle per m/s of CoM velocity */
 #define PS_STAND_CORR_MAX_RAD   0.15f /**< |ankle correction| limit */
 
 typedef struct {
@@ -20,6 +21,7 @@ typedef struct {
     int idx_ankle_pitch[2], idx_ankle_roll[2]; /**< [0] left, [1] right, -1 if absent */
     float k_tilt;                              /**< ankle angle per rad of trunk tilt */
     float k_com;                               /**< ankle angle per m of CoM offset */
+    float k_vel;                               /**< ankle angle per m/s of CoM velocity */
 } ps_stand_t;
 
 /** Finds l/r_ankle_pitch and l/r_ankle_roll by name (-1 if absent: that

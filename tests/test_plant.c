@@ -608,7 +608,6 @@ static void test_ps_plant_step_speed_report(void **st)
 static void test_ps_config_load_robot_ps1_matches_model(void **st)
 {
     (void)st;
-#if __has_include("../rt/ps_config.c")
     ps_robot_cfg_t loaded, ref;
     char err[PS_ERR_MSG_LEN] = "";
     const int rc = ps_config_load_robot(ROBOT_PATH, &loaded, err, sizeof(err));
@@ -645,9 +644,6 @@ static void test_ps_config_load_robot_ps1_matches_model(void **st)
     ps_plant_t *p = NULL;
     assert_int_equal(ps_plant_create(model, &loaded, &p, err, sizeof(err)), 0);
     ps_plant_destroy(p);
-#else
-    skip(); /* rt/ps_config.c not written yet */
-#endif
 }
 
 int main(void)

@@ -62,6 +62,11 @@ static int setup(void **state)
                                    .foot_offset_x_m = 0.03f,
                                    .com_offset_z_m = 0.15f};
     assert_int_equal(ps_stand_init(&f.st, r), 0);
+    /* The arithmetic tests below use fixed gains, not the shipped defaults
+     * (which are checked separately and tuned in simulation). */
+    f.st.k_tilt = 0.5f;
+    f.st.k_com = 1.0f;
+    f.st.k_vel = 0.0f;
     ps_stand_as_policy(&f.st, &f.pol);
     /* Upright, both feet down at (0, +-0.08), CoM 0.85 m above their midpoint. */
     f.est.foot_m[0][1] = 0.08f;
@@ -115,8 +120,11 @@ static void test_stand_init_finds_ankles_by_name_and_sets_defaults(void **state)
     assert_int_equal(f->st.idx_ankle_roll[0], L_AR);
     assert_int_equal(f->st.idx_ankle_pitch[1], R_AP);
     assert_int_equal(f->st.idx_ankle_roll[1], R_AR);
-    assert_true(f->st.k_tilt == PS_STAND_K_TILT_DEFAULT);
-    assert_true(f->st.k_com == PS_STAND_K_COM_DEFAULT);
+    ps_stand_t st;
+    assert_int_equal(ps_stand_init(&st, &f->robot), 0);
+    assert_true(st.k_tilt == PS_STAND_K_TILT_DEFAULT);
+    assert_true(st.k_com == PS_STAND_K_COM_DEFAULT);
+    assert_true(st.k_vel == PS_STAND_K_VEL_DEFAULT);
     assert_string_equal(f->pol.ops->name, "stand");
     assert_ptr_equal(f->pol.ctx, &f->st);
 }
@@ -156,6 +164,19 @@ static void test_stand_step_lateral_lean_moves_ankle_roll(void **state)
     f->est.com_m[1] = -0.01f;
     assert_int_equal(step(f), 0);
     assert_targets(f, 0.0f, 0.03f);
+}
+
+/* CoM moving forward (+x) and left (+y): the velocity term acts like the
+ * position term, pitch up and roll the other way:
+ * pitch 0.25 * 0.2 = +0.05, roll -0.25 * 0.1 = -0.025. */
+static void test_stand_step_com_velocity_damps(void **state)
+{
+    fixture_t *f = *state;
+    f->st.k_vel = 0.25f;
+    f->est.com_vel_m_s[0] = 0.2f;
+    f->est.com_vel_m_s[1] = 0.1f;
+    assert_int_equal(step(f), 0);
+    assert_targets(f, 0.05f, -0.025f);
 }
 
 static void test_stand_step_gains_scale_correction(void **state)
@@ -290,6 +311,7 @@ int main(void)
         cmocka_unit_test_setup(test_stand_step_upright_outputs_stance, setup),
         cmocka_unit_test_setup(test_stand_step_forward_lean_raises_ankle_pitch, setup),
         cmocka_unit_test_setup(test_stand_step_lateral_lean_moves_ankle_roll, setup),
+        cmocka_unit_test_setup(test_stand_step_com_velocity_damps, setup),
         cmocka_unit_test_setup(test_stand_step_gains_scale_correction, setup),
         cmocka_unit_test_setup(test_stand_step_support_centre_is_contact_feet, setup),
         cmocka_unit_test_setup(test_stand_step_large_lean_correction_clamped, setup),
