@@ -22,13 +22,13 @@
 
 /** One classical CAN data frame. */
 typedef struct {
-    uint32_t id;     /**< 11- or 29-bit identifier */
-    uint8_t len;     /**< payload length, 0..8 */
-    uint8_t is_ext;  /**< 1: 29-bit identifier */
+    uint32_t id;    /**< 11- or 29-bit identifier */
+    uint8_t len;    /**< payload length, 0..8 */
+    uint8_t is_ext; /**< 1: 29-bit identifier */
     uint8_t pad[2];
     uint8_t data[PS_CAN_MAX_DLEN];
-    int64_t t_ns;    /**< rx: time the frame was complete on the wire (CLOCK_MONOTONIC
-                          or simulated time); tx: ignored */
+    int64_t t_ns; /**< rx: time the frame was complete on the wire (CLOCK_MONOTONIC
+                       or simulated time); tx: ignored */
 } ps_can_frame_t;
 
 /** ISO 11898 fault confinement state of the controller. */

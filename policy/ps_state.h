@@ -14,10 +14,10 @@
 typedef struct {
     float q_rad;
     float qd_rad_s;
-    float tau_nm;       /**< current * kt */
-    float temp_c;       /**< max(mos, rotor) */
-    uint8_t fault;      /**< ps_mit_fault_t */
-    int64_t t_ns;       /**< time the reply arrived; 0: never */
+    float tau_nm;  /**< current * kt */
+    float temp_c;  /**< max(mos, rotor) */
+    uint8_t fault; /**< ps_mit_fault_t */
+    int64_t t_ns;  /**< time the reply arrived; 0: never */
 } ps_joint_meas_t;
 
 typedef struct {
@@ -35,11 +35,11 @@ typedef struct {
 /** Estimated state. Ground frame: origin on the ground under the midpoint of
  *  the feet, x forward (trunk heading), y left, z up. */
 typedef struct {
-    float roll_rad, pitch_rad;   /**< trunk tilt (complementary filter) */
-    float com_m[3];              /**< com_m[2] is the CoM height above the ground */
+    float roll_rad, pitch_rad; /**< trunk tilt (complementary filter) */
+    float com_m[3];            /**< com_m[2] is the CoM height above the ground */
     float com_vel_m_s[3];
-    float cop_m[2];              /**< centre of pressure (x, y) */
-    float foot_m[2][3];          /**< sole centres, [0] left, [1] right */
+    float cop_m[2];     /**< centre of pressure (x, y) */
+    float foot_m[2][3]; /**< sole centres, [0] left, [1] right */
     bool is_contact[2];
     bool is_fallen;
 } ps_estimate_t;

@@ -123,24 +123,42 @@ static int parse_options(int argc, char **argv, options_t *o)
     int c;
     while ((c = getopt_long(argc, argv, "h", LONG, NULL)) != -1) {
         switch (c) {
-        case 'b': o->board = optarg; break;
-        case 'r': o->robot = optarg; break;
-        case 's': o->scenario = optarg; break;
+        case 'b':
+            o->board = optarg;
+            break;
+        case 'r':
+            o->robot = optarg;
+            break;
+        case 's':
+            o->scenario = optarg;
+            break;
         case 'd':
             if (parse_seconds(optarg, "--duration", &o->duration_s) < 0)
                 return -EINVAL;
             o->has_duration = true;
             break;
-        case O_LOCKSTEP: o->is_lockstep = true; break;
-        case O_SUMMARY: o->summary_path = optarg; break;
-        case O_REQUIRE_RT: o->is_rt_required = true; break;
+        case O_LOCKSTEP:
+            o->is_lockstep = true;
+            break;
+        case O_SUMMARY:
+            o->summary_path = optarg;
+            break;
+        case O_REQUIRE_RT:
+            o->is_rt_required = true;
+            break;
         case O_START_AFTER:
             if (parse_seconds(optarg, "--start-after", &o->start_after_s) < 0)
                 return -EINVAL;
             break;
-        case O_QUIET: o->is_quiet = true; break;
-        case 'h': fputs(USAGE, stdout); exit(0);
-        default: fputs(USAGE, stderr); return -EINVAL;
+        case O_QUIET:
+            o->is_quiet = true;
+            break;
+        case 'h':
+            fputs(USAGE, stdout);
+            exit(0);
+        default:
+            fputs(USAGE, stderr);
+            return -EINVAL;
         }
     }
     if (optind < argc) {
@@ -186,8 +204,9 @@ static void report_rt(void)
     if (g.opt.is_rt_required)
         fprintf(stderr, "pushstep: real-time setup not permitted: %s\n", what);
     else
-        fprintf(stderr, "pushstep: warning: real-time setup incomplete: %s; running on without "
-                        "(--require-rt makes this fatal)\n",
+        fprintf(stderr,
+                "pushstep: warning: real-time setup incomplete: %s; running on without "
+                "(--require-rt makes this fatal)\n",
                 what);
 }
 
@@ -268,8 +287,8 @@ static int run_loop(ps_summary_t *sum)
     g.end_ns = duration_s > 0 ? g.start_ns + ps_s_to_ns(duration_s) : 0;
     if (g.opt.start_after_s >= 0)
         ps_app_request_start_at(&g.app, g.start_ns + ps_s_to_ns(g.opt.start_after_s));
-    int rc = ps_logger_start(&g.logger, &g.app.loop, &g.app.ring, stdout, g.start_ns, g.opt.is_quiet,
-                             g.app.board.rt.worker_cpu);
+    int rc = ps_logger_start(&g.logger, &g.app.loop, &g.app.ring, stdout, g.start_ns,
+                             g.opt.is_quiet, g.app.board.rt.worker_cpu);
     if (rc < 0)
         return rc;
     rc = ps_sim_start(g.app.sim, g.start_ns);
@@ -277,9 +296,14 @@ static int run_loop(ps_summary_t *sum)
         ps_logger_stop(&g.logger);
         return rc;
     }
-    printf("running %s on board %s (%s), robot %s, %s%.1f s\n",
+    char length[48];
+    if (duration_s > 0)
+        snprintf(length, sizeof(length), "%.1f s", duration_s);
+    else
+        snprintf(length, sizeof(length), "until Ctrl-C");
+    printf("running %s on board %s (%s), robot %s, %s\n",
            g.opt.is_lockstep ? "lockstep" : "in real time", g.app.board.name, g.app.board_path,
-           g.app.robot.name, duration_s > 0 ? "" : "until Ctrl-C, ", duration_s);
+           g.app.robot.name, length);
     fflush(stdout);
     pthread_t th;
     int64_t wall0 = wall_ns();

@@ -52,8 +52,7 @@ static int load_configs(ps_app_t *app, const ps_app_opts_t *o, char *err, size_t
     if (rc < 0)
         return rc;
     if (o->is_lockstep && app->board.kind != PS_BOARD_SIM) {
-        snprintf(err, len, "--lockstep needs a simulated board; %s is kind linux",
-                 app->board_path);
+        snprintf(err, len, "--lockstep needs a simulated board; %s is kind linux", app->board_path);
         return -PS_ERR_CONFIG;
     }
     resolve_model_path(app);

@@ -41,7 +41,7 @@ typedef struct {
     ps_robot_cfg_t robot;
     ps_scenario_cfg_t scenario;
     ps_canbus_plan_t plan;
-    ps_sim_t *sim;                /**< NULL on real boards */
+    ps_sim_t *sim; /**< NULL on real boards */
     ps_stand_t stand;
     ps_ring_t ring;
     ps_loop_rec_t ring_storage[PS_APP_RING_SLOTS];

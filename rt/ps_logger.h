@@ -24,7 +24,7 @@
 #define PS_LOGGER_MAX_TRANSITIONS 256u
 
 typedef struct {
-    double t_s;      /**< loop time since start */
+    double t_s; /**< loop time since start */
     uint8_t from, to;
     uint32_t cond;
 } ps_logger_transition_t;
@@ -33,8 +33,8 @@ typedef struct {
     const ps_loop_t *loop;
     ps_ring_t *ring;
     FILE *out;
-    int64_t start_ns;          /**< loop time origin */
-    bool is_quiet;             /**< no status lines (transitions still printed) */
+    int64_t start_ns; /**< loop time origin */
+    bool is_quiet;    /**< no status lines (transitions still printed) */
     int cpu;
     pthread_t thread;
     bool has_thread;
@@ -44,7 +44,7 @@ typedef struct {
     uint64_t last_policy_runs;
     ps_perf_hist_t prev_tick;
     ps_perf_hist_t delta;
-    uint32_t n_transitions;    /**< may exceed the array; extra ones are counted only */
+    uint32_t n_transitions; /**< may exceed the array; extra ones are counted only */
     ps_logger_transition_t transitions[PS_LOGGER_MAX_TRANSITIONS];
 } ps_logger_t;
 

@@ -46,10 +46,10 @@ typedef enum {
     PS_STAGE_WAKE = 0, /**< wake-up latency: actual wake minus deadline */
     PS_STAGE_READ,
     PS_STAGE_ESTIMATE,
-    PS_STAGE_POLICY,   /**< recorded on policy ticks only */
-    PS_STAGE_SERVO,    /**< includes the state machine */
+    PS_STAGE_POLICY, /**< recorded on policy ticks only */
+    PS_STAGE_SERVO,  /**< includes the state machine */
     PS_STAGE_WRITE,
-    PS_STAGE_TICK,     /**< read start to write end */
+    PS_STAGE_TICK, /**< read start to write end */
     PS_STAGE_COUNT
 } ps_stage_t;
 
@@ -64,16 +64,16 @@ typedef struct {
     const ps_board_cfg_t *board;
     const ps_robot_cfg_t *robot;
     const ps_canbus_plan_t *plan;
-    const ps_clock_t *clock;      /**< paces the loop (simulated time in lockstep) */
-    const ps_clock_t *perf_clock; /**< stage timestamps and the policy deadline; NULL: clock.
-                                       In lockstep this is the real clock, so the figures
-                                       are the loop's own compute time */
+    const ps_clock_t *clock;           /**< paces the loop (simulated time in lockstep) */
+    const ps_clock_t *perf_clock;      /**< stage timestamps and the policy deadline; NULL: clock.
+                                            In lockstep this is the real clock, so the figures
+                                            are the loop's own compute time */
     ps_can_port_t buses[PS_MAX_BUSES]; /**< one per board bus */
     ps_gpio_port_t gpio;
     ps_policy_t policy;
-    ps_operator_t op;          /**< .take may be NULL: no operator */
-    ps_ring_t *ring;           /**< records to the non-RT side; may be NULL */
-    uint32_t status_every;     /**< ticks between status records (0: never) */
+    ps_operator_t op;      /**< .take may be NULL: no operator */
+    ps_ring_t *ring;       /**< records to the non-RT side; may be NULL */
+    uint32_t status_every; /**< ticks between status records (0: never) */
 } ps_loop_cfg_t;
 
 typedef enum {
@@ -84,18 +84,18 @@ typedef enum {
 
 /** Fixed-size record sent to the non-RT side. */
 typedef struct {
-    uint8_t kind;         /**< ps_rec_kind_t */
-    uint8_t state;        /**< ps_sm_state_t after this tick */
-    uint8_t from_state;   /**< TRANSITION: state before */
+    uint8_t kind;       /**< ps_rec_kind_t */
+    uint8_t state;      /**< ps_sm_state_t after this tick */
+    uint8_t from_state; /**< TRANSITION: state before */
     uint8_t pad;
-    uint32_t cond;        /**< TRANSITION: conditions that caused it; REFUSED: the request */
+    uint32_t cond; /**< TRANSITION: conditions that caused it; REFUSED: the request */
     uint64_t tick;
-    int64_t t_ns;         /**< loop time of the tick's deadline */
+    int64_t t_ns; /**< loop time of the tick's deadline */
     uint64_t n_overruns;
     uint64_t n_policy_runs;
     float com_height_m;
     float tilt_rad;
-    const char *reason;   /**< REFUSED: static string */
+    const char *reason; /**< REFUSED: static string */
 } ps_loop_rec_t;
 
 /** Counters of the loop (read-only outside the loop thread; a torn read of one is accepted). */
@@ -104,18 +104,18 @@ typedef struct {
     uint64_t n_policy_runs;
     uint64_t n_policy_late;
     uint64_t n_rx_frames;
-    uint64_t n_rx_unknown;      /**< frames with an id nobody expects */
-    uint64_t n_rx_bad;          /**< malformed replies/IMU frames */
+    uint64_t n_rx_unknown; /**< frames with an id nobody expects */
+    uint64_t n_rx_bad;     /**< malformed replies/IMU frames */
     uint64_t n_tx_frames;
-    uint64_t n_tx_refused;      /**< frames a bus would not queue */
-    uint64_t n_bus_errors;      /**< -errno from a port */
+    uint64_t n_tx_refused; /**< frames a bus would not queue */
+    uint64_t n_bus_errors; /**< -errno from a port */
     uint64_t n_gpio_errors;
-    uint64_t n_target_invalid;  /**< targets refused by the servo layer */
-    uint64_t n_cmd_replaced;    /**< commands outside limits replaced by damping (must stay 0) */
+    uint64_t n_target_invalid; /**< targets refused by the servo layer */
+    uint64_t n_cmd_replaced;   /**< commands outside limits replaced by damping (must stay 0) */
     uint64_t n_transitions;
-    uint64_t n_refused;         /**< operator requests refused */
-    uint64_t n_ring_dropped;    /**< records the ring had no room for */
-    bool has_fallen;            /**< estimator reported a fall in RAMP or ACTIVE */
+    uint64_t n_refused;      /**< operator requests refused */
+    uint64_t n_ring_dropped; /**< records the ring had no room for */
+    bool has_fallen;         /**< estimator reported a fall in RAMP or ACTIVE */
 } ps_loop_counters_t;
 
 typedef struct {
@@ -125,7 +125,7 @@ typedef struct {
     uint32_t policy_div;
     ps_sm_state_t state;
     int64_t state_since_ns;
-    uint32_t pending_requests;   /**< accepted requests waiting for ps_sm_next */
+    uint32_t pending_requests;     /**< accepted requests waiting for ps_sm_next */
     atomic_uint external_requests; /**< from ps_loop_request (any thread) */
     atomic_uint n_stop_requests;   /**< from ps_loop_request_stop (any thread) */
     uint32_t n_stops_handled;
@@ -143,7 +143,7 @@ typedef struct {
     ps_can_frame_t rx_buf[64];
     ps_can_frame_t tx_buf[PS_MAX_BUSES][PS_MAX_JOINTS + 2];
     uint32_t n_tx[PS_MAX_BUSES];
-    int64_t t_deadline_ns;       /**< deadline of the current tick */
+    int64_t t_deadline_ns; /**< deadline of the current tick */
     ps_perf_hist_t perf[PS_STAGE_COUNT];
     ps_loop_counters_t counters;
 } ps_loop_t;

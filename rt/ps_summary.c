@@ -55,8 +55,9 @@ static cJSON *buses_json(const ps_summary_t *s)
         cJSON_AddNumberToObject(o, "tx_frames", (double)s->bus_states[b].n_tx_frames);
         cJSON_AddNumberToObject(o, "rx_frames", (double)s->bus_states[b].n_rx_frames);
         cJSON_AddNumberToObject(o, "late_frames", (double)s->bus_states[b].n_late);
-        cJSON_AddNumberToObject(o, "dropped_frames", (double)(s->bus_states[b].n_tx_dropped +
-                                                              s->bus_states[b].n_rx_dropped));
+        cJSON_AddNumberToObject(
+            o, "dropped_frames",
+            (double)(s->bus_states[b].n_tx_dropped + s->bus_states[b].n_rx_dropped));
         cJSON_AddItemToArray(a, o);
     }
     return a;
@@ -146,7 +147,8 @@ int ps_summary_write_json(const ps_summary_t *s, const char *path, char *err, si
 
 static void print_stage(FILE *out, const char *name, const ps_perf_hist_t *h)
 {
-    fprintf(out, "  %-9s n=%-8llu min=%7.1f avg=%7.1f p50=%7.1f p99=%7.1f p99.9=%7.1f max=%7.1f us\n",
+    fprintf(out,
+            "  %-9s n=%-8llu min=%7.1f avg=%7.1f p50=%7.1f p99=%7.1f p99.9=%7.1f max=%7.1f us\n",
             name, (unsigned long long)h->n, h->n ? (double)h->min_ns * 1e-3 : 0.0,
             ps_perf_mean_ns(h) * 1e-3, (double)ps_perf_quantile_ns(h, 0.5) * 1e-3,
             (double)ps_perf_quantile_ns(h, 0.99) * 1e-3,
@@ -157,8 +159,9 @@ void ps_summary_print(const ps_summary_t *s, FILE *out)
 {
     const ps_loop_t *loop = s->loop;
     fprintf(out, "\n== summary (%s) ==\n", s->is_lockstep ? "lockstep" : "real time");
-    fprintf(out, "  loop time %.2f s in %.2f s wall (%.1fx), %llu ticks, %llu overruns "
-                 "(%llu deadlines missed), final state %s\n",
+    fprintf(out,
+            "  loop time %.2f s in %.2f s wall (%.1fx), %llu ticks, %llu overruns "
+            "(%llu deadlines missed), final state %s\n",
             s->loop_s, s->wall_s, s->wall_s > 0 ? s->loop_s / s->wall_s : 0.0,
             (unsigned long long)loop->counters.n_ticks, (unsigned long long)loop->pacer.n_overruns,
             (unsigned long long)loop->pacer.n_missed, ps_sm_state_name(loop->state));
@@ -173,8 +176,9 @@ void ps_summary_print(const ps_summary_t *s, FILE *out)
     fprintf(out, " after init on the loop thread: %llu mallocs%s, %llu frees, %llu page faults\n",
             (unsigned long long)s->guard.n_allocs, s->is_guard_exact ? "" : " (not counted)",
             (unsigned long long)s->guard.n_frees, (unsigned long long)s->guard.n_faults);
-    fprintf(out, " policy runs %llu (late %llu), transitions %llu, requests refused %llu, "
-                 "commands replaced %llu, rx bad %llu, unknown %llu\n",
+    fprintf(out,
+            " policy runs %llu (late %llu), transitions %llu, requests refused %llu, "
+            "commands replaced %llu, rx bad %llu, unknown %llu\n",
             (unsigned long long)loop->counters.n_policy_runs,
             (unsigned long long)loop->counters.n_policy_late,
             (unsigned long long)loop->counters.n_transitions,
@@ -184,8 +188,9 @@ void ps_summary_print(const ps_summary_t *s, FILE *out)
             (unsigned long long)loop->counters.n_rx_unknown);
     fprintf(out, " fall detected: %s\n", loop->counters.has_fallen ? "yes" : "no");
     if (s->has_truth)
-        fprintf(out, " sim truth: fell while active %s, min CoM height while active %.3f m, "
-                     "commands out of limits %llu, plant overruns %llu\n",
+        fprintf(out,
+                " sim truth: fell while active %s, min CoM height while active %.3f m, "
+                "commands out of limits %llu, plant overruns %llu\n",
                 s->truth_fell_while_active ? "yes" : "no", s->truth_min_com_height_active_m,
                 (unsigned long long)s->truth_cmd_out_of_limits,
                 (unsigned long long)s->truth_plant_overruns);

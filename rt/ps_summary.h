@@ -19,17 +19,17 @@
 typedef struct {
     const char *board_path, *robot_path, *scenario_path;
     bool is_lockstep;
-    double loop_s;            /**< loop time covered */
-    double wall_s;            /**< wall time the loop ran */
+    double loop_s; /**< loop time covered */
+    double wall_s; /**< wall time the loop ran */
     const ps_loop_t *loop;
     const ps_logger_t *logger;
-    ps_guard_counts_t guard;  /**< counted on the loop thread after init */
-    bool is_guard_exact;      /**< false under sanitizers (allocations not interposed) */
-    unsigned rt_missing;      /**< ps_rt_missing_t bits */
+    ps_guard_counts_t guard; /**< counted on the loop thread after init */
+    bool is_guard_exact;     /**< false under sanitizers (allocations not interposed) */
+    unsigned rt_missing;     /**< ps_rt_missing_t bits */
     const ps_canbus_plan_t *plan;
     const ps_board_cfg_t *board;
     ps_can_state_t bus_states[PS_MAX_BUSES];
-    bool has_truth;           /**< simulation ground truth below is valid */
+    bool has_truth; /**< simulation ground truth below is valid */
     bool truth_fell_while_active;
     double truth_min_com_height_active_m;
     uint64_t truth_cmd_out_of_limits;

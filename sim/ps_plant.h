@@ -33,10 +33,10 @@ typedef struct ps_plant ps_plant_t;
 
 typedef struct {
     double t_s;
-    double com_m[3];        /**< whole-body centre of mass, world */
-    double head_height_m;   /**< world z of the head body */
+    double com_m[3];      /**< whole-body centre of mass, world */
+    double head_height_m; /**< world z of the head body */
     double pelvis_m[3];
-    bool is_fallen;         /**< a body other than the feet touches the floor */
+    bool is_fallen; /**< a body other than the feet touches the floor */
 } ps_plant_truth_t;
 
 /** Load the model and place the robot in its stance (robot->joints[].stance_rad)

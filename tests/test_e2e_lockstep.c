@@ -57,17 +57,17 @@ static void check_command(checking_port_t *c, const ps_can_frame_t *f)
         }
         ps_mit_cmd_t cmd;
         const ps_mit_range_t *w = &jc->wire;
-        bool ok = ps_mit_decode_cmd(w, f->data, f->len, &cmd) == 0 &&
-                  is_within(cmd.p_rad, jc->pos_min_rad, jc->pos_max_rad, w->p_min_rad,
-                            w->p_max_rad, PS_MIT_P_BITS) &&
-                  is_within(cmd.v_rad_s, -jc->vel_max_rad_s, jc->vel_max_rad_s, w->v_min_rad_s,
-                            w->v_max_rad_s, PS_MIT_V_BITS) &&
-                  is_within(cmd.kp_nm_rad, 0, jc->kp_max_nm_rad, 0, w->kp_max_nm_rad,
-                            PS_MIT_KP_BITS) &&
-                  is_within(cmd.kd_nm_s_rad, 0, jc->kd_max_nm_s_rad, 0, w->kd_max_nm_s_rad,
-                            PS_MIT_KD_BITS) &&
-                  is_within(cmd.t_ff_nm, -jc->torque_max_nm, jc->torque_max_nm, w->t_min_nm,
-                            w->t_max_nm, PS_MIT_T_BITS);
+        bool ok =
+            ps_mit_decode_cmd(w, f->data, f->len, &cmd) == 0 &&
+            is_within(cmd.p_rad, jc->pos_min_rad, jc->pos_max_rad, w->p_min_rad, w->p_max_rad,
+                      PS_MIT_P_BITS) &&
+            is_within(cmd.v_rad_s, -jc->vel_max_rad_s, jc->vel_max_rad_s, w->v_min_rad_s,
+                      w->v_max_rad_s, PS_MIT_V_BITS) &&
+            is_within(cmd.kp_nm_rad, 0, jc->kp_max_nm_rad, 0, w->kp_max_nm_rad, PS_MIT_KP_BITS) &&
+            is_within(cmd.kd_nm_s_rad, 0, jc->kd_max_nm_s_rad, 0, w->kd_max_nm_s_rad,
+                      PS_MIT_KD_BITS) &&
+            is_within(cmd.t_ff_nm, -jc->torque_max_nm, jc->torque_max_nm, w->t_min_nm, w->t_max_nm,
+                      PS_MIT_T_BITS);
         c->n_commands++;
         if (!ok && c->n_violations++ == 0)
             snprintf(c->first_violation, sizeof(c->first_violation),
@@ -105,8 +105,8 @@ static const ps_can_ops_t CHECKING_OPS = {
 static void install_checkers(ps_app_t *app)
 {
     for (uint32_t b = 0; b < app->board.n_buses; b++) {
-        checkers[b] = (checking_port_t){
-            .inner = app->loop.cfg.buses[b], .robot = &app->robot, .bus_idx = b};
+        checkers[b] =
+            (checking_port_t){.inner = app->loop.cfg.buses[b], .robot = &app->robot, .bus_idx = b};
         app->loop.cfg.buses[b] =
             (ps_can_port_t){.ops = &CHECKING_OPS, .ctx = &checkers[b], .name = "check"};
     }

@@ -45,8 +45,8 @@ typedef struct {
     uint8_t fault[PS_MAX_JOINTS];
     bool is_imu_mute;
     uint8_t imu_seq;
-    float policy_value;          /* NAN: the policy returns a NaN target */
-    int64_t policy_extra_ns;     /* time the policy takes */
+    float policy_value;      /* NAN: the policy returns a NaN target */
+    int64_t policy_extra_ns; /* time the policy takes */
     ps_ring_t ring;
     ps_loop_rec_t ring_storage[256];
     ps_loop_t loop;
@@ -273,7 +273,7 @@ static void test_loop_step_long_tick_counts_overrun_keeps_grid(void **state)
     (void)state;
     steps(10);
     fx->policy_extra_ns = 3 * PERIOD_NS + PERIOD_NS / 2; /* next policy tick takes 3.5 periods */
-    steps(fx->loop.policy_div); /* reaches a policy tick */
+    steps(fx->loop.policy_div);                          /* reaches a policy tick */
     fx->policy_extra_ns = 0;
     steps(5);
     assert_int_equal(fx->loop.pacer.n_overruns, 1);
