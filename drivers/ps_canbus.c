@@ -1,7 +1,6 @@
 #include "ps_canbus.h"
 
 #include <math.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -54,19 +53,6 @@ typedef struct {
     uint32_t div;      /* due every div servo ticks */
     int32_t joint_idx; /* -1: the IMU */
 } source_t;
-
-static void set_err(char *err, size_t err_len, const char *fmt, ...)
-    __attribute__((format(printf, 3, 4)));
-
-static void set_err(char *err, size_t err_len, const char *fmt, ...)
-{
-    if (err == NULL || err_len == 0u)
-        return;
-    va_list ap;
-    va_start(ap, fmt);
-    (void)vsnprintf(err, err_len, fmt, ap); /* truncation is acceptable for a message */
-    va_end(ap);
-}
 
 static uint32_t gcd_u32(uint32_t a, uint32_t b)
 {
@@ -136,52 +122,53 @@ static uint32_t place_source(uint32_t *tick_bits, uint32_t hyper, const source_t
 static int check_inputs(const ps_board_cfg_t *b, const ps_robot_cfg_t *r, char *err, size_t err_len)
 {
     if (b->n_buses == 0u || b->n_buses > PS_MAX_BUSES) {
-        set_err(err, err_len, "board %s: n_buses %u outside [1, %u]", b->name, b->n_buses,
-                PS_MAX_BUSES);
+        ps_err_format(err, err_len, "board %s: n_buses %u outside [1, %u]", b->name, b->n_buses,
+                      PS_MAX_BUSES);
         return -PS_ERR_CONFIG;
     }
     if (r->n_joints > PS_MAX_JOINTS) {
-        set_err(err, err_len, "robot %s: n_joints %u outside [0, %u]", r->name, r->n_joints,
-                PS_MAX_JOINTS);
+        ps_err_format(err, err_len, "robot %s: n_joints %u outside [0, %u]", r->name, r->n_joints,
+                      PS_MAX_JOINTS);
         return -PS_ERR_CONFIG;
     }
     if (r->control.servo_hz == 0u) {
-        set_err(err, err_len, "robot %s: control.servo_hz is 0", r->name);
+        ps_err_format(err, err_len, "robot %s: control.servo_hz is 0", r->name);
         return -PS_ERR_CONFIG;
     }
     if (!isfinite(b->bus_budget) || !(b->bus_budget > 0.0f) || b->bus_budget > 1.0f) {
-        set_err(err, err_len, "board %s: bus_budget %g outside (0, 1]", b->name,
-                (double)b->bus_budget);
+        ps_err_format(err, err_len, "board %s: bus_budget %g outside (0, 1]", b->name,
+                      (double)b->bus_budget);
         return -PS_ERR_CONFIG;
     }
     for (uint32_t i = 0; i < b->n_buses; i++) {
         if (b->buses[i].bitrate / r->control.servo_hz == 0u) {
-            set_err(err, err_len, "bus %u (%s): bitrate %u gives no bits per tick at %u Hz", i,
-                    b->buses[i].ifname, b->buses[i].bitrate, r->control.servo_hz);
+            ps_err_format(err, err_len, "bus %u (%s): bitrate %u gives no bits per tick at %u Hz",
+                          i, b->buses[i].ifname, b->buses[i].bitrate, r->control.servo_hz);
             return -PS_ERR_CONFIG;
         }
     }
     for (uint32_t j = 0; j < r->n_joints; j++) {
         const ps_joint_cfg_t *jc = &r->joints[j];
         if (jc->bus_idx >= b->n_buses) {
-            set_err(err, err_len, "joint %u (%s): bus_idx %u but board %s has %u bus(es) (0..%u)",
-                    j, jc->name, jc->bus_idx, b->name, b->n_buses, b->n_buses - 1u);
+            ps_err_format(err, err_len,
+                          "joint %u (%s): bus_idx %u but board %s has %u bus(es) (0..%u)", j,
+                          jc->name, jc->bus_idx, b->name, b->n_buses, b->n_buses - 1u);
             return -PS_ERR_CONFIG;
         }
         if (jc->rate_div == 0u || jc->rate_div > PS_CANBUS_MAX_HYPERPERIOD) {
-            set_err(err, err_len, "joint %u (%s): rate_div %u outside [1, %u]", j, jc->name,
-                    jc->rate_div, PS_CANBUS_MAX_HYPERPERIOD);
+            ps_err_format(err, err_len, "joint %u (%s): rate_div %u outside [1, %u]", j, jc->name,
+                          jc->rate_div, PS_CANBUS_MAX_HYPERPERIOD);
             return -PS_ERR_CONFIG;
         }
     }
     if (r->imu.bus_idx >= b->n_buses) {
-        set_err(err, err_len, "imu: bus_idx %u but board %s has %u bus(es) (0..%u)", r->imu.bus_idx,
-                b->name, b->n_buses, b->n_buses - 1u);
+        ps_err_format(err, err_len, "imu: bus_idx %u but board %s has %u bus(es) (0..%u)",
+                      r->imu.bus_idx, b->name, b->n_buses, b->n_buses - 1u);
         return -PS_ERR_CONFIG;
     }
     if (r->imu.rate_div == 0u || r->imu.rate_div > PS_CANBUS_MAX_HYPERPERIOD) {
-        set_err(err, err_len, "imu: rate_div %u outside [1, %u]", r->imu.rate_div,
-                PS_CANBUS_MAX_HYPERPERIOD);
+        ps_err_format(err, err_len, "imu: rate_div %u outside [1, %u]", r->imu.rate_div,
+                      PS_CANBUS_MAX_HYPERPERIOD);
         return -PS_ERR_CONFIG;
     }
     return 0;
@@ -219,11 +206,11 @@ int ps_canbus_plan(const ps_board_cfg_t *b, const ps_robot_cfg_t *r, ps_canbus_p
         for (uint32_t k = 0; k < n; k++) {
             hyper = hyper / gcd_u32(hyper, src[k].div) * src[k].div;
             if (hyper > PS_CANBUS_MAX_HYPERPERIOD) {
-                set_err(err, err_len,
-                        "bus %u (%s): the rate_div values on it repeat only every %u+ ticks, "
-                        "more than %u; use divisors of %u",
-                        bus, b->buses[bus].ifname, hyper, PS_CANBUS_MAX_HYPERPERIOD,
-                        PS_CANBUS_MAX_HYPERPERIOD);
+                ps_err_format(err, err_len,
+                              "bus %u (%s): the rate_div values on it repeat only every %u+ ticks, "
+                              "more than %u; use divisors of %u",
+                              bus, b->buses[bus].ifname, hyper, PS_CANBUS_MAX_HYPERPERIOD,
+                              PS_CANBUS_MAX_HYPERPERIOD);
                 return -PS_ERR_CONFIG;
             }
         }
@@ -254,11 +241,12 @@ int ps_canbus_plan(const ps_board_cfg_t *b, const ps_robot_cfg_t *r, ps_canbus_p
 
     for (uint32_t bus = 0; bus < plan.n_buses; bus++) {
         if (plan.load_peak[bus] > (double)b->bus_budget) {
-            set_err(err, err_len,
-                    "bus %u (%s): worst-case tick load %.1f%% (%u of %u bits at %u Hz) exceeds "
-                    "budget %.3g%%; raise rate_div of its joints or move joints to another bus",
-                    bus, b->buses[bus].ifname, plan.load_peak[bus] * 100.0, plan.tick_bits_max[bus],
-                    plan.tick_capacity_bits[bus], hz, (double)b->bus_budget * 100.0);
+            ps_err_format(
+                err, err_len,
+                "bus %u (%s): worst-case tick load %.1f%% (%u of %u bits at %u Hz) exceeds "
+                "budget %.3g%%; raise rate_div of its joints or move joints to another bus",
+                bus, b->buses[bus].ifname, plan.load_peak[bus] * 100.0, plan.tick_bits_max[bus],
+                plan.tick_capacity_bits[bus], hz, (double)b->bus_budget * 100.0);
             return -PS_ERR_BUS_BUDGET;
         }
     }

@@ -1503,18 +1503,7 @@ int ps_config_load_scenario(const char *path, ps_scenario_cfg_t *out, char *err,
 /* cross-file checks and look-ups                                         */
 /* ====================================================================== */
 
-static int pair_fail(char *err, size_t err_len, const char *fmt, ...)
-    __attribute__((format(printf, 3, 4)));
-static int pair_fail(char *err, size_t err_len, const char *fmt, ...)
-{
-    if (err != NULL && err_len > 0) {
-        va_list ap;
-        va_start(ap, fmt);
-        (void)vsnprintf(err, err_len, fmt, ap);
-        va_end(ap);
-    }
-    return -PS_ERR_CONFIG;
-}
+#define PAIR_FAIL(...) (ps_err_format(__VA_ARGS__), -PS_ERR_CONFIG)
 
 int ps_config_check_pair(const ps_board_cfg_t *b, const ps_robot_cfg_t *r,
                          const ps_scenario_cfg_t *s, char *err, size_t err_len)
@@ -1525,19 +1514,19 @@ int ps_config_check_pair(const ps_board_cfg_t *b, const ps_robot_cfg_t *r,
         err[0] = '\0';
     for (uint32_t i = 0; i < r->n_joints; i++) {
         if (r->joints[i].bus_idx >= b->n_buses)
-            return pair_fail(err, err_len,
+            return PAIR_FAIL(err, err_len,
                              "robot %s: joints[%u].bus: bus %u not on board %s (buses 0..%u)",
                              r->name, i, r->joints[i].bus_idx, b->name, b->n_buses - 1u);
     }
     if (r->imu.bus_idx >= b->n_buses)
-        return pair_fail(err, err_len, "robot %s: imu.bus: bus %u not on board %s (buses 0..%u)",
+        return PAIR_FAIL(err, err_len, "robot %s: imu.bus: bus %u not on board %s (buses 0..%u)",
                          r->name, r->imu.bus_idx, b->name, b->n_buses - 1u);
     if (s == NULL)
         return 0;
     for (uint32_t i = 0; i < s->n_events; i++) {
         const ps_event_cfg_t *e = &s->events[i];
         if (e->kind == PS_EVENT_DROP_REPLIES && ps_config_find_joint(r, e->joint) < 0)
-            return pair_fail(err, err_len,
+            return PAIR_FAIL(err, err_len,
                              "scenario %s: events[%u].joint: no joint \"%s\" in robot %s", s->name,
                              i, e->joint, r->name);
     }

@@ -1,5 +1,7 @@
 #include "ps_err.h"
 
+#include <stdarg.h>
+#include <stdio.h>
 #include <string.h>
 
 static const char *const PROJECT_MESSAGES[PS_ERR_END - PS_ERR_BASE] = {
@@ -23,4 +25,14 @@ const char *ps_strerror(int code)
     /* strerror() is not guaranteed thread-safe, but glibc returns static
      * strings for known codes; the RT loop never calls this. */
     return strerror(code);
+}
+
+void ps_err_format(char *err, size_t err_len, const char *fmt, ...)
+{
+    if (err == NULL || err_len == 0)
+        return;
+    va_list ap;
+    va_start(ap, fmt);
+    (void)vsnprintf(err, err_len, fmt, ap); /* truncation is acceptable for a message */
+    va_end(ap);
 }

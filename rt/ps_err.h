@@ -10,6 +10,7 @@
 #define PS_ERR_H
 
 #include <errno.h>
+#include <stddef.h>
 
 enum {
     PS_ERR_BASE = 4096,
@@ -28,5 +29,11 @@ enum {
 /** @pre none  @post none  @return static string naming code (positive or negative)
  *  @rt RT-SAFE O(1), any thread */
 const char *ps_strerror(int code);
+
+/** Write a one-line error message into a caller's buffer (truncated to
+ *  fit); does nothing when err is NULL or err_len is 0.
+ *  @rt INIT / NON-RT (vsnprintf), any thread */
+void ps_err_format(char *err, size_t err_len, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
 
 #endif /* PS_ERR_H */

@@ -1,7 +1,6 @@
 #include "ps_plant.h"
 
 #include <math.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -43,19 +42,6 @@ struct ps_plant {
     unsigned char *is_foot; /**< nbody, 1 for bodies named *foot */
     int n_bad_warnings;     /**< MuJoCo's bad-qpos/qvel/qacc count at last check */
 };
-
-static void put_err(char *err, size_t err_len, const char *fmt, ...)
-    __attribute__((format(printf, 3, 4)));
-
-static void put_err(char *err, size_t err_len, const char *fmt, ...)
-{
-    if (err == NULL || err_len == 0)
-        return;
-    va_list ap;
-    va_start(ap, fmt);
-    (void)vsnprintf(err, err_len, fmt, ap); /* truncation is acceptable */
-    va_end(ap);
-}
 
 /* MuJoCo's parser messages span lines; logs want one line. */
 static void one_line(char *s)
@@ -123,7 +109,8 @@ static int map_joints(ps_plant_t *p, const ps_robot_cfg_t *robot, char *err, siz
 {
     const mjModel *m = p->m;
     if (robot->n_joints > PS_MAX_JOINTS) {
-        put_err(err, err_len, "robot has %u joints, at most %u", robot->n_joints, PS_MAX_JOINTS);
+        ps_err_format(err, err_len, "robot has %u joints, at most %u", robot->n_joints,
+                      PS_MAX_JOINTS);
         return -PS_ERR_CONFIG;
     }
     p->n_joints = (int)robot->n_joints;
@@ -131,20 +118,20 @@ static int map_joints(ps_plant_t *p, const ps_robot_cfg_t *robot, char *err, siz
         const char *name = robot->joints[i].name;
         const int j = mj_name2id(m, mjOBJ_JOINT, name);
         if (j < 0) {
-            put_err(err, err_len, "joint '%s' not found in the model", name);
+            ps_err_format(err, err_len, "joint '%s' not found in the model", name);
             return -PS_ERR_CONFIG;
         }
         if (m->jnt_type[j] != mjJNT_HINGE) {
-            put_err(err, err_len, "joint '%s' is not a hinge", name);
+            ps_err_format(err, err_len, "joint '%s' is not a hinge", name);
             return -PS_ERR_CONFIG;
         }
         const int a = mj_name2id(m, mjOBJ_ACTUATOR, name);
         if (a < 0) {
-            put_err(err, err_len, "actuator '%s' not found in the model", name);
+            ps_err_format(err, err_len, "actuator '%s' not found in the model", name);
             return -PS_ERR_CONFIG;
         }
         if (m->actuator_trntype[a] != mjTRN_JOINT || m->actuator_trnid[2 * a] != j) {
-            put_err(err, err_len, "actuator '%s' does not drive joint '%s'", name, name);
+            ps_err_format(err, err_len, "actuator '%s' does not drive joint '%s'", name, name);
             return -PS_ERR_CONFIG;
         }
         p->qpos_adr[i] = m->jnt_qposadr[j];
@@ -167,12 +154,12 @@ static int map_bodies(ps_plant_t *p, char *err, size_t err_len)
         }
     }
     if (p->root_body < 0) {
-        put_err(err, err_len, "model has no free joint (floating base)");
+        ps_err_format(err, err_len, "model has no free joint (floating base)");
         return -PS_ERR_CONFIG;
     }
     p->head_body = mj_name2id(m, mjOBJ_BODY, HEAD_BODY_NAME);
     if (p->head_body < 0) {
-        put_err(err, err_len, "body '%s' not found in the model", HEAD_BODY_NAME);
+        ps_err_format(err, err_len, "body '%s' not found in the model", HEAD_BODY_NAME);
         return -PS_ERR_CONFIG;
     }
     int n_feet = 0;
@@ -182,7 +169,7 @@ static int map_bodies(ps_plant_t *p, char *err, size_t err_len)
         n_feet += p->is_foot[b];
     }
     if (n_feet == 0) {
-        put_err(err, err_len, "no body named '*%s' in the model", FOOT_NAME_SUFFIX);
+        ps_err_format(err, err_len, "no body named '*%s' in the model", FOOT_NAME_SUFFIX);
         return -PS_ERR_CONFIG;
     }
     const int gyro = mj_name2id(m, mjOBJ_SENSOR, IMU_GYRO_NAME);
@@ -190,8 +177,8 @@ static int map_bodies(ps_plant_t *p, char *err, size_t err_len)
     if (gyro < 0 || m->sensor_type[gyro] != mjSENS_GYRO || accel < 0 ||
         m->sensor_type[accel] != mjSENS_ACCELEROMETER ||
         mj_name2id(m, mjOBJ_SITE, IMU_SITE_NAME) < 0) {
-        put_err(err, err_len, "model needs site '%s' with gyro '%s' and accelerometer '%s'",
-                IMU_SITE_NAME, IMU_GYRO_NAME, IMU_ACCEL_NAME);
+        ps_err_format(err, err_len, "model needs site '%s' with gyro '%s' and accelerometer '%s'",
+                      IMU_SITE_NAME, IMU_GYRO_NAME, IMU_ACCEL_NAME);
         return -PS_ERR_CONFIG;
     }
     p->gyro_adr = m->sensor_adr[gyro];
@@ -225,7 +212,7 @@ int ps_plant_create(const char *model_path, const ps_robot_cfg_t *robot, ps_plan
                     char *err, size_t err_len)
 {
     if (model_path == NULL || robot == NULL || out == NULL) {
-        put_err(err, err_len, "ps_plant_create: NULL argument");
+        ps_err_format(err, err_len, "ps_plant_create: NULL argument");
         return -EINVAL;
     }
     if (mju_user_warning == NULL)
@@ -240,7 +227,7 @@ int ps_plant_create(const char *model_path, const ps_robot_cfg_t *robot, ps_plan
     p->m = mj_loadXML(model_path, NULL, mj_err, (int)sizeof(mj_err));
     if (p->m == NULL) {
         one_line(mj_err);
-        put_err(err, err_len, "%s: %s", model_path, mj_err[0] ? mj_err : "load failed");
+        ps_err_format(err, err_len, "%s: %s", model_path, mj_err[0] ? mj_err : "load failed");
         rc = -PS_ERR_PLANT;
         goto fail;
     }
@@ -248,7 +235,7 @@ int ps_plant_create(const char *model_path, const ps_robot_cfg_t *robot, ps_plan
     p->ext_force_n = calloc((size_t)p->m->nbody * 3u, sizeof(double));
     p->is_foot = calloc((size_t)p->m->nbody, 1u);
     if (p->d == NULL || p->ext_force_n == NULL || p->is_foot == NULL) {
-        put_err(err, err_len, "%s: out of memory", model_path);
+        ps_err_format(err, err_len, "%s: out of memory", model_path);
         rc = -ENOMEM;
         goto fail;
     }

@@ -1,7 +1,6 @@
 #include "ps_sim.h"
 
 #include <pthread.h>
-#include <stdarg.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -75,19 +74,6 @@ struct ps_sim {
     bool has_mutex;
     ps_sim_truth_t truth;
 };
-
-static void put_err(char *err, size_t err_len, const char *fmt, ...)
-    __attribute__((format(printf, 3, 4)));
-
-static void put_err(char *err, size_t err_len, const char *fmt, ...)
-{
-    if (err == NULL || err_len == 0)
-        return;
-    va_list ap;
-    va_start(ap, fmt);
-    (void)vsnprintf(err, err_len, fmt, ap); /* truncation is acceptable */
-    va_end(ap);
-}
 
 /* ---- one physics step ------------------------------------------------ */
 
@@ -337,15 +323,16 @@ static int setup_scenario(ps_sim_t *s, char *err, size_t err_len)
 {
     const ps_scenario_cfg_t *sc = &s->scenario;
     if (sc->n_pushes > PS_MAX_PUSHES || sc->n_events > PS_MAX_EVENTS) {
-        put_err(err, err_len, "scenario %s: too many pushes or events", sc->name);
+        ps_err_format(err, err_len, "scenario %s: too many pushes or events", sc->name);
         return -PS_ERR_CONFIG;
     }
     for (uint32_t p = 0; p < sc->n_pushes; p++) {
         const ps_push_cfg_t *pc = &sc->pushes[p];
         const int body = ps_plant_find_body(s->plant, pc->body);
         if (body < 0) {
-            put_err(err, err_len, "scenario %s: pushes[%u].body: '%.*s' is not a body of the model",
-                    sc->name, p, (int)PS_NAME_LEN, pc->body);
+            ps_err_format(err, err_len,
+                          "scenario %s: pushes[%u].body: '%.*s' is not a body of the model",
+                          sc->name, p, (int)PS_NAME_LEN, pc->body);
             return -PS_ERR_CONFIG;
         }
         int slot = -1;
@@ -368,8 +355,9 @@ static int setup_scenario(ps_sim_t *s, char *err, size_t err_len)
         if (ev->kind == PS_EVENT_DROP_REPLIES) {
             const int j = find_joint(&s->robot, ev->joint);
             if (j < 0) {
-                put_err(err, err_len, "scenario %s: events[%u].joint: '%.*s' is not a joint of %s",
-                        sc->name, e, (int)PS_NAME_LEN, ev->joint, s->robot.name);
+                ps_err_format(err, err_len,
+                              "scenario %s: events[%u].joint: '%.*s' is not a joint of %s",
+                              sc->name, e, (int)PS_NAME_LEN, ev->joint, s->robot.name);
                 return -PS_ERR_CONFIG;
             }
             s->event_joint_idx[e] = j;
@@ -382,12 +370,12 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
 {
     if (cfg == NULL || out_sim == NULL || cfg->board == NULL || cfg->robot == NULL ||
         cfg->model_path == NULL || cfg->period_ns <= 0) {
-        put_err(err, err_len, "sim: missing board, robot, model path or period");
+        ps_err_format(err, err_len, "sim: missing board, robot, model path or period");
         return -EINVAL;
     }
     ps_sim_t *s = calloc(1, sizeof *s);
     if (s == NULL) {
-        put_err(err, err_len, "sim: out of memory");
+        ps_err_format(err, err_len, "sim: out of memory");
         return -ENOMEM;
     }
     int rc;
@@ -403,28 +391,28 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
     s->clock = (ps_clock_t){.now_ns = sim_now_ns, .sleep_until_ns = sim_sleep_until_ns, .ctx = s};
 
     if (pthread_mutex_init(&s->truth_mu, NULL) != 0) {
-        put_err(err, err_len, "sim: mutex init failed");
+        ps_err_format(err, err_len, "sim: mutex init failed");
         free(s);
         return -ENOMEM;
     }
     s->has_mutex = true;
 
     if (s->robot.n_joints > PS_MAX_JOINTS || s->board.n_buses > PS_MAX_BUSES) {
-        put_err(err, err_len, "sim: too many joints or buses");
+        ps_err_format(err, err_len, "sim: too many joints or buses");
         rc = -PS_ERR_CONFIG;
         goto fail;
     }
     for (uint32_t j = 0; j < s->robot.n_joints; j++) {
         if (s->robot.joints[j].bus_idx >= s->board.n_buses) {
-            put_err(err, err_len, "sim: joint %s: bus %u not on board %s", s->robot.joints[j].name,
-                    s->robot.joints[j].bus_idx, s->board.name);
+            ps_err_format(err, err_len, "sim: joint %s: bus %u not on board %s",
+                          s->robot.joints[j].name, s->robot.joints[j].bus_idx, s->board.name);
             rc = -PS_ERR_CONFIG;
             goto fail;
         }
     }
     if (s->robot.imu.bus_idx >= s->board.n_buses) {
-        put_err(err, err_len, "sim: imu bus %u not on board %s", s->robot.imu.bus_idx,
-                s->board.name);
+        ps_err_format(err, err_len, "sim: imu bus %u not on board %s", s->robot.imu.bus_idx,
+                      s->board.name);
         rc = -PS_ERR_CONFIG;
         goto fail;
     }
@@ -435,8 +423,9 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
     s->dt_s = ps_plant_timestep_s(s->plant);
     s->dt_ns = ps_s_to_ns(s->dt_s);
     if (s->dt_ns <= 0 || s->period_ns % s->dt_ns != 0) {
-        put_err(err, err_len, "sim: model timestep %g s does not divide the servo period %lld ns",
-                s->dt_s, (long long)s->period_ns);
+        ps_err_format(err, err_len,
+                      "sim: model timestep %g s does not divide the servo period %lld ns", s->dt_s,
+                      (long long)s->period_ns);
         rc = -PS_ERR_CONFIG;
         goto fail;
     }
@@ -449,7 +438,8 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
         rc = ps_can_sim_create(&s->bus[b], s->board.buses[b].ifname, s->board.buses[b].bitrate,
                                bus_clock, s->period_ns, BUS_QUEUE_LEN);
         if (rc < 0) {
-            put_err(err, err_len, "sim: bus %s: %s", s->board.buses[b].ifname, ps_strerror(rc));
+            ps_err_format(err, err_len, "sim: bus %s: %s", s->board.buses[b].ifname,
+                          ps_strerror(rc));
             goto fail;
         }
         s->dev_port[b] = ps_can_sim_device_port(s->bus[b]);
