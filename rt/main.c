@@ -23,6 +23,7 @@
 #include "ps_err.h"
 #include "ps_guard.h"
 #include "ps_logger.h"
+#include "ps_profile.h"
 #include "ps_rtsetup.h"
 #include "ps_summary.h"
 
@@ -42,6 +43,11 @@ typedef struct {
     bool is_quiet;
     const char *summary_path;
     double start_after_s; /**< real boards: request START after this; < 0 never */
+    bool is_profile;      /**< `pushstep profile` */
+    const char *out_dir;  /**< profile output folder */
+    const char *stress;   /**< profile: stress-ng load, NULL none */
+    bool is_trace;        /**< trace_marker points */
+    unsigned hist_us;     /**< wake-up histogram buckets (cyclictest -h N) */
 } options_t;
 
 /* Everything the run owns; static because ps_app_t is large and must not
@@ -51,6 +57,8 @@ static struct {
     char data_dir[PATH_MAX];
     ps_app_t app;
     ps_logger_t logger;
+    ps_trace_t trace;
+    pid_t stress_pid;
     int64_t start_ns, end_ns;
     unsigned rt_missing;
     ps_guard_counts_t guard;
@@ -60,6 +68,7 @@ static struct {
 
 static const char USAGE[] =
     "usage: pushstep [options]\n"
+    "       pushstep profile [options] [profile options]\n"
     "Runs the balance controller's fixed-step loop against a board: real hardware\n"
     "or, for board `sim`, the MuJoCo plant with emulated CAN actuators, IMU and GPIO.\n"
     "\n"
@@ -81,7 +90,19 @@ static const char USAGE[] =
     "  --start-after S       real boards: request START S seconds after start\n"
     "                        (on board sim the scenario's events do this)\n"
     "  --quiet               no status lines (transitions and the summary still print)\n"
+    "  --trace               write trace points to ftrace's trace_marker (tick start,\n"
+    "                        end, overruns, state changes) for trace-cmd/KernelShark\n"
     "  -h, --help            this text\n"
+    "\n"
+    "pushstep profile runs the real loop (any board, sim included; default 30 s) and\n"
+    "reports min/avg/p50/p99/p99.9/max per stage (wake-up latency, read, estimate,\n"
+    "policy, servo, write, tick, tick on plain and on policy ticks) and overruns:\n"
+    "  --out DIR             output folder (default ./profile): profile.json,\n"
+    "                        wakeup.hist (cyclictest -h text format), PNG plots\n"
+    "                        when gnuplot is installed\n"
+    "  --stress cpu|mem|io   run stress-ng (Debian package stress-ng) beside the loop\n"
+    "  --hist-us N           wake-up histogram size in 1-us buckets (default 1000,\n"
+    "                        at most 10000), like cyclictest -h N\n"
     "\n"
     "Ctrl-C (or the end of --duration) brakes the robot through DAMPING to STANDBY\n"
     "before exiting; a second Ctrl-C while braking requests e-stop.\n"
@@ -105,7 +126,17 @@ static int parse_seconds(const char *text, const char *what, double *out)
 
 static int parse_options(int argc, char **argv, options_t *o)
 {
-    enum { O_LOCKSTEP = 256, O_SUMMARY, O_REQUIRE_RT, O_START_AFTER, O_QUIET };
+    enum {
+        O_LOCKSTEP = 256,
+        O_SUMMARY,
+        O_REQUIRE_RT,
+        O_START_AFTER,
+        O_QUIET,
+        O_OUT,
+        O_STRESS,
+        O_TRACE,
+        O_HIST_US
+    };
     static const struct option LONG[] = {
         {"board", required_argument, NULL, 'b'},
         {"robot", required_argument, NULL, 'r'},
@@ -116,10 +147,21 @@ static int parse_options(int argc, char **argv, options_t *o)
         {"require-rt", no_argument, NULL, O_REQUIRE_RT},
         {"start-after", required_argument, NULL, O_START_AFTER},
         {"quiet", no_argument, NULL, O_QUIET},
+        {"out", required_argument, NULL, O_OUT},
+        {"stress", required_argument, NULL, O_STRESS},
+        {"trace", no_argument, NULL, O_TRACE},
+        {"hist-us", required_argument, NULL, O_HIST_US},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
-    *o = (options_t){.board = "sim", .start_after_s = -1.0};
+    *o = (options_t){.board = "sim", .start_after_s = -1.0, .out_dir = "profile", .hist_us = 1000};
+    if (argc > 1 && strcmp(argv[1], "profile") == 0) {
+        o->is_profile = true;
+        argv[1] = argv[0]; /* getopt starts after the subcommand */
+        argc--;
+        argv++;
+    }
+    bool is_profile_option = false;
     int c;
     while ((c = getopt_long(argc, argv, "h", LONG, NULL)) != -1) {
         switch (c) {
@@ -153,6 +195,33 @@ static int parse_options(int argc, char **argv, options_t *o)
         case O_QUIET:
             o->is_quiet = true;
             break;
+        case O_OUT:
+            o->out_dir = optarg;
+            is_profile_option = true;
+            break;
+        case O_STRESS:
+            if (ps_profile_check_stress(optarg) < 0) {
+                fprintf(stderr, "pushstep: --stress: \"%s\" is not one of cpu, mem, io\n", optarg);
+                return -EINVAL;
+            }
+            o->stress = optarg;
+            is_profile_option = true;
+            break;
+        case O_TRACE:
+            o->is_trace = true;
+            break;
+        case O_HIST_US: {
+            char *end = NULL;
+            unsigned long n = strtoul(optarg, &end, 10);
+            if (end == optarg || *end != '\0' || n < 1 || n > PS_PERF_US_BUCKETS) {
+                fprintf(stderr, "pushstep: --hist-us: \"%s\" is not a number in [1, %u]\n", optarg,
+                        PS_PERF_US_BUCKETS);
+                return -EINVAL;
+            }
+            o->hist_us = (unsigned)n;
+            is_profile_option = true;
+            break;
+        }
         case 'h':
             fputs(USAGE, stdout);
             exit(0);
@@ -160,6 +229,18 @@ static int parse_options(int argc, char **argv, options_t *o)
             fputs(USAGE, stderr);
             return -EINVAL;
         }
+    }
+    if (is_profile_option && !o->is_profile) {
+        fprintf(stderr, "pushstep: --out, --stress and --hist-us belong to `pushstep profile`\n");
+        return -EINVAL;
+    }
+    if (o->is_profile && o->is_lockstep) {
+        fprintf(stderr, "pushstep: profile measures the real loop; --lockstep does not apply\n");
+        return -EINVAL;
+    }
+    if (o->is_profile && !o->has_duration) {
+        o->duration_s = 30.0;
+        o->has_duration = true;
     }
     if (optind < argc) {
         fprintf(stderr, "pushstep: unexpected argument \"%s\"\n%s", argv[optind], USAGE);
@@ -335,6 +416,12 @@ static void finish_summary(ps_summary_t *sum)
     sum->is_guard_exact = true;
 #endif
     sum->rt_missing = g.rt_missing;
+    sum->priority = g.app.board.rt.priority;
+    sum->loop_cpu = g.app.board.rt.loop_cpu;
+    sum->period_ns = g.app.loop.period_ns;
+    sum->is_profile = g.opt.is_profile;
+    sum->stress = g.opt.stress;
+    sum->hist_us = g.opt.hist_us;
     sum->plan = &g.app.plan;
     sum->board = &g.app.board;
     for (uint32_t b = 0; b < g.app.board.n_buses; b++)
@@ -371,8 +458,15 @@ int main(int argc, char **argv)
         .robot = g.opt.robot,
         .scenario = g.opt.scenario,
         .is_lockstep = g.opt.is_lockstep,
+        .wake_hist_us = g.opt.hist_us,
+        .trace = g.opt.is_trace ? &g.trace : NULL,
     };
     char err[PS_ERR_MSG_LEN];
+    ps_trace_init(&g.trace);
+    if (g.opt.is_trace && ps_trace_open(&g.trace, NULL, err, sizeof(err)) < 0) {
+        fprintf(stderr, "pushstep: --trace: cannot open trace_marker: %s\n", err);
+        return 2;
+    }
     int rc = ps_app_init(&g.app, &ao, err, sizeof(err));
     if (rc == 0 || rc == -PS_ERR_BUS_BUDGET)
         print_plan(&g.app);
@@ -384,10 +478,21 @@ int main(int argc, char **argv)
     rc = setup_process_rt();
     if (rc == 0)
         rc = install_signals();
+    if (rc == 0 && g.opt.stress != NULL) {
+        rc = ps_profile_start_stress(g.opt.stress, g.opt.duration_s, &g.stress_pid, err,
+                                     sizeof(err));
+        if (rc < 0) {
+            fprintf(stderr, "pushstep: %s\n", err);
+            ps_app_deinit(&g.app);
+            return 2;
+        }
+        printf("load: stress-ng --%s on every CPU\n", g.opt.stress);
+    }
     ps_summary_t sum;
     memset(&sum, 0, sizeof(sum));
     if (rc == 0)
         rc = run_loop(&sum);
+    ps_profile_stop_stress(g.stress_pid);
     if (rc == -PS_ERR_RT_UNAVAILABLE)
         fprintf(stderr, "pushstep: --require-rt: %s\n", ps_strerror(rc));
     else if (rc < 0)
@@ -400,7 +505,18 @@ int main(int argc, char **argv)
             fprintf(stderr, "pushstep: %s\n", err);
             rc = -EIO;
         }
+        if (g.opt.is_profile) {
+            if (ps_profile_write(g.opt.out_dir, &sum, &g.app.loop.wake_us, g.data_dir, err,
+                                 sizeof(err)) < 0) {
+                fprintf(stderr, "pushstep: profile: %s\n", err);
+                rc = -EIO;
+            } else {
+                printf("profile written to %s/ (profile.json, wakeup.hist%s)\n", g.opt.out_dir,
+                       access("/usr/bin/gnuplot", X_OK) == 0 ? ", plots" : "");
+            }
+        }
     }
+    ps_trace_close(&g.trace);
     ps_app_deinit(&g.app);
     return rc < 0 ? 1 : 0;
 }

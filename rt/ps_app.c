@@ -98,7 +98,7 @@ static int wire_sim(ps_app_t *app, ps_loop_cfg_t *lc, char *err, size_t len)
     return 0;
 }
 
-static int wire(ps_app_t *app, char *err, size_t len)
+static int wire(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t len)
 {
     ps_loop_cfg_t lc = {
         .board = &app->board,
@@ -106,6 +106,8 @@ static int wire(ps_app_t *app, char *err, size_t len)
         .plan = &app->plan,
         .ring = &app->ring,
         .status_every = PS_APP_STATUS_EVERY,
+        .wake_hist_us = opts->wake_hist_us,
+        .trace = opts->trace,
     };
     if (app->board.kind != PS_BOARD_SIM) {
         snprintf(err, len,
@@ -144,7 +146,7 @@ int ps_app_init(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t err_
     if (rc == 0)
         rc = ps_canbus_plan(&app->board, &app->robot, &app->plan, err, err_len);
     if (rc == 0)
-        rc = wire(app, err, err_len);
+        rc = wire(app, opts, err, err_len);
     if (rc < 0 && rc != -PS_ERR_BUS_BUDGET)
         ps_app_deinit(app);
     return rc;

@@ -10,7 +10,8 @@
 static const char *const STAGE_NAMES[PS_STAGE_COUNT] = {
     [PS_STAGE_WAKE] = "wake",     [PS_STAGE_READ] = "read",   [PS_STAGE_ESTIMATE] = "estimate",
     [PS_STAGE_POLICY] = "policy", [PS_STAGE_SERVO] = "servo", [PS_STAGE_WRITE] = "write",
-    [PS_STAGE_TICK] = "tick",
+    [PS_STAGE_TICK] = "tick",     [PS_STAGE_TICK_PLAIN] = "tick_plain",
+    [PS_STAGE_TICK_POLICY] = "tick_policy",
 };
 _Static_assert(sizeof(STAGE_NAMES) / sizeof(STAGE_NAMES[0]) == PS_STAGE_COUNT,
                "one name per stage");
@@ -64,6 +65,9 @@ int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg)
     ps_imu_msg_rx_init(&loop->imu_rx, cfg->robot->imu.base_id);
     for (int s = 0; s < PS_STAGE_COUNT; s++)
         ps_perf_reset(&loop->perf[s]);
+    rc = ps_perf_us_reset(&loop->wake_us, cfg->wake_hist_us ? cfg->wake_hist_us : 1000u);
+    if (rc < 0)
+        return rc;
     return ps_pacer_init(&loop->pacer, cfg->clock, loop->period_ns, 0);
 }
 
@@ -333,6 +337,7 @@ static void stage_state_machine(ps_loop_t *loop)
     rec.cond = cond;
     push_record(loop, &rec);
     loop->counters.n_transitions++;
+    ps_trace_mark(loop->cfg.trace, "state", "from", loop->state, "to", next);
     enter_state(loop, next);
 }
 
@@ -467,6 +472,10 @@ void ps_loop_tick(ps_loop_t *loop, int64_t deadline_ns)
     ps_perf_record(&loop->perf[PS_STAGE_SERVO], t4 - t3);
     ps_perf_record(&loop->perf[PS_STAGE_WRITE], t5 - t4);
     ps_perf_record(&loop->perf[PS_STAGE_TICK], t5 - t0);
+    bool is_policy_tick = tick % loop->policy_div == 0;
+    ps_perf_record(&loop->perf[is_policy_tick ? PS_STAGE_TICK_POLICY : PS_STAGE_TICK_PLAIN],
+                   t5 - t0);
+    ps_trace_mark(loop->cfg.trace, "end", "n", (int64_t)tick, "work_ns", t5 - t0);
     loop->counters.n_ticks++;
     if (loop->cfg.status_every != 0 && tick % loop->cfg.status_every == 0) {
         ps_loop_rec_t rec;
@@ -514,9 +523,14 @@ int ps_loop_step(ps_loop_t *loop)
     if (wake < 0)
         return (int)wake;
     ps_perf_record(&loop->perf[PS_STAGE_WAKE], wake);
+    ps_perf_us_record(&loop->wake_us, wake, loop->counters.n_ticks);
+    ps_trace_mark(loop->cfg.trace, "tick", "n", (int64_t)loop->counters.n_ticks, "wake_ns", wake);
     handle_stop_requests(loop);
     ps_loop_tick(loop, loop->pacer.next_ns - loop->period_ns); /* this tick's deadline */
-    (void)ps_pacer_end_tick(&loop->pacer); /* the pacer counts overruns itself */
+    uint64_t missed = ps_pacer_end_tick(&loop->pacer); /* the pacer counts overruns itself */
+    if (missed != 0)
+        ps_trace_mark(loop->cfg.trace, "overrun", "n", (int64_t)loop->counters.n_ticks - 1,
+                      "missed", (int64_t)missed);
     return 0;
 }
 

@@ -41,6 +41,8 @@
 #include "ps_perf.h"
 #include "ps_ring.h"
 #include "ps_sm.h"
+#include "ps_trace.h"
+#include "ps_trace.h"
 
 typedef enum {
     PS_STAGE_WAKE = 0, /**< wake-up latency: actual wake minus deadline */
@@ -50,6 +52,8 @@ typedef enum {
     PS_STAGE_SERVO,  /**< includes the state machine */
     PS_STAGE_WRITE,
     PS_STAGE_TICK, /**< read start to write end */
+    PS_STAGE_TICK_PLAIN,  /**< PS_STAGE_TICK of ticks without a policy run */
+    PS_STAGE_TICK_POLICY, /**< PS_STAGE_TICK of ticks with a policy run */
     PS_STAGE_COUNT
 } ps_stage_t;
 
@@ -74,6 +78,8 @@ typedef struct {
     ps_operator_t op;      /**< .take may be NULL: no operator */
     ps_ring_t *ring;       /**< records to the non-RT side; may be NULL */
     uint32_t status_every; /**< ticks between status records (0: never) */
+    uint32_t wake_hist_us; /**< 1-us wake-up histogram size (cyclictest -h N); 0: 1000 */
+    ps_trace_t *trace;     /**< trace_marker points; NULL: off */
 } ps_loop_cfg_t;
 
 typedef enum {
@@ -145,6 +151,7 @@ typedef struct {
     uint32_t n_tx[PS_MAX_BUSES];
     int64_t t_deadline_ns; /**< deadline of the current tick */
     ps_perf_hist_t perf[PS_STAGE_COUNT];
+    ps_perf_us_hist_t wake_us; /**< wake-up latency, cyclictest's 1-us layout */
     ps_loop_counters_t counters;
 } ps_loop_t;
 

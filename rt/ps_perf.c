@@ -3,6 +3,8 @@
  */
 #include "ps_perf.h"
 
+#include <errno.h>
+
 #include <string.h>
 
 /* First octave exponent: [2^5, 2^6) is octave index 1. */
@@ -118,4 +120,60 @@ double ps_perf_mean_ns(const ps_perf_hist_t *h)
     if (h->n == 0)
         return 0.0;
     return (double)h->sum_ns / (double)h->n;
+}
+
+/* ---- linear 1-us histogram ------------------------------------------------ */
+
+int ps_perf_us_reset(ps_perf_us_hist_t *h, unsigned n_buckets)
+{
+    if (n_buckets == 0 || n_buckets > PS_PERF_US_BUCKETS)
+        return -EINVAL;
+    memset(h, 0, sizeof(*h));
+    h->n_buckets = n_buckets;
+    return 0;
+}
+
+void ps_perf_us_record(ps_perf_us_hist_t *h, int64_t value_ns, uint64_t tick)
+{
+    if (value_ns < 0)
+        value_ns = 0;
+    if (h->n == 0 || value_ns < h->min_ns)
+        h->min_ns = value_ns;
+    if (value_ns > h->max_ns)
+        h->max_ns = value_ns;
+    h->sum_ns = (h->sum_ns > INT64_MAX - value_ns) ? INT64_MAX : h->sum_ns + value_ns;
+    h->n++;
+    uint64_t us = (uint64_t)value_ns / 1000u;
+    if (us < h->n_buckets) {
+        h->buckets[us]++;
+        return;
+    }
+    h->n_overflow++;
+    if (h->n_overflow_ticks < PS_PERF_US_MAX_OVERFLOW_TICKS)
+        h->overflow_ticks[h->n_overflow_ticks++] = tick;
+}
+
+int ps_perf_us_write_cyclictest(const ps_perf_us_hist_t *h, FILE *out)
+{
+    uint64_t total = 0;
+    fputs("# Histogram\n", out);
+    for (unsigned i = 0; i < h->n_buckets; i++) {
+        fprintf(out, "%06u %06u\n", i, (unsigned)h->buckets[i]);
+        total += h->buckets[i];
+    }
+    /* As cyclictest: Total counts the samples inside the histogram; the
+     * latencies are whole microseconds (truncated) over all samples. */
+    fprintf(out, "# Total: %09llu\n", (unsigned long long)total);
+    fprintf(out, "# Min Latencies: %05lld\n", (long long)(h->min_ns / 1000));
+    fprintf(out, "# Avg Latencies: %05lld\n",
+            (long long)(h->n ? h->sum_ns / (int64_t)h->n / 1000 : 0));
+    fprintf(out, "# Max Latencies: %05lld\n", (long long)(h->max_ns / 1000));
+    fprintf(out, "# Histogram Overflows: %05llu\n", (unsigned long long)h->n_overflow);
+    fputs("# Histogram Overflow at cycle number:\n# Thread 0:", out);
+    for (uint32_t i = 0; i < h->n_overflow_ticks; i++)
+        fprintf(out, " %05llu", (unsigned long long)h->overflow_ticks[i]);
+    if (h->n_overflow > h->n_overflow_ticks)
+        fprintf(out, " # %05llu others", (unsigned long long)(h->n_overflow - h->n_overflow_ticks));
+    fputs("\n", out);
+    return ferror(out) ? -EIO : 0;
 }

@@ -20,6 +20,7 @@
 #define PS_PERF_H
 
 #include <stdint.h>
+#include <stdio.h>
 
 #define PS_PERF_SUB_BITS    5u /* 32 sub-buckets per octave */
 #define PS_PERF_SUB_BUCKETS (1u << PS_PERF_SUB_BITS)
@@ -62,5 +63,38 @@ double ps_perf_mean_ns(const ps_perf_hist_t *h);
 unsigned ps_perf_bucket_of(int64_t value_ns);
 int64_t ps_perf_bucket_lo_ns(unsigned idx);
 int64_t ps_perf_bucket_hi_ns(unsigned idx);
+
+/* ---- linear 1-us histogram, cyclictest's layout -------------------------
+ * Wake-up latency is also kept the way cyclictest keeps it (`-h N`): one
+ * bucket per whole microsecond (ns / 1000, truncated), the samples beyond the
+ * last bucket counted as overflows with the tick index of the first
+ * PS_PERF_US_MAX_OVERFLOW_TICKS of them. ps_perf_us_write_cyclictest() prints
+ * it in cyclictest's text format, so its plotting scripts read ours. */
+
+#define PS_PERF_US_BUCKETS            10000u /**< 0 .. 9999 us */
+#define PS_PERF_US_MAX_OVERFLOW_TICKS 1000u
+
+typedef struct {
+    uint32_t n_buckets; /**< buckets in use (cyclictest's -h N) */
+    uint64_t n;
+    int64_t min_ns, max_ns, sum_ns;
+    uint64_t n_overflow;
+    uint32_t n_overflow_ticks; /**< entries used in overflow_ticks */
+    uint64_t overflow_ticks[PS_PERF_US_MAX_OVERFLOW_TICKS];
+    uint32_t buckets[PS_PERF_US_BUCKETS];
+} ps_perf_us_hist_t;
+
+/** @pre 1 <= n_buckets <= PS_PERF_US_BUCKETS  @post h empty with n_buckets
+ *  1-us buckets, every page touched  @return 0 | -EINVAL  @rt INIT */
+int ps_perf_us_reset(ps_perf_us_hist_t *h, unsigned n_buckets);
+
+/** Record a sample taken on tick `tick`. @units ns  @rt RT-SAFE O(1), writer thread */
+void ps_perf_us_record(ps_perf_us_hist_t *h, int64_t value_ns, uint64_t tick);
+
+/** Print in the format of `cyclictest -h N` for one thread: "# Histogram",
+ *  then "%06u %06u" per bucket, then the "# Total", "# Min/Avg/Max Latencies",
+ *  "# Histogram Overflows" and "# Histogram Overflow at cycle number" lines.
+ *  @return 0 | -EIO  @rt NON-RT */
+int ps_perf_us_write_cyclictest(const ps_perf_us_hist_t *h, FILE *out);
 
 #endif /* PS_PERF_H */

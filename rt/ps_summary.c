@@ -82,6 +82,24 @@ static cJSON *counters_json(const ps_loop_counters_t *c)
     return o;
 }
 
+/* The conditions the figures were taken under: what was asked and what the
+ * system granted. */
+static cJSON *rt_json(const ps_summary_t *s)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddNumberToObject(o, "period_us", (double)s->period_ns * 1e-3);
+    cJSON_AddNumberToObject(o, "priority", s->priority);
+    cJSON_AddNumberToObject(o, "loop_cpu", s->loop_cpu);
+    cJSON_AddBoolToObject(o, "is_fifo",
+                          !s->is_lockstep && s->priority > 0 &&
+                              !(s->rt_missing & PS_RT_MISSING_FIFO));
+    cJSON_AddBoolToObject(o, "is_mlocked", !(s->rt_missing & PS_RT_MISSING_MLOCK));
+    cJSON_AddBoolToObject(o, "is_pinned",
+                          !s->is_lockstep && s->loop_cpu >= 0 &&
+                              !(s->rt_missing & PS_RT_MISSING_AFFINITY));
+    return o;
+}
+
 static cJSON *summary_json(const ps_summary_t *s)
 {
     const ps_loop_t *loop = s->loop;
@@ -109,6 +127,16 @@ static cJSON *summary_json(const ps_summary_t *s)
     char rt[200];
     ps_rtsetup_describe(s->rt_missing, rt, sizeof(rt));
     cJSON_AddStringToObject(root, "rt_missing", rt);
+    cJSON_AddItemToObject(root, "rt", rt_json(s));
+    if (s->is_profile) {
+        cJSON *p = rt_json(s);
+        if (s->stress != NULL)
+            cJSON_AddStringToObject(p, "stress", s->stress);
+        else
+            cJSON_AddNullToObject(p, "stress");
+        cJSON_AddNumberToObject(p, "hist_us", s->hist_us);
+        cJSON_AddItemToObject(root, "profile", p);
+    }
     cJSON_AddItemToObject(root, "buses", buses_json(s));
     cJSON_AddItemToObject(root, "counters", counters_json(&loop->counters));
     cJSON_AddBoolToObject(root, "fall_detected", loop->counters.has_fallen);
