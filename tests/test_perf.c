@@ -6,6 +6,8 @@
 #include <stdint.h>
 #include <setjmp.h>
 #include <cmocka.h>
+#include <errno.h>
+#include <stdio.h>
 
 #include <math.h>
 #include <stdlib.h>
@@ -193,6 +195,72 @@ static void test_ps_perf_copy_equal_and_reset_empties(void **state)
     free(c);
 }
 
+
+/* ---- linear 1-us histogram and its cyclictest text ----------------------- */
+
+static void test_ps_perf_us_reset_bad_size_einval(void **state)
+{
+    (void)state;
+    static ps_perf_us_hist_t h;
+    assert_int_equal(ps_perf_us_reset(&h, 0), -EINVAL);
+    assert_int_equal(ps_perf_us_reset(&h, PS_PERF_US_BUCKETS + 1), -EINVAL);
+    assert_int_equal(ps_perf_us_reset(&h, PS_PERF_US_BUCKETS), 0);
+}
+
+static void test_ps_perf_us_record_truncates_to_us_and_counts_overflows(void **state)
+{
+    (void)state;
+    static ps_perf_us_hist_t h;
+    assert_int_equal(ps_perf_us_reset(&h, 5), 0);
+    ps_perf_us_record(&h, 999, 0);   /* 0 us */
+    ps_perf_us_record(&h, 1000, 1);  /* 1 us */
+    ps_perf_us_record(&h, 4999, 2);  /* 4 us: last bucket */
+    ps_perf_us_record(&h, 5000, 3);  /* 5 us: overflow, tick 3 */
+    ps_perf_us_record(&h, -7, 4);    /* negative counts as 0 */
+    ps_perf_us_record(&h, 90000, 5); /* overflow, tick 5 */
+    assert_int_equal(h.buckets[0], 2);
+    assert_int_equal(h.buckets[1], 1);
+    assert_int_equal(h.buckets[4], 1);
+    assert_int_equal(h.n, 6);
+    assert_int_equal(h.n_overflow, 2);
+    assert_int_equal(h.n_overflow_ticks, 2);
+    assert_int_equal(h.overflow_ticks[0], 3);
+    assert_int_equal(h.overflow_ticks[1], 5);
+    assert_int_equal(h.min_ns, 0);
+    assert_int_equal(h.max_ns, 90000);
+}
+
+/* The text must match what `cyclictest -h 5` prints for one thread, line by
+ * line (format taken from rt-tests 2.x output on Debian 12). */
+static void test_ps_perf_us_write_cyclictest_exact_text(void **state)
+{
+    (void)state;
+    static ps_perf_us_hist_t h;
+    assert_int_equal(ps_perf_us_reset(&h, 5), 0);
+    ps_perf_us_record(&h, 3000, 0);
+    ps_perf_us_record(&h, 3500, 1);
+    ps_perf_us_record(&h, 12000, 2);
+    char buf[1024] = "";
+    FILE *f = fmemopen(buf, sizeof(buf), "w");
+    assert_non_null(f);
+    assert_int_equal(ps_perf_us_write_cyclictest(&h, f), 0);
+    fclose(f);
+    const char *expected = "# Histogram\n"
+                           "000000 000000\n"
+                           "000001 000000\n"
+                           "000002 000000\n"
+                           "000003 000002\n"
+                           "000004 000000\n"
+                           "# Total: 000000002\n"
+                           "# Min Latencies: 00003\n"
+                           "# Avg Latencies: 00006\n" /* (3000 + 3500 + 12000) / 3 = 6166 ns */
+                           "# Max Latencies: 00012\n"
+                           "# Histogram Overflows: 00001\n"
+                           "# Histogram Overflow at cycle number:\n"
+                           "# Thread 0: 00002\n";
+    assert_string_equal(buf, expected);
+}
+
 int main(void)
 {
 #define T(f) cmocka_unit_test_setup_teardown(f, setup_hist, teardown_hist)
@@ -208,6 +276,9 @@ int main(void)
         T(test_ps_perf_quantile_clamped_to_max),
         T(test_ps_perf_mean_min_max_exact),
         T(test_ps_perf_copy_equal_and_reset_empties),
+        cmocka_unit_test(test_ps_perf_us_reset_bad_size_einval),
+        cmocka_unit_test(test_ps_perf_us_record_truncates_to_us_and_counts_overflows),
+        cmocka_unit_test(test_ps_perf_us_write_cyclictest_exact_text),
     };
 #undef T
     return cmocka_run_group_tests(tests, NULL, NULL);
