@@ -116,7 +116,7 @@ static void *worker_main(void *arg)
 {
     ps_logger_t *lg = arg;
     if (lg->cpu >= 0)
-        (void)ps_rtsetup_thread(0, lg->cpu); /* best effort: the worker is not RT */
+        (void)ps_rtsetup_thread_best_effort(0, lg->cpu); /* best effort: the worker is not RT */
     const struct timespec idle = {0, IDLE_SLEEP_NS};
     while (!atomic_load(&lg->should_stop)) {
         drain(lg);

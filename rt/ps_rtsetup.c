@@ -3,6 +3,8 @@
  */
 #include "ps_rtsetup.h"
 
+#include <stdbool.h>
+
 #include <errno.h>
 #include <fcntl.h>
 #include <pthread.h>
@@ -57,26 +59,36 @@ static int set_affinity(int cpu)
     return pthread_setaffinity_np(pthread_self(), sizeof(set), &set);
 }
 
-unsigned ps_rtsetup_thread(unsigned priority, int cpu)
+static unsigned setup_thread(unsigned priority, int cpu, bool is_recorded)
 {
     unsigned missing = 0;
     if (priority > 0) {
         const int err = set_fifo(priority);
-        if (err != 0) {
+        if (err != 0 && is_recorded) {
             atomic_store(&g_fifo_errno, err);
             atomic_store(&g_fifo_priority, priority);
-            missing |= PS_RT_MISSING_FIFO;
         }
+        missing |= err != 0 ? PS_RT_MISSING_FIFO : 0u;
     }
     if (cpu != -1) {
         const int err = set_affinity(cpu);
-        if (err != 0) {
+        if (err != 0 && is_recorded) {
             atomic_store(&g_affinity_errno, err);
             atomic_store(&g_affinity_cpu, cpu);
-            missing |= PS_RT_MISSING_AFFINITY;
         }
+        missing |= err != 0 ? PS_RT_MISSING_AFFINITY : 0u;
     }
     return missing;
+}
+
+unsigned ps_rtsetup_thread(unsigned priority, int cpu)
+{
+    return setup_thread(priority, cpu, true);
+}
+
+unsigned ps_rtsetup_thread_best_effort(unsigned priority, int cpu)
+{
+    return setup_thread(priority, cpu, false);
 }
 
 static size_t page_size(void)

@@ -47,6 +47,11 @@ int ps_rtsetup_lock_memory(void);
  *  @rt INIT, the thread itself */
 unsigned ps_rtsetup_thread(unsigned priority, int cpu);
 
+/** As ps_rtsetup_thread, for helper threads (sim plant, logger) whose
+ *  failures are not the loop's: nothing is recorded for ps_rtsetup_describe().
+ *  @return bitmask of ps_rt_missing_t  @rt INIT, the thread itself */
+unsigned ps_rtsetup_thread_best_effort(unsigned priority, int cpu);
+
 /** Touch stack_bytes of stack below the caller (one write per page) so it
  *  is resident. @pre stack_bytes well below the thread's stack size minus
  *  what is in use (e.g. 256 KiB on an 8 MiB stack)  @rt INIT, the thread itself */

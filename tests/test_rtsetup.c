@@ -58,6 +58,22 @@ static void test_ps_rtsetup_thread_bad_priority_and_cpu_described(void **state)
     assert_int_equal(ps_rtsetup_thread(0, -7), PS_RT_MISSING_AFFINITY);
 }
 
+/* A helper thread's failure must not replace the loop's in the report. */
+static void test_ps_rtsetup_thread_best_effort_not_recorded(void **state)
+{
+    (void)state;
+    assert_int_equal(ps_rtsetup_thread(1000, CPU_SETSIZE + 5),
+                     PS_RT_MISSING_FIFO | PS_RT_MISSING_AFFINITY);
+    assert_int_equal(ps_rtsetup_thread_best_effort(999, CPU_SETSIZE + 9),
+                     PS_RT_MISSING_FIFO | PS_RT_MISSING_AFFINITY);
+    char buf[256];
+    ps_rtsetup_describe(PS_RT_MISSING_FIFO | PS_RT_MISSING_AFFINITY, buf, sizeof(buf));
+    char want[256];
+    snprintf(want, sizeof(want), "SCHED_FIFO priority 1000 (%s), CPU affinity cpu %d (%s)",
+             strerror(EINVAL), CPU_SETSIZE + 5, strerror(EINVAL));
+    assert_string_equal(buf, want);
+}
+
 static void test_ps_rtsetup_describe_truncates_nul_terminated(void **state)
 {
     (void)state;
@@ -217,6 +233,7 @@ int main(void)
         cmocka_unit_test(test_ps_rtsetup_thread_nothing_asked_zero),
         cmocka_unit_test(test_ps_rtsetup_describe_nothing_missing_empty),
         cmocka_unit_test(test_ps_rtsetup_thread_bad_priority_and_cpu_described),
+        cmocka_unit_test(test_ps_rtsetup_thread_best_effort_not_recorded),
         cmocka_unit_test(test_ps_rtsetup_describe_truncates_nul_terminated),
         cmocka_unit_test(test_ps_rtsetup_lock_memory_result_described),
         cmocka_unit_test(test_ps_rtsetup_thread_fifo_affinity_consistent),
