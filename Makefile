@@ -10,6 +10,8 @@ CXX     ?= c++
 # Debian 12 packages the build, the tests and `make run` need (see README).
 DEPS_PKGS := gcc g++ libc6-dev make pkg-config libmujoco-dev libcyaml-dev libyaml-dev \
              libcmocka-dev libcjson-dev libgpiod-dev rt-tests can-utils
+# Extra packages `make bench` needs: load generator, plots, the analysis script.
+BENCH_PKGS := stress-ng gnuplot-nox python3
 
 WARN    := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototypes
 CFLAGS  ?= -O2 -g
@@ -34,7 +36,7 @@ FAKE_OBJS    := $(call OBJ,$(FAKE_SRCS))
 FAKE_SANOBJS := $(call SANOBJ,$(FAKE_SRCS))
 TEST_BINS := $(addprefix $(BUILD)/tests/,$(SAN_TESTS) $(NOSAN_TESTS))
 
-.PHONY: all deps run test clean format help bench check-format
+.PHONY: all deps deps-bench run test clean format help bench
 all: $(BUILD)/pushstep
 
 help:
@@ -43,11 +45,16 @@ help:
 	@echo "make run     deps + build + run against the simulated crowd, board sim"
 	@echo "             options pass through: make run ARGS=\"--duration 5 --lockstep\""
 	@echo "make test    deps + build + run the whole cmocka suite"
+	@echo "make bench   latency beside cyclictest, tick share, bus load, allocations:"
+	@echo "             bench/results/*.json and summary.md (see docs/latency.md)"
 	@echo "make format  clang-format every C source in place"
 	@echo "make clean   remove $(BUILD)/"
 
 deps:
 	@bash tools/deps.sh $(DEPS_PKGS)
+
+deps-bench: deps
+	@bash tools/deps.sh $(BENCH_PKGS)
 
 $(BUILD)/obj/%.o: %.c
 	@mkdir -p $(@D)
@@ -72,9 +79,9 @@ run: deps $(BUILD)/pushstep
 	$(BUILD)/pushstep --board sim $(ARGS)
 
 test: deps $(BUILD)/pushstep $(TEST_BINS)
-	@bash tools/run-tests.sh $(TEST_BINS)
+	@PUSHSTEP_BIN=$(BUILD)/pushstep bash tools/run-tests.sh $(TEST_BINS)
 
-bench: deps $(BUILD)/pushstep
+bench: deps-bench $(BUILD)/pushstep
 	@bash bench/run.sh
 
 format:

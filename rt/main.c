@@ -468,8 +468,8 @@ int main(int argc, char **argv)
         return 2;
     }
     int rc = ps_app_init(&g.app, &ao, err, sizeof(err));
-    if (rc == 0 || rc == -PS_ERR_BUS_BUDGET)
-        print_plan(&g.app);
+    if (g.app.plan.n_buses > 0)
+        print_plan(&g.app); /* also when wiring failed after the plan */
     if (rc < 0) {
         fprintf(stderr, "pushstep: %s\n", err);
         ps_app_deinit(&g.app);

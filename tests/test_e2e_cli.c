@@ -1,0 +1,203 @@
+/*
+ * The command line as a user meets it: `pushstep --help`, a lockstep run with
+ * --summary (its JSON read back with cJSON), a real-time run, and the error
+ * paths (bad option, bad config file, a board without drivers yet), each
+ * with its exit status and message. Runs the binary the Makefile built
+ * ($PUSHSTEP_BIN, default build/pushstep) from the repository root.
+ */
+#include <cjson/cJSON.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmocka.h>
+
+#define OUT_MAX (256 * 1024)
+
+static char out[OUT_MAX];
+
+static const char *bin(void)
+{
+    const char *b = getenv("PUSHSTEP_BIN");
+    return b ? b : "build/pushstep";
+}
+
+/* Run `bin args` with stdout and stderr captured into out; return its exit status. */
+static int run(const char *args)
+{
+    char cmd[1024];
+    snprintf(cmd, sizeof(cmd), "%s %s 2>&1", bin(), args);
+    FILE *p = popen(cmd, "r");
+    assert_non_null(p);
+    size_t n = fread(out, 1, sizeof(out) - 1, p);
+    out[n] = '\0';
+    int status = pclose(p);
+    assert_true(WIFEXITED(status));
+    return WEXITSTATUS(status);
+}
+
+static cJSON *read_json(const char *path)
+{
+    FILE *f = fopen(path, "r");
+    assert_non_null(f);
+    static char text[OUT_MAX];
+    size_t n = fread(text, 1, sizeof(text) - 1, f);
+    text[n] = '\0';
+    fclose(f);
+    cJSON *j = cJSON_Parse(text);
+    assert_non_null(j);
+    return j;
+}
+
+static double num(const cJSON *o, const char *key)
+{
+    const cJSON *v = cJSON_GetObjectItemCaseSensitive(o, key);
+    if (!cJSON_IsNumber(v))
+        fail_msg("JSON key \"%s\" missing or not a number", key);
+    return v->valuedouble;
+}
+
+static const cJSON *obj(const cJSON *o, const char *key)
+{
+    const cJSON *v = cJSON_GetObjectItemCaseSensitive(o, key);
+    if (v == NULL)
+        fail_msg("JSON key \"%s\" missing", key);
+    return v;
+}
+
+static void test_cli_help_documents_every_option(void **state)
+{
+    (void)state;
+    assert_int_equal(run("--help"), 0);
+    static const char *const OPTIONS[] = {"--board NAME|FILE", "--robot FILE", "--scenario FILE",
+                                          "--duration S", "--lockstep", "--summary FILE.json",
+                                          "--require-rt", "--trace", "pushstep profile",
+                                          "--stress cpu|mem|io", "--out DIR", "--hist-us N"};
+    for (size_t i = 0; i < sizeof(OPTIONS) / sizeof(OPTIONS[0]); i++)
+        if (strstr(out, OPTIONS[i]) == NULL)
+            fail_msg("--help does not mention %s", OPTIONS[i]);
+}
+
+static void test_cli_lockstep_summary_json_has_the_figures(void **state)
+{
+    (void)state;
+    char path[] = "/tmp/ps_cli_XXXXXX";
+    int fd = mkstemp(path);
+    assert_true(fd >= 0);
+    close(fd);
+    char args[256];
+    snprintf(args, sizeof(args), "--lockstep --duration 6 --quiet --summary %s", path);
+    int rc = run(args);
+    if (rc != 0)
+        fail_msg("exit %d:\n%s", rc, out);
+    assert_non_null(strstr(out, "state STANDBY -> RAMP"));
+    assert_non_null(strstr(out, "state ACTIVE -> DAMPING (REQ_STOP)"));
+    assert_non_null(strstr(out, "state DAMPING -> STANDBY"));
+    cJSON *j = read_json(path);
+    assert_true(num(j, "ticks") >= 6000);
+    assert_int_equal((int)num(j, "overruns"), 0);
+    const cJSON *lat = obj(j, "latency");
+    static const char *const STAGES[] = {"wake",  "read",  "estimate", "policy",     "servo",
+                                         "write", "tick", "tick_plain", "tick_policy"};
+    for (size_t i = 0; i < sizeof(STAGES) / sizeof(STAGES[0]); i++) {
+        const cJSON *st = obj(lat, STAGES[i]);
+        num(st, "p50_us");
+        num(st, "p999_us");
+        assert_true(num(st, "max_us") >= num(st, "p99_us"));
+    }
+    assert_true(num(obj(lat, "tick"), "n") >= 6000);
+    const cJSON *after = obj(j, "after_init");
+    assert_int_equal((int)num(after, "mallocs"), 0);
+    assert_int_equal((int)num(after, "page_faults"), 0);
+    assert_true(cJSON_IsFalse(obj(j, "fall_detected")));
+    assert_true(cJSON_GetArraySize(obj(j, "transitions")) == 4);
+    assert_int_equal(cJSON_GetArraySize(obj(j, "buses")), 4);
+    const cJSON *bus0 = cJSON_GetArrayItem(obj(j, "buses"), 0);
+    assert_true(num(bus0, "observed_load") > 0.3 && num(bus0, "observed_load") < 0.8);
+    assert_int_equal((int)num(obj(j, "sim_truth"), "commands_out_of_limits"), 0);
+    assert_string_equal(cJSON_GetStringValue(obj(j, "final_state")), "STANDBY");
+    cJSON_Delete(j);
+    unlink(path);
+}
+
+static void test_cli_realtime_run_paced_in_real_time(void **state)
+{
+    (void)state;
+    char path[] = "/tmp/ps_cli_XXXXXX";
+    int fd = mkstemp(path);
+    assert_true(fd >= 0);
+    close(fd);
+    char args[256];
+    snprintf(args, sizeof(args), "--duration 2 --quiet --summary %s", path);
+    int rc = run(args);
+    if (rc != 0)
+        fail_msg("exit %d:\n%s", rc, out);
+    cJSON *j = read_json(path);
+    /* 2 s, then damping (at most damping_s = 2 s) at 1 kHz, in wall time */
+    double ticks = num(j, "ticks"), wall_s = num(j, "wall_s");
+    assert_true(ticks >= 2000 && ticks <= 4100);
+    assert_true(wall_s >= ticks / 1000.0 - 0.05 && wall_s <= ticks / 1000.0 + 0.5);
+    assert_true(num(obj(obj(j, "latency"), "wake"), "n") == ticks);
+    cJSON_Delete(j);
+    unlink(path);
+}
+
+static void test_cli_bad_option_exit_2(void **state)
+{
+    (void)state;
+    assert_int_equal(run("--no-such-option"), 2);
+    assert_non_null(strstr(out, "usage: pushstep"));
+    assert_int_equal(run("--duration -3"), 2);
+    assert_non_null(strstr(out, "--duration"));
+    assert_int_equal(run("--out /tmp/x"), 2); /* profile-only option */
+    assert_int_equal(run("profile --lockstep"), 2);
+}
+
+static void test_cli_bad_config_names_file_and_field(void **state)
+{
+    (void)state;
+    char path[] = "/tmp/ps_cli_board_XXXXXX.yaml";
+    int fd = mkstemps(path, 5);
+    assert_true(fd >= 0);
+    const char *bad = "name: bad\nkind: sim\nbuses:\n  - {ifname: can0, bitrate: 5000000}\n"
+                      "gpio: {chip: sim, estop_line: 0, estop_active_low: true, enable_line: 1, "
+                      "led_line: 2}\nrt: {priority: 80, loop_cpu: 1, plant_cpu: 0, worker_cpu: 0}\n";
+    assert_int_equal(write(fd, bad, strlen(bad)), (ssize_t)strlen(bad));
+    close(fd);
+    char args[256];
+    snprintf(args, sizeof(args), "--board %s --lockstep --duration 1", path);
+    assert_int_equal(run(args), 2);
+    assert_non_null(strstr(out, path));
+    assert_non_null(strstr(out, ":4:"));
+    assert_non_null(strstr(out, "buses[0].bitrate"));
+    assert_non_null(strstr(out, "5000000"));
+    unlink(path);
+}
+
+static void test_cli_linux_board_says_drivers_missing(void **state)
+{
+    (void)state;
+    assert_int_equal(run("--board rpi4 --duration 1"), 2);
+    assert_non_null(strstr(out, "SocketCAN"));
+    /* the bus plan of that board was still checked and shown */
+    assert_non_null(strstr(out, "bus can0:"));
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_cli_help_documents_every_option),
+        cmocka_unit_test(test_cli_lockstep_summary_json_has_the_figures),
+        cmocka_unit_test(test_cli_realtime_run_paced_in_real_time),
+        cmocka_unit_test(test_cli_bad_option_exit_2),
+        cmocka_unit_test(test_cli_bad_config_names_file_and_field),
+        cmocka_unit_test(test_cli_linux_board_says_drivers_missing),
+    };
+    return cmocka_run_group_tests_name("e2e_cli", tests, NULL, NULL);
+}
