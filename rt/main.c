@@ -447,6 +447,22 @@ static void print_plan(const ps_app_t *app)
                (double)app->board.bus_budget * 100);
 }
 
+/* Profile outputs; plots are a convenience: without them the run still counts. */
+static int finish_profile(const ps_summary_t *sum)
+{
+    char err[PS_ERR_MSG_LEN];
+    if (ps_profile_write(g.opt.out_dir, sum, &g.app.loop.wake_us, err, sizeof(err)) < 0) {
+        fprintf(stderr, "pushstep: profile: %s\n", err);
+        return -EIO;
+    }
+    bool has_plots = ps_profile_plot(g.opt.out_dir, g.data_dir, err, sizeof(err)) == 0;
+    if (!has_plots)
+        fprintf(stderr, "pushstep: profile: %s\n", err);
+    printf("profile written to %s/: profile.json, wakeup.hist%s\n", g.opt.out_dir,
+           has_plots ? ", wakeup.png, stages.png" : "");
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     if (parse_options(argc, argv, &g.opt) < 0)
@@ -505,16 +521,8 @@ int main(int argc, char **argv)
             fprintf(stderr, "pushstep: %s\n", err);
             rc = -EIO;
         }
-        if (g.opt.is_profile) {
-            if (ps_profile_write(g.opt.out_dir, &sum, &g.app.loop.wake_us, g.data_dir, err,
-                                 sizeof(err)) < 0) {
-                fprintf(stderr, "pushstep: profile: %s\n", err);
-                rc = -EIO;
-            } else {
-                printf("profile written to %s/ (profile.json, wakeup.hist%s)\n", g.opt.out_dir,
-                       access("/usr/bin/gnuplot", X_OK) == 0 ? ", plots" : "");
-            }
-        }
+        if (g.opt.is_profile)
+            rc = finish_profile(&sum) < 0 ? -EIO : rc;
     }
     ps_trace_close(&g.trace);
     ps_app_deinit(&g.app);

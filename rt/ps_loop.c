@@ -8,9 +8,14 @@
 #include "ps_err.h"
 
 static const char *const STAGE_NAMES[PS_STAGE_COUNT] = {
-    [PS_STAGE_WAKE] = "wake",     [PS_STAGE_READ] = "read",   [PS_STAGE_ESTIMATE] = "estimate",
-    [PS_STAGE_POLICY] = "policy", [PS_STAGE_SERVO] = "servo", [PS_STAGE_WRITE] = "write",
-    [PS_STAGE_TICK] = "tick",     [PS_STAGE_TICK_PLAIN] = "tick_plain",
+    [PS_STAGE_WAKE] = "wake",
+    [PS_STAGE_READ] = "read",
+    [PS_STAGE_ESTIMATE] = "estimate",
+    [PS_STAGE_POLICY] = "policy",
+    [PS_STAGE_SERVO] = "servo",
+    [PS_STAGE_WRITE] = "write",
+    [PS_STAGE_TICK] = "tick",
+    [PS_STAGE_TICK_PLAIN] = "tick_plain",
     [PS_STAGE_TICK_POLICY] = "tick_policy",
 };
 _Static_assert(sizeof(STAGE_NAMES) / sizeof(STAGE_NAMES[0]) == PS_STAGE_COUNT,

@@ -51,7 +51,7 @@ typedef enum {
     PS_STAGE_POLICY, /**< recorded on policy ticks only */
     PS_STAGE_SERVO,  /**< includes the state machine */
     PS_STAGE_WRITE,
-    PS_STAGE_TICK, /**< read start to write end */
+    PS_STAGE_TICK,        /**< read start to write end */
     PS_STAGE_TICK_PLAIN,  /**< PS_STAGE_TICK of ticks without a policy run */
     PS_STAGE_TICK_POLICY, /**< PS_STAGE_TICK of ticks with a policy run */
     PS_STAGE_COUNT

@@ -62,10 +62,10 @@ int ps_profile_start_stress(const char *kind, double duration_s, pid_t *out_pid,
     /* One worker per CPU ("0"); mem and io workers bounded so the machine
      * stays usable. */
     char *const cpu[] = {"stress-ng", "--cpu", "0", "--timeout", timeout, "--quiet", NULL};
-    char *const mem[] = {"stress-ng", "--vm", "0", "--vm-bytes", "25%", "--timeout", timeout,
-                         "--quiet", NULL};
-    char *const io[] = {"stress-ng", "--hdd", "0", "--hdd-bytes", "64M", "--temp-path", "/tmp",
-                        "--timeout", timeout, "--quiet", NULL};
+    char *const mem[] = {"stress-ng", "--vm",  "0",       "--vm-bytes", "25%",
+                         "--timeout", timeout, "--quiet", NULL};
+    char *const io[] = {"stress-ng", "--hdd",     "0",     "--hdd-bytes", "64M", "--temp-path",
+                        "/tmp",      "--timeout", timeout, "--quiet",     NULL};
     char *const *argv = strcmp(kind, "cpu") == 0 ? cpu : strcmp(kind, "mem") == 0 ? mem : io;
     int rc = posix_spawnp(out_pid, argv[0], NULL, NULL, argv, environ);
     if (rc != 0) {
@@ -95,7 +95,7 @@ static int write_hist(const char *path, const ps_perf_us_hist_t *wake, char *err
 }
 
 int ps_profile_write(const char *dir, const ps_summary_t *sum, const ps_perf_us_hist_t *wake,
-                     const char *data_dir, char *err, size_t err_len)
+                     char *err, size_t err_len)
 {
     if (mkdir(dir, 0755) < 0 && errno != EEXIST) {
         ps_err_format(err, err_len, "cannot create %s: %s", dir, strerror(errno));
@@ -107,8 +107,16 @@ int ps_profile_write(const char *dir, const ps_summary_t *sum, const ps_perf_us_
     snprintf(path, sizeof(path), "%s/wakeup.hist", dir);
     if (rc == 0)
         rc = write_hist(path, wake, err, err_len);
-    if (rc < 0 || !has_program("gnuplot"))
-        return rc;
+    return rc;
+}
+
+int ps_profile_plot(const char *dir, const char *data_dir, char *err, size_t err_len)
+{
+    if (!has_program("gnuplot")) {
+        ps_err_format(err, err_len, "no plots: gnuplot is not installed (make deps-bench)");
+        return -ENOENT;
+    }
+    char path[4096];
     snprintf(path, sizeof(path), "%s/tools/plot-profile.sh", data_dir);
     char *const argv[] = {"bash", path, (char *)dir, NULL};
     if (spawn_wait(argv) < 0) {

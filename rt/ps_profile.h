@@ -28,10 +28,13 @@ int ps_profile_start_stress(const char *kind, double duration_s, pid_t *out_pid,
 /** Stop and reap the stress child. Safe with pid <= 0. @rt NON-RT */
 void ps_profile_stop_stress(pid_t pid);
 
-/** Write dir/profile.json, dir/wakeup.hist and, when gnuplot is present, the
- *  plots (data_dir/tools/plot-profile.sh dir). Creates dir.
+/** Write dir/profile.json and dir/wakeup.hist. Creates dir.
  *  @post err says what failed  @return 0 | -errno  @rt NON-RT */
 int ps_profile_write(const char *dir, const ps_summary_t *sum, const ps_perf_us_hist_t *wake,
-                     const char *data_dir, char *err, size_t err_len);
+                     char *err, size_t err_len);
+
+/** Draw the PNG plots into dir with data_dir/tools/plot-profile.sh (gnuplot).
+ *  @return 0 | -ENOENT gnuplot missing | -ECHILD the script failed (err says)  @rt NON-RT */
+int ps_profile_plot(const char *dir, const char *data_dir, char *err, size_t err_len);
 
 #endif /* PS_PROFILE_H */

@@ -90,9 +90,8 @@ static cJSON *rt_json(const ps_summary_t *s)
     cJSON_AddNumberToObject(o, "period_us", (double)s->period_ns * 1e-3);
     cJSON_AddNumberToObject(o, "priority", s->priority);
     cJSON_AddNumberToObject(o, "loop_cpu", s->loop_cpu);
-    cJSON_AddBoolToObject(o, "is_fifo",
-                          !s->is_lockstep && s->priority > 0 &&
-                              !(s->rt_missing & PS_RT_MISSING_FIFO));
+    cJSON_AddBoolToObject(
+        o, "is_fifo", !s->is_lockstep && s->priority > 0 && !(s->rt_missing & PS_RT_MISSING_FIFO));
     cJSON_AddBoolToObject(o, "is_mlocked", !(s->rt_missing & PS_RT_MISSING_MLOCK));
     cJSON_AddBoolToObject(o, "is_pinned",
                           !s->is_lockstep && s->loop_cpu >= 0 &&

@@ -29,13 +29,13 @@ typedef struct {
     const ps_canbus_plan_t *plan;
     const ps_board_cfg_t *board;
     ps_can_state_t bus_states[PS_MAX_BUSES];
-    unsigned priority;        /**< SCHED_FIFO priority asked for (0: none) */
-    int loop_cpu;             /**< CPU asked for (-1: none) */
+    unsigned priority; /**< SCHED_FIFO priority asked for (0: none) */
+    int loop_cpu;      /**< CPU asked for (-1: none) */
     int64_t period_ns;
-    bool is_profile;          /**< add the "profile" object (pushstep profile) */
-    const char *stress;       /**< profile: stress-ng load kind, NULL: none */
-    unsigned hist_us;         /**< profile: wake-up histogram buckets */
-    bool has_truth; /**< simulation ground truth below is valid */
+    bool is_profile;    /**< add the "profile" object (pushstep profile) */
+    const char *stress; /**< profile: stress-ng load kind, NULL: none */
+    unsigned hist_us;   /**< profile: wake-up histogram buckets */
+    bool has_truth;     /**< simulation ground truth below is valid */
     bool truth_fell_while_active;
     double truth_min_com_height_active_m;
     uint64_t truth_cmd_out_of_limits;

@@ -65,8 +65,8 @@ static size_t put_int(char *buf, size_t at, size_t cap, int64_t v)
     return at;
 }
 
-void ps_trace_mark(ps_trace_t *t, const char *what, const char *key1, int64_t v1,
-                   const char *key2, int64_t v2)
+void ps_trace_mark(ps_trace_t *t, const char *what, const char *key1, int64_t v1, const char *key2,
+                   int64_t v2)
 {
     if (t == NULL || t->fd < 0)
         return;

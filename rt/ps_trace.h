@@ -22,7 +22,7 @@
 #include <stdint.h>
 
 typedef struct {
-    int fd;              /**< -1: closed, marks are no-ops */
+    int fd; /**< -1: closed, marks are no-ops */
     uint64_t n_marks;
     uint64_t n_failed;
 } ps_trace_t;
@@ -37,8 +37,8 @@ int ps_trace_open(ps_trace_t *t, const char *path, char *err, size_t err_len);
 
 /** Write "pushstep: <what> <key1>=<v1> <key2>=<v2>\n". key2 may be NULL.
  *  @rt RT-SAFE: one non-blocking write, loop thread */
-void ps_trace_mark(ps_trace_t *t, const char *what, const char *key1, int64_t v1,
-                   const char *key2, int64_t v2);
+void ps_trace_mark(ps_trace_t *t, const char *what, const char *key1, int64_t v1, const char *key2,
+                   int64_t v2);
 
 /** Safe twice.  @rt INIT */
 void ps_trace_close(ps_trace_t *t);

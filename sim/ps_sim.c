@@ -284,7 +284,8 @@ static void *plant_thread(void *arg)
 {
     ps_sim_t *s = arg;
     const unsigned prio = s->board.rt.priority > 1u ? s->board.rt.priority - 1u : 0u;
-    (void)ps_rtsetup_thread_best_effort(prio, s->board.rt.plant_cpu); /* best effort, like the sim itself */
+    (void)ps_rtsetup_thread_best_effort(
+        prio, s->board.rt.plant_cpu); /* best effort, like the sim itself */
     const ps_clock_t *mono = ps_clock_monotonic();
     const int64_t n_sub = s->period_ns / s->dt_ns;
     int64_t next_ns = s->start_ns + s->period_ns / 2;

@@ -75,10 +75,10 @@ static void test_cli_help_documents_every_option(void **state)
 {
     (void)state;
     assert_int_equal(run("--help"), 0);
-    static const char *const OPTIONS[] = {"--board NAME|FILE", "--robot FILE", "--scenario FILE",
-                                          "--duration S", "--lockstep", "--summary FILE.json",
-                                          "--require-rt", "--trace", "pushstep profile",
-                                          "--stress cpu|mem|io", "--out DIR", "--hist-us N"};
+    static const char *const OPTIONS[] = {
+        "--board NAME|FILE", "--robot FILE",        "--scenario FILE", "--duration S",
+        "--lockstep",        "--summary FILE.json", "--require-rt",    "--trace",
+        "pushstep profile",  "--stress cpu|mem|io", "--out DIR",       "--hist-us N"};
     for (size_t i = 0; i < sizeof(OPTIONS) / sizeof(OPTIONS[0]); i++)
         if (strstr(out, OPTIONS[i]) == NULL)
             fail_msg("--help does not mention %s", OPTIONS[i]);
@@ -103,7 +103,7 @@ static void test_cli_lockstep_summary_json_has_the_figures(void **state)
     assert_true(num(j, "ticks") >= 6000);
     assert_int_equal((int)num(j, "overruns"), 0);
     const cJSON *lat = obj(j, "latency");
-    static const char *const STAGES[] = {"wake",  "read",  "estimate", "policy",     "servo",
+    static const char *const STAGES[] = {"wake",  "read", "estimate",   "policy",     "servo",
                                          "write", "tick", "tick_plain", "tick_policy"};
     for (size_t i = 0; i < sizeof(STAGES) / sizeof(STAGES[0]); i++) {
         const cJSON *st = obj(lat, STAGES[i]);
@@ -148,6 +148,55 @@ static void test_cli_realtime_run_paced_in_real_time(void **state)
     unlink(path);
 }
 
+/* `pushstep profile`: profile.json with the conditions, and wakeup.hist in
+ * cyclictest's format whose counts add up to the ticks measured. */
+static void test_cli_profile_writes_json_and_cyclictest_histogram(void **state)
+{
+    (void)state;
+    char dir[] = "/tmp/ps_prof_XXXXXX";
+    assert_non_null(mkdtemp(dir));
+    char args[256];
+    snprintf(args, sizeof(args), "profile --duration 1 --quiet --hist-us 200 --out %s", dir);
+    int rc = run(args);
+    if (rc != 0)
+        fail_msg("exit %d:\n%s", rc, out);
+    char path[512];
+    snprintf(path, sizeof(path), "%s/profile.json", dir);
+    cJSON *j = read_json(path);
+    const cJSON *prof = obj(j, "profile");
+    assert_int_equal((int)num(prof, "period_us"), 1000);
+    assert_int_equal((int)num(prof, "hist_us"), 200);
+    assert_true(cJSON_IsNull(obj(prof, "stress")));
+    double ticks = num(j, "ticks");
+
+    snprintf(path, sizeof(path), "%s/wakeup.hist", dir);
+    FILE *f = fopen(path, "r");
+    assert_non_null(f);
+    char line[256];
+    unsigned n_rows = 0;
+    unsigned long long sum = 0, total = 0, overflows = 0;
+    assert_non_null(fgets(line, sizeof(line), f));
+    assert_string_equal(line, "# Histogram\n");
+    while (fgets(line, sizeof(line), f) != NULL) {
+        unsigned us;
+        unsigned long long count;
+        if (sscanf(line, "%06u %06llu", &us, &count) == 2 && line[0] != '#') {
+            assert_int_equal(us, n_rows);
+            n_rows++;
+            sum += count;
+        }
+        (void)sscanf(line, "# Total: %llu", &total);
+        (void)sscanf(line, "# Histogram Overflows: %llu", &overflows);
+    }
+    fclose(f);
+    assert_int_equal(n_rows, 200);
+    assert_int_equal(sum, total);
+    assert_int_equal(total + overflows, (unsigned long long)ticks);
+    cJSON_Delete(j);
+    snprintf(args, sizeof(args), "rm -rf %s", dir);
+    assert_int_equal(system(args), 0);
+}
+
 static void test_cli_bad_option_exit_2(void **state)
 {
     (void)state;
@@ -165,9 +214,10 @@ static void test_cli_bad_config_names_file_and_field(void **state)
     char path[] = "/tmp/ps_cli_board_XXXXXX.yaml";
     int fd = mkstemps(path, 5);
     assert_true(fd >= 0);
-    const char *bad = "name: bad\nkind: sim\nbuses:\n  - {ifname: can0, bitrate: 5000000}\n"
-                      "gpio: {chip: sim, estop_line: 0, estop_active_low: true, enable_line: 1, "
-                      "led_line: 2}\nrt: {priority: 80, loop_cpu: 1, plant_cpu: 0, worker_cpu: 0}\n";
+    const char *bad =
+        "name: bad\nkind: sim\nbuses:\n  - {ifname: can0, bitrate: 5000000}\n"
+        "gpio: {chip: sim, estop_line: 0, estop_active_low: true, enable_line: 1, "
+        "led_line: 2}\nrt: {priority: 80, loop_cpu: 1, plant_cpu: 0, worker_cpu: 0}\n";
     assert_int_equal(write(fd, bad, strlen(bad)), (ssize_t)strlen(bad));
     close(fd);
     char args[256];
@@ -195,6 +245,7 @@ int main(void)
         cmocka_unit_test(test_cli_help_documents_every_option),
         cmocka_unit_test(test_cli_lockstep_summary_json_has_the_figures),
         cmocka_unit_test(test_cli_realtime_run_paced_in_real_time),
+        cmocka_unit_test(test_cli_profile_writes_json_and_cyclictest_histogram),
         cmocka_unit_test(test_cli_bad_option_exit_2),
         cmocka_unit_test(test_cli_bad_config_names_file_and_field),
         cmocka_unit_test(test_cli_linux_board_says_drivers_missing),

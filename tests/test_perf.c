@@ -195,7 +195,6 @@ static void test_ps_perf_copy_equal_and_reset_empties(void **state)
     free(c);
 }
 
-
 /* ---- linear 1-us histogram and its cyclictest text ----------------------- */
 
 static void test_ps_perf_us_reset_bad_size_einval(void **state)
