@@ -346,7 +346,7 @@ static void watch_truth(ps_summary_t *sum)
         nanosleep(&poll, NULL);
         if (g.app.sim == NULL)
             continue;
-        ps_sm_state_t st = *(volatile ps_sm_state_t *)&g.app.loop.state;
+        ps_sm_state_t st = ps_loop_get_state(&g.app.loop);
         if (st != PS_SM_ACTIVE)
             continue;
         ps_sim_truth_t t;

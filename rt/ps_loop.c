@@ -21,6 +21,9 @@ static const char *const STAGE_NAMES[PS_STAGE_COUNT] = {
 _Static_assert(sizeof(STAGE_NAMES) / sizeof(STAGE_NAMES[0]) == PS_STAGE_COUNT,
                "one name per stage");
 
+#define IMU_STATUS_REJECTED                                                                        \
+    (PS_IMU_STATUS_SELFTEST_FAIL | PS_IMU_STATUS_GYRO_SAT | PS_IMU_STATUS_ACCEL_SAT)
+
 /* DAMPING may end early on stillness only after this long, so that a robot
  * that is momentarily still at the instant damping starts is still braked. */
 #define MIN_DAMPING_NS (200 * PS_NS_PER_MS)
@@ -35,8 +38,21 @@ static void build_reply_table(ps_loop_t *loop)
     const ps_robot_cfg_t *r = loop->cfg.robot;
     memset(loop->reply_joint, 0xff, sizeof(loop->reply_joint)); /* all -1 */
     for (uint32_t j = 0; j < r->n_joints; j++)
-        loop->reply_joint[r->joints[j].bus_idx][r->joints[j].reply_id & PS_CAN_SFF_MASK] =
-            (int16_t)j;
+        loop->reply_joint[r->joints[j].bus_idx][r->joints[j].reply_id] = (int16_t)j;
+}
+
+/* The config loader checks all of this too; the loop checks again because it
+ * indexes its fixed tables with these values on every tick. */
+static bool is_schedule_valid(const ps_board_cfg_t *b, const ps_robot_cfg_t *r)
+{
+    for (uint32_t j = 0; j < r->n_joints; j++) {
+        const ps_joint_cfg_t *jc = &r->joints[j];
+        if (jc->bus_idx >= b->n_buses || jc->rate_div == 0 || jc->can_id > PS_CAN_SFF_MASK ||
+            jc->reply_id > PS_CAN_SFF_MASK)
+            return false;
+    }
+    return r->imu.bus_idx < b->n_buses && r->imu.rate_div != 0 &&
+           r->imu.base_id < PS_CAN_SFF_MASK;
 }
 
 int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg)
@@ -52,6 +68,9 @@ int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg)
     for (uint32_t b = 0; b < cfg->board->n_buses; b++)
         if (cfg->buses[b].ops == NULL)
             return -EINVAL;
+    if (cfg->gpio.ops == NULL || !is_schedule_valid(cfg->board, cfg->robot) ||
+        !(c->ramp_s > 0.0f) || !(c->damping_s > 0.0f))
+        return -EINVAL;
 
     memset(loop, 0, sizeof(*loop)); /* also touches every page of the struct */
     loop->cfg = *cfg;
@@ -60,6 +79,7 @@ int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg)
     loop->period_ns = PS_NS_PER_S / c->servo_hz;
     loop->policy_div = c->servo_hz / c->policy_hz;
     loop->state = PS_SM_STANDBY;
+    atomic_init(&loop->published_state, (int)PS_SM_STANDBY);
     loop->meas.n_joints = cfg->robot->n_joints;
     atomic_init(&loop->external_requests, 0u);
     atomic_init(&loop->n_stop_requests, 0u);
@@ -105,8 +125,12 @@ static void take_reply(ps_loop_t *loop, int joint_idx, const ps_can_frame_t *f)
 static void take_frame(ps_loop_t *loop, uint32_t bus_idx, const ps_can_frame_t *f)
 {
     loop->counters.n_rx_frames++;
+    if (!f->is_ext && f->id > PS_CAN_SFF_MASK) {
+        loop->counters.n_rx_bad++; /* not a valid 11-bit identifier */
+        return;
+    }
     if (!f->is_ext) {
-        int joint_idx = loop->reply_joint[bus_idx][f->id & PS_CAN_SFF_MASK];
+        int joint_idx = loop->reply_joint[bus_idx][f->id];
         if (joint_idx >= 0) {
             take_reply(loop, joint_idx, f);
             return;
@@ -120,9 +144,13 @@ static void take_frame(ps_loop_t *loop, uint32_t bus_idx, const ps_can_frame_t *
     int rc = ps_imu_msg_rx_feed(&loop->imu_rx, f, &sample);
     if (rc == -ENOENT) {
         loop->counters.n_rx_unknown++;
-    } else if (rc < 0 || (rc == 1 && (sample.status & PS_IMU_STATUS_SELFTEST_FAIL))) {
-        loop->counters.n_rx_bad++;
+    } else if (rc < 0 || (rc == 1 && (sample.status & IMU_STATUS_REJECTED))) {
+        loop->counters.n_rx_bad++; /* saturated or failed: not a measurement */
+    } else if (rc == 1 && loop->has_imu_seq && sample.seq == loop->imu_seq) {
+        loop->counters.n_imu_repeated++; /* a hung IMU repeating itself is not fresh */
     } else if (rc == 1) {
+        loop->has_imu_seq = true;
+        loop->imu_seq = sample.seq;
         ps_imu_meas_t *imu = &loop->meas.imu;
         memcpy(imu->gyro_body_rad_s, sample.gyro_body_rad_s, sizeof(imu->gyro_body_rad_s));
         memcpy(imu->accel_body_m_s2, sample.accel_body_m_s2, sizeof(imu->accel_body_m_s2));
@@ -134,7 +162,10 @@ static void read_bus(ps_loop_t *loop, uint32_t bus_idx)
 {
     const ps_can_port_t *port = &loop->cfg.buses[bus_idx];
     const size_t cap = sizeof(loop->rx_buf) / sizeof(loop->rx_buf[0]);
-    for (;;) { /* bounded: a bus carries at most a tick's worth of frames */
+    /* A healthy bus carries far less than a batch per tick; the cap keeps a
+     * babbling node or a backlog after a stall from starving the tick. What
+     * is left waits for the next tick. */
+    for (unsigned batch = 0; batch < PS_LOOP_MAX_RX_BATCHES; batch++) {
         int n = ps_can_recv_batch(port, loop->rx_buf, cap);
         if (n < 0) {
             loop->counters.n_bus_errors++;
@@ -145,6 +176,7 @@ static void read_bus(ps_loop_t *loop, uint32_t bus_idx)
         if ((size_t)n < cap)
             return;
     }
+    loop->counters.n_rx_capped++;
 }
 
 static void read_bus_states(ps_loop_t *loop)
@@ -188,14 +220,17 @@ static void stage_policy(ps_loop_t *loop, uint64_t tick)
 {
     if (tick % loop->policy_div != 0)
         return;
-    const ps_clock_t *clk = loop->cfg.perf_clock;
-    int64_t t0 = ps_clock_now_ns(clk);
+    /* Statistics on the perf clock; the deadline on the pacing clock, so that
+     * in lockstep (simulated time) a preempted policy is not "late" and the
+     * run stays deterministic. On hardware both are the monotonic clock. */
+    const ps_clock_t *perf = loop->cfg.perf_clock, *pace = loop->cfg.clock;
+    int64_t t0 = ps_clock_now_ns(perf), t0_pace = ps_clock_now_ns(pace);
     int rc = loop->cfg.policy.ops->step(loop->cfg.policy.ctx, &loop->meas, &loop->estimator.est,
                                         &loop->targets);
-    int64_t dt = ps_clock_now_ns(clk) - t0;
+    int64_t dt = ps_clock_now_ns(perf) - t0, dt_pace = ps_clock_now_ns(pace) - t0_pace;
     ps_perf_record(&loop->perf[PS_STAGE_POLICY], dt);
     loop->counters.n_policy_runs++;
-    loop->has_policy_late = dt > ps_s_to_ns(loop->cfg.robot->control.policy_deadline_s);
+    loop->has_policy_late = dt_pace > ps_s_to_ns(loop->cfg.robot->control.policy_deadline_s);
     if (loop->has_policy_late)
         loop->counters.n_policy_late++;
     loop->has_target_invalid = rc < 0 || !is_target_valid(loop->cfg.robot, &loop->targets);
@@ -251,7 +286,7 @@ static uint32_t watchdog_conditions(const ps_loop_t *loop)
         cond |= PS_SM_C_IMU_STALE;
     if (loop->has_policy_late)
         cond |= PS_SM_C_POLICY_LATE;
-    if (loop->has_target_invalid)
+    if (loop->has_target_invalid || loop->has_cmd_fault)
         cond |= PS_SM_C_TARGET_INVALID;
     if (loop->bus_off_mask != 0)
         cond |= PS_SM_C_BUS_OFF;
@@ -288,6 +323,8 @@ static uint32_t take_requests(ps_loop_t *loop, uint32_t cond)
     uint32_t req = atomic_exchange(&loop->external_requests, 0u);
     if (loop->cfg.op.take != NULL)
         req |= loop->cfg.op.take(loop->cfg.op.ctx) & PS_SM_C_REQUESTS;
+    if (loop->n_stops_handled > 0)
+        req &= ~(uint32_t)PS_SM_C_REQ_START; /* stopping: no new start */
     uint32_t accepted = 0;
     for (uint32_t bit = 1; bit != 0 && bit <= PS_SM_C_REQUESTS; bit <<= 1) {
         if ((req & bit) == 0)
@@ -309,7 +346,15 @@ static uint32_t take_requests(ps_loop_t *loop, uint32_t cond)
 
 static void enter_state(ps_loop_t *loop, ps_sm_state_t to)
 {
+    if (loop->state == PS_SM_ESTOP && to == PS_SM_STANDBY) {
+        /* Only replies after the drives' new ENTER count (docs/safety.md). */
+        for (uint32_t j = 0; j < loop->meas.n_joints; j++) {
+            loop->meas.joints[j].fault = PS_MIT_FAULT_NONE;
+            loop->meas.joints[j].t_ns = 0;
+        }
+    }
     loop->state = to;
+    atomic_store_explicit(&loop->published_state, (int)to, memory_order_relaxed);
     loop->state_since_ns = loop->t_deadline_ns;
     if (to == PS_SM_RAMP) {
         for (uint32_t j = 0; j < loop->meas.n_joints; j++)
@@ -348,13 +393,18 @@ static void stage_state_machine(ps_loop_t *loop)
 
 /* ---- SERVO and WRITE -------------------------------------------------- */
 
-static void queue_frame(ps_loop_t *loop, uint32_t bus_idx, uint32_t id, const uint8_t *data)
+/* mode_joint: the joint whose ENTER/EXIT this frame is, or -1 for a
+ * command; stage_write undoes is_entered for mode frames a bus refused. */
+static void queue_frame(ps_loop_t *loop, uint32_t bus_idx, uint32_t id, const uint8_t *data,
+                        int mode_joint)
 {
-    ps_can_frame_t *f = &loop->tx_buf[bus_idx][loop->n_tx[bus_idx]++];
+    uint32_t i = loop->n_tx[bus_idx]++;
+    ps_can_frame_t *f = &loop->tx_buf[bus_idx][i];
     memset(f, 0, sizeof(*f));
     f->id = id;
     f->len = PS_MIT_FRAME_LEN;
     memcpy(f->data, data, PS_MIT_FRAME_LEN);
+    loop->tx_mode_joint[bus_idx][i] = (int8_t)mode_joint;
 }
 
 /* Drives need ENTER before they obey commands and get EXIT when the robot is
@@ -367,9 +417,19 @@ static bool queue_mode_change(ps_loop_t *loop, uint32_t j)
     if (loop->is_entered[j] == want_entered)
         return false;
     ps_mit_encode_special(want_entered ? PS_MIT_SPECIAL_ENTER : PS_MIT_SPECIAL_EXIT, data);
-    queue_frame(loop, jc->bus_idx, jc->can_id, data);
+    queue_frame(loop, jc->bus_idx, jc->can_id, data, (int)j);
     loop->is_entered[j] = want_entered;
     return true;
+}
+
+/* Damping for one joint: always inside its limits (the config keeps
+ * damping_kd under kd_max), the command of last resort. */
+static void damping_command(const ps_joint_cfg_t *jc, const ps_control_cfg_t *c, float q_rad,
+                            ps_mit_cmd_t *out)
+{
+    memset(out, 0, sizeof(*out));
+    out->p_rad = fminf(fmaxf(q_rad, jc->pos_min_rad), jc->pos_max_rad);
+    out->kd_nm_s_rad = fminf(c->damping_kd_nm_s_rad, jc->kd_max_nm_s_rad);
 }
 
 static void servo_joint(ps_loop_t *loop, uint32_t j, const ps_servo_mode_t *mode)
@@ -379,18 +439,21 @@ static void servo_joint(ps_loop_t *loop, uint32_t j, const ps_servo_mode_t *mode
     ps_mit_cmd_t cmd;
     if (ps_servo_command(jc, &r->control, mode, j, &loop->targets, &cmd) < 0)
         loop->counters.n_target_invalid++;
-    if (!ps_servo_is_within_limits(jc, &cmd)) {
-        /* Defence in depth: the servo layer already clamps. */
-        loop->counters.n_cmd_replaced++;
-        memset(&cmd, 0, sizeof(cmd));
-        cmd.p_rad = fminf(fmaxf(loop->meas.joints[j].q_rad, jc->pos_min_rad), jc->pos_max_rad);
-    }
     uint8_t data[PS_MIT_FRAME_LEN];
-    if (ps_mit_encode_cmd(&jc->wire, &cmd, data) < 0) {
+    if (!ps_servo_is_within_limits(jc, &cmd) || ps_mit_encode_cmd(&jc->wire, &cmd, data) < 0) {
+        /* Defence in depth: the servo layer already clamps. Brake this joint
+         * and let the state machine damp the robot. */
         loop->counters.n_cmd_replaced++;
-        return;
+        loop->has_cmd_fault = true;
+        damping_command(jc, &r->control, loop->meas.joints[j].q_rad, &cmd);
+        if (ps_mit_encode_cmd(&jc->wire, &cmd, data) < 0) {
+            ps_mit_encode_special(PS_MIT_SPECIAL_EXIT, data); /* cannot even damp: disable */
+            queue_frame(loop, jc->bus_idx, jc->can_id, data, (int)j);
+            loop->is_entered[j] = false;
+            return;
+        }
     }
-    queue_frame(loop, jc->bus_idx, jc->can_id, data);
+    queue_frame(loop, jc->bus_idx, jc->can_id, data, -1);
 }
 
 static void stage_servo(ps_loop_t *loop, uint64_t tick)
@@ -414,6 +477,7 @@ static void stage_servo(ps_loop_t *loop, uint64_t tick)
     }
     for (uint32_t b = 0; b < loop->cfg.board->n_buses; b++)
         loop->n_tx[b] = 0;
+    loop->has_cmd_fault = false; /* the state machine saw last tick's */
     for (uint32_t j = 0; j < r->n_joints; j++) {
         if (!ps_canbus_is_due(tick, r->joints[j].rate_div, loop->cfg.plan->joint_phase[j]))
             continue;
@@ -430,10 +494,17 @@ static void stage_write(ps_loop_t *loop)
         int n = ps_can_send_batch(&loop->cfg.buses[b], loop->tx_buf[b], loop->n_tx[b]);
         if (n < 0) {
             loop->counters.n_bus_errors++;
-            continue;
+            n = 0;
         }
         loop->counters.n_tx_frames += (uint64_t)n;
         loop->counters.n_tx_refused += loop->n_tx[b] - (uint32_t)n;
+        /* A refused ENTER/EXIT did not happen: send it again on the joint's
+         * next due tick instead of believing the drive changed mode. */
+        for (uint32_t i = (uint32_t)n; i < loop->n_tx[b]; i++) {
+            int j = loop->tx_mode_joint[b][i];
+            if (j >= 0)
+                loop->is_entered[j] = !loop->is_entered[j];
+        }
     }
     /* LED: on when the controller is in charge, blinking at 2 Hz in RAMP and
      * DAMPING, 8 Hz in ESTOP, off in STANDBY. */
@@ -499,16 +570,24 @@ void ps_loop_request_stop(ps_loop_t *loop)
     atomic_fetch_add(&loop->n_stop_requests, 1u);
 }
 
-/* First stop request (Ctrl-C or end of run): brake through DAMPING; a second
- * one while stopping: e-stop. */
+/* Stopping (Ctrl-C, SIGTERM, end of run) is a mode, not a one-off request:
+ * from the first stop on, START is refused and STOP is asked on every tick
+ * the robot is in RAMP or ACTIVE, so a START accepted in the same tick as
+ * the stop cannot outlive it. A stop request that arrives in a later tick
+ * than the first one (a second Ctrl-C while braking) asks for e-stop. */
 static void handle_stop_requests(ps_loop_t *loop)
 {
     uint32_t n = atomic_load(&loop->n_stop_requests);
-    if (n == loop->n_stops_handled)
-        return;
-    loop->n_stops_handled = n;
-    bool is_running = loop->state == PS_SM_RAMP || loop->state == PS_SM_ACTIVE;
-    ps_loop_request(loop, (n >= 2) ? PS_SM_C_REQ_ESTOP : (is_running ? PS_SM_C_REQ_STOP : 0));
+    if (n != loop->n_stops_handled) {
+        bool is_second = loop->n_stops_handled > 0;
+        loop->n_stops_handled = n;
+        if (is_second) {
+            ps_loop_request(loop, PS_SM_C_REQ_ESTOP);
+            return;
+        }
+    }
+    if (loop->n_stops_handled > 0 && (loop->state == PS_SM_RAMP || loop->state == PS_SM_ACTIVE))
+        ps_loop_request(loop, PS_SM_C_REQ_STOP);
 }
 
 static bool is_at_rest(const ps_loop_t *loop)
@@ -544,6 +623,27 @@ bool ps_loop_is_stopped(const ps_loop_t *loop)
     return loop->n_stops_handled > 0 && is_at_rest(loop);
 }
 
+void ps_loop_release_drives(ps_loop_t *loop)
+{
+    const ps_robot_cfg_t *r = loop->cfg.robot;
+    uint8_t data[PS_MIT_FRAME_LEN];
+    ps_mit_encode_special(PS_MIT_SPECIAL_EXIT, data);
+    for (uint32_t b = 0; b < loop->cfg.board->n_buses; b++)
+        loop->n_tx[b] = 0;
+    for (uint32_t j = 0; j < r->n_joints; j++)
+        queue_frame(loop, r->joints[j].bus_idx, r->joints[j].can_id, data, -1);
+    for (uint32_t b = 0; b < loop->cfg.board->n_buses; b++) {
+        int n = ps_can_send_batch(&loop->cfg.buses[b], loop->tx_buf[b], loop->n_tx[b]);
+        if (n < 0 || (uint32_t)n < loop->n_tx[b])
+            loop->counters.n_tx_refused += loop->n_tx[b] - (uint32_t)(n < 0 ? 0 : n);
+    }
+    for (uint32_t j = 0; j < r->n_joints; j++)
+        loop->is_entered[j] = false;
+    if (ps_gpio_set_enable(&loop->cfg.gpio, false) < 0 ||
+        ps_gpio_set_led(&loop->cfg.gpio, PS_GPIO_LED_OFF) < 0)
+        loop->counters.n_gpio_errors++;
+}
+
 int ps_loop_run(ps_loop_t *loop, int64_t start_ns, int64_t end_ns)
 {
     int rc = ps_loop_start(loop, start_ns);
@@ -552,5 +652,17 @@ int ps_loop_run(ps_loop_t *loop, int64_t start_ns, int64_t end_ns)
             ps_loop_request_stop(loop);
         rc = ps_loop_step(loop);
     }
+    if (rc < 0) {
+        /* The clock failed: no more paced ticks. One last tick, now, in
+         * e-stop, so the drives are told EXIT and the enable output drops. */
+        ps_loop_request(loop, PS_SM_C_REQ_ESTOP);
+        ps_loop_tick(loop, ps_clock_now_ns(loop->cfg.clock));
+    }
+    ps_loop_release_drives(loop);
     return rc;
+}
+
+ps_sm_state_t ps_loop_get_state(const ps_loop_t *loop)
+{
+    return (ps_sm_state_t)atomic_load_explicit(&loop->published_state, memory_order_relaxed);
 }

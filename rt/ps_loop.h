@@ -44,6 +44,9 @@
 #include "ps_trace.h"
 #include "ps_trace.h"
 
+/** Receive batches per bus per tick at most (of rx_buf's size). */
+#define PS_LOOP_MAX_RX_BATCHES 4u
+
 typedef enum {
     PS_STAGE_WAKE = 0, /**< wake-up latency: actual wake minus deadline */
     PS_STAGE_READ,
@@ -111,7 +114,9 @@ typedef struct {
     uint64_t n_policy_late;
     uint64_t n_rx_frames;
     uint64_t n_rx_unknown; /**< frames with an id nobody expects */
-    uint64_t n_rx_bad;     /**< malformed replies/IMU frames */
+    uint64_t n_rx_bad;     /**< malformed replies/IMU frames, saturated IMU samples */
+    uint64_t n_rx_capped;    /**< ticks a bus still had frames after PS_LOOP_MAX_RX_BATCHES */
+    uint64_t n_imu_repeated; /**< IMU samples whose seq did not advance (ignored) */
     uint64_t n_tx_frames;
     uint64_t n_tx_refused; /**< frames a bus would not queue */
     uint64_t n_bus_errors; /**< -errno from a port */
@@ -130,6 +135,7 @@ typedef struct {
     int64_t period_ns;
     uint32_t policy_div;
     ps_sm_state_t state;
+    atomic_int published_state; /**< copy of state for other threads (ps_loop_get_state) */
     int64_t state_since_ns;
     uint32_t pending_requests;     /**< accepted requests waiting for ps_sm_next */
     atomic_uint external_requests; /**< from ps_loop_request (any thread) */
@@ -143,11 +149,15 @@ typedef struct {
     bool is_entered[PS_MAX_JOINTS]; /**< ENTER sent since the last EXIT */
     bool has_policy_late;
     bool has_target_invalid;
+    bool has_cmd_fault;          /**< a command had to be replaced (TARGET_INVALID) */
     uint32_t bus_off_mask;
     int16_t reply_joint[PS_MAX_BUSES][PS_CAN_SFF_MASK + 1]; /**< reply id -> joint, -1 */
     ps_imu_msg_rx_t imu_rx;
+    bool has_imu_seq;
+    uint8_t imu_seq; /**< seq of the last IMU sample taken */
     ps_can_frame_t rx_buf[64];
     ps_can_frame_t tx_buf[PS_MAX_BUSES][PS_MAX_JOINTS + 2];
+    int8_t tx_mode_joint[PS_MAX_BUSES][PS_MAX_JOINTS + 2]; /**< per tx frame: ENTER/EXIT joint, -1 */
     uint32_t n_tx[PS_MAX_BUSES];
     int64_t t_deadline_ns; /**< deadline of the current tick */
     ps_perf_hist_t perf[PS_STAGE_COUNT];
@@ -165,7 +175,8 @@ void ps_loop_tick(ps_loop_t *loop, int64_t deadline_ns);
 
 /** Paced loop: ps_loop_start, then ps_loop_step until end_ns (loop time;
  *  <= 0: no end) or a stop request, then keep ticking through DAMPING until
- *  the robot is in STANDBY or ESTOP, and return.
+ *  the robot is in STANDBY or ESTOP; then ps_loop_release_drives. If the
+ *  clock fails, one last unpaced tick in ESTOP before returning its error.
  *  @return 0 | -errno from the clock  @rt RT-SAFE, loop thread */
 int ps_loop_run(ps_loop_t *loop, int64_t start_ns, int64_t end_ns);
 
@@ -179,6 +190,15 @@ int ps_loop_step(ps_loop_t *loop);
 
 /** @return true once a stop was handled and the robot is in STANDBY or ESTOP  @rt RT-SAFE */
 bool ps_loop_is_stopped(const ps_loop_t *loop);
+
+/** Leave the drives safe at the end of a run: EXIT to every drive, enable
+ *  output and LED off. The state is left as it is (STANDBY or ESTOP).
+ *  @rt RT-SAFE, loop thread, after the last tick */
+void ps_loop_release_drives(ps_loop_t *loop);
+
+/** @return the loop's state as last published (relaxed atomic)
+ *  @rt RT-SAFE, any thread */
+ps_sm_state_t ps_loop_get_state(const ps_loop_t *loop);
 
 /** Ask the loop to stop (it goes through DAMPING to STANDBY first); a second
  *  call while stopping asks for e-stop.  @rt async-signal-safe, any thread */

@@ -41,8 +41,9 @@ static const ps_sm_edge_t EDGES[] = {
     {PS_SM_DAMPING, PS_SM_C_DAMP_DONE, HARD, PS_SM_STANDBY},
 
     /* ESTOP: latched. The self-edge makes the latch explicit (and gives the
-     * loop a matched edge to log); only a reset with no hard fault left leaves. */
-    {PS_SM_ESTOP, HARD, 0u, PS_SM_ESTOP},
+     * loop a matched edge to log); only a reset with none of the reset
+     * blockers left leaves. */
+    {PS_SM_ESTOP, PS_SM_C_RESET_BLOCKERS, 0u, PS_SM_ESTOP},
     {PS_SM_ESTOP, PS_SM_C_REQ_RESET, PS_SM_C_RESET_BLOCKERS, PS_SM_STANDBY},
 };
 
@@ -84,7 +85,6 @@ static const blocker_reason_t RESET_REASONS[] = {
     {PS_SM_C_ESTOP_INPUT, "reset refused: e-stop input still pressed"},
     {PS_SM_C_REQ_ESTOP, "reset refused: e-stop requested"},
     {PS_SM_C_BUS_OFF, "reset refused: CAN bus still off"},
-    {PS_SM_C_DRIVE_FAULT, "reset refused: drive fault persists"},
 };
 
 static int is_valid_state(ps_sm_state_t s)

@@ -72,9 +72,12 @@ typedef enum {
  *  other soft faults (POLICY_LATE, TARGET_INVALID, FALL) do not block a start:
  *  if they persist, RAMP drops to DAMPING on its first tick. */
 #define PS_SM_C_START_BLOCKERS (PS_SM_C_HARD_FAULTS | PS_SM_C_REPLY_STALE | PS_SM_C_IMU_STALE)
-/** What blocks ESTOP -> STANDBY: any hard fault still present (e-stop input
- *  still pressed, bus still off, drive still faulted, e-stop requested again). */
-#define PS_SM_C_RESET_BLOCKERS PS_SM_C_HARD_FAULTS
+/** What blocks ESTOP -> STANDBY: e-stop input still pressed, bus still off,
+ *  e-stop requested again. Not a drive fault: drives clear a latched fault
+ *  only when they are enabled again (ENTER), which happens in STANDBY; a
+ *  drive that is still faulted then sends the robot straight back to ESTOP,
+ *  with its cause logged, instead of making the reset impossible. */
+#define PS_SM_C_RESET_BLOCKERS (PS_SM_C_REQ_ESTOP | PS_SM_C_ESTOP_INPUT | PS_SM_C_BUS_OFF)
 
 /** One edge: leave `from` for `to` when (cond & trigger) && !(cond & blocker). */
 typedef struct {

@@ -32,6 +32,8 @@ typedef struct {
     ps_can_frame_t pending[MAX_SENT]; /* delivered on the next recv */
     uint32_t n_pending;
     bool is_bus_off;
+    uint32_t n_refuse_batches; /* the next N send_batch calls queue nothing */
+    uint32_t n_exit_total;     /* EXIT frames accepted, never cleared */
 } fake_bus_t;
 
 typedef struct {
@@ -44,6 +46,8 @@ typedef struct {
     bool is_mute[PS_MAX_JOINTS]; /* joint does not answer */
     uint8_t fault[PS_MAX_JOINTS];
     bool is_imu_mute;
+    bool is_imu_frozen; /* repeats the same seq */
+    uint8_t imu_status;
     uint8_t imu_seq;
     float policy_value;      /* NAN: the policy returns a NaN target */
     int64_t policy_extra_ns; /* time the policy takes */
@@ -82,9 +86,15 @@ static void answer(fake_bus_t *b, int j)
 static int fake_send(void *ctx, const ps_can_frame_t *frames, size_t n)
 {
     fake_bus_t *b = ctx;
+    if (b->n_refuse_batches > 0) {
+        b->n_refuse_batches--;
+        return 0;
+    }
     for (size_t i = 0; i < n; i++) {
         if (b->n_sent < MAX_SENT)
             b->sent[b->n_sent++] = frames[i];
+        if (ps_mit_classify_special(frames[i].data, frames[i].len) == PS_MIT_SPECIAL_EXIT)
+            b->n_exit_total++;
         int j = joint_of(fx, b->bus_idx, frames[i].id);
         if (j >= 0)
             answer(b, j);
@@ -97,7 +107,9 @@ static int fake_recv(void *ctx, ps_can_frame_t *out, size_t max)
     fake_bus_t *b = ctx;
     size_t n = 0;
     if (b->bus_idx == fx->robot.imu.bus_idx && !fx->is_imu_mute && max >= 2) {
-        ps_imu_sample_t s = {.accel_body_m_s2 = {0, 0, 9.81f}, .seq = fx->imu_seq++};
+        ps_imu_sample_t s = {.accel_body_m_s2 = {0, 0, 9.81f},
+                             .seq = fx->is_imu_frozen ? fx->imu_seq : fx->imu_seq++,
+                             .status = fx->imu_status};
         ps_imu_msg_encode(fx->robot.imu.base_id, &s, out);
         n = 2;
     }
@@ -486,6 +498,167 @@ static void test_loop_commands_each_joint_at_its_rate(void **state)
         assert_int_equal(n_cmd[j], 200 / fx->robot.joints[j].rate_div);
 }
 
+
+/* ---- findings of the review: each a regression test ------------------------ */
+
+static uint32_t count_special(int which)
+{
+    uint32_t n = 0;
+    for (uint32_t b = 0; b < fx->board.n_buses; b++)
+        for (uint32_t i = 0; i < fx->buses[b].n_sent; i++)
+            if (ps_mit_classify_special(fx->buses[b].sent[i].data, 8) == which)
+                n++;
+    return n;
+}
+
+/* A bus that refuses the batch carrying ENTER must not leave the loop
+ * believing the drive is enabled: ENTER goes out again. */
+static void test_loop_refused_enter_is_sent_again(void **state)
+{
+    (void)state;
+    fx->buses[0].n_refuse_batches = 1; /* the first batch on bus 0 carries ENTERs */
+    uint32_t n_enter = 0;
+    for (unsigned t = 0; t < 64; t++) {
+        steps(1);
+        n_enter += count_special(PS_MIT_SPECIAL_ENTER);
+    }
+    uint32_t n_on_bus0 = 0;
+    for (uint32_t j = 0; j < fx->robot.n_joints; j++)
+        n_on_bus0 += fx->robot.joints[j].bus_idx == 0;
+    /* every joint's ENTER got through once, those of the refused batch included */
+    assert_int_equal(n_enter, fx->robot.n_joints);
+    assert_true(n_on_bus0 > 0);
+    assert_true(fx->loop.counters.n_tx_refused >= 1);
+    for (uint32_t j = 0; j < fx->robot.n_joints; j++)
+        assert_true(fx->loop.is_entered[j]);
+}
+
+/* A stop that lands in the tick where START is accepted still stops, through
+ * DAMPING, and two stop signals before one tick are one stop, not e-stop. */
+static void test_loop_stop_with_start_in_same_tick_still_stops(void **state)
+{
+    (void)state;
+    steps(20);
+    ps_loop_request(&fx->loop, PS_SM_C_REQ_START);
+    ps_loop_request_stop(&fx->loop);
+    ps_loop_request_stop(&fx->loop);
+    for (unsigned t = 0; t < 3000 && !ps_loop_is_stopped(&fx->loop); t++)
+        steps(1);
+    assert_true(ps_loop_is_stopped(&fx->loop));
+    assert_int_equal(fx->loop.state, PS_SM_STANDBY);
+    ps_loop_request(&fx->loop, PS_SM_C_REQ_START); /* stopping: no new start */
+    steps(2);
+    assert_int_equal(fx->loop.state, PS_SM_STANDBY);
+}
+
+static void test_loop_saturated_imu_sample_rejected(void **state)
+{
+    (void)state;
+    go_active();
+    fx->imu_status = PS_IMU_STATUS_ACCEL_SAT;
+    uint64_t bad0 = fx->loop.counters.n_rx_bad;
+    steps((unsigned)(fx->robot.control.imu_timeout_s * 1000) + fx->robot.imu.rate_div + 2);
+    assert_true(fx->loop.counters.n_rx_bad > bad0);
+    assert_int_equal(fx->loop.state, PS_SM_DAMPING); /* no valid IMU: stale */
+}
+
+static void test_loop_frozen_imu_seq_goes_stale(void **state)
+{
+    (void)state;
+    go_active();
+    fx->is_imu_frozen = true;
+    steps((unsigned)(fx->robot.control.imu_timeout_s * 1000) + fx->robot.imu.rate_div + 2);
+    assert_true(fx->loop.counters.n_imu_repeated > 0);
+    assert_int_equal(fx->loop.state, PS_SM_DAMPING);
+}
+
+static void test_loop_init_rejects_unsafe_tables(void **state)
+{
+    (void)state;
+    static ps_loop_t other;
+    ps_loop_cfg_t lc = fx->loop.cfg;
+    ps_robot_cfg_t robot = fx->robot;
+    ps_board_cfg_t board = fx->board;
+    lc.robot = &robot;
+    lc.board = &board;
+    board.n_buses = 3; /* joints on bus 3 now name a bus the board lacks */
+    assert_int_equal(ps_loop_init(&other, &lc), -EINVAL);
+    board = fx->board;
+    robot.joints[2].rate_div = 0;
+    assert_int_equal(ps_loop_init(&other, &lc), -EINVAL);
+    robot = fx->robot;
+    robot.control.ramp_s = 0.0f;
+    assert_int_equal(ps_loop_init(&other, &lc), -EINVAL);
+    robot = fx->robot;
+    lc.gpio.ops = NULL;
+    assert_int_equal(ps_loop_init(&other, &lc), -EINVAL);
+    lc.gpio = fx->loop.cfg.gpio;
+    assert_int_equal(ps_loop_init(&other, &lc), 0);
+}
+
+static void test_loop_bad_sff_id_counted_not_indexed(void **state)
+{
+    (void)state;
+    fake_bus_t *b = &fx->buses[0];
+    ps_can_frame_t *f = &b->pending[b->n_pending++];
+    memset(f, 0, sizeof(*f));
+    f->id = 0x7ff + 0x101; /* would alias reply 0x101 if masked */
+    f->len = 8;
+    steps(1);
+    assert_int_equal(fx->loop.counters.n_rx_bad, 1);
+}
+
+/* A latched drive fault e-stops; the reset is accepted (the drive is
+ * re-enabled in STANDBY); a drive still faulted e-stops again. */
+static void test_loop_drive_fault_reset_then_back_to_estop_if_persists(void **state)
+{
+    (void)state;
+    go_active();
+    fx->fault[5] = PS_MIT_FAULT_ROTOR_OVERTEMP;
+    steps(fx->robot.joints[5].rate_div + 2);
+    assert_int_equal(fx->loop.state, PS_SM_ESTOP);
+    ps_loop_request(&fx->loop, PS_SM_C_REQ_RESET);
+    steps(1);
+    assert_int_equal(fx->loop.state, PS_SM_STANDBY);
+    steps(30); /* ENTER, then the drive answers with its fault again */
+    assert_int_equal(fx->loop.state, PS_SM_ESTOP);
+    fx->fault[5] = PS_MIT_FAULT_NONE; /* cooled down */
+    ps_loop_request(&fx->loop, PS_SM_C_REQ_RESET);
+    steps(30);
+    assert_int_equal(fx->loop.state, PS_SM_STANDBY);
+    ps_loop_request(&fx->loop, PS_SM_C_REQ_START);
+    steps(1);
+    assert_int_equal(fx->loop.state, PS_SM_RAMP);
+}
+
+/* The end of a run leaves the drives disabled and the enable output off. */
+static void test_loop_run_end_releases_drives(void **state)
+{
+    (void)state;
+    go_active();
+    int64_t end = fx->loop.pacer.next_ns + 10 * PERIOD_NS;
+    assert_int_equal(ps_loop_run(&fx->loop, fx->loop.pacer.next_ns, end), 0);
+    uint32_t n_exit = 0;
+    for (uint32_t b = 0; b < fx->board.n_buses; b++)
+        n_exit += fx->buses[b].n_exit_total;
+    assert_int_equal(n_exit, fx->robot.n_joints);
+    assert_false(fx->is_enabled);
+}
+
+/* The clock fails mid-run: one last tick in ESTOP, then the error. */
+static void test_loop_run_clock_failure_estops(void **state)
+{
+    (void)state;
+    go_active();
+    static const int RC[] = {0, 0, -EIO};
+    fx->clock.rc_script = RC;
+    fx->clock.n_rc_script = 3;
+    fx->clock.n_sleep_calls = 0;
+    assert_int_equal(ps_loop_run(&fx->loop, fx->loop.pacer.next_ns, 0), -EIO);
+    assert_int_equal(fx->loop.state, PS_SM_ESTOP);
+    assert_false(fx->is_enabled);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -506,6 +679,15 @@ int main(void)
         T(test_loop_run_until_end_goes_through_damping_to_standby),
         T(test_loop_second_stop_request_estops),
         T(test_loop_commands_each_joint_at_its_rate),
+        T(test_loop_refused_enter_is_sent_again),
+        T(test_loop_stop_with_start_in_same_tick_still_stops),
+        T(test_loop_saturated_imu_sample_rejected),
+        T(test_loop_frozen_imu_seq_goes_stale),
+        T(test_loop_init_rejects_unsafe_tables),
+        T(test_loop_bad_sff_id_counted_not_indexed),
+        T(test_loop_drive_fault_reset_then_back_to_estop_if_persists),
+        T(test_loop_run_end_releases_drives),
+        T(test_loop_run_clock_failure_estops),
 #undef T
     };
     return cmocka_run_group_tests_name("loop", tests, NULL, NULL);

@@ -34,6 +34,8 @@ enum {
     N_BITS = 14,
 };
 #define T_HARD (REQ_ESTOP | ESTOP_IN | DRIVE_FAULT | BUS_OFF)
+/* A drive fault does not block a reset: the drive is re-enabled in STANDBY. */
+#define T_RESET_BLOCK (REQ_ESTOP | ESTOP_IN | BUS_OFF)
 #define T_SOFT (REPLY_STALE | IMU_STALE | POLICY_LATE | TARGET_INVALID | FALL)
 
 enum {
@@ -93,7 +95,7 @@ static const combo_t COMBOS[] = {
     {ES, RESET | ESTOP_IN, ES},
     {ES, RESET | REQ_ESTOP, ES},
     {ES, RESET | BUS_OFF, ES},
-    {ES, RESET | DRIVE_FAULT, ES},
+    {ES, RESET | DRIVE_FAULT, SB},
     {ES, RESET | REPLY_STALE | IMU_STALE | FALL, SB},
     {ES, RESET | START, SB},
     {ES, START | DAMP_DONE | RAMP_DONE | STOP, ES},
@@ -127,7 +129,7 @@ static int ref_next(int s, uint32_t c)
             return ES;
         return (c & DAMP_DONE) ? SB : DA;
     case ES:
-        return ((c & RESET) && !hard) ? SB : ES;
+        return ((c & RESET) && !(c & T_RESET_BLOCK)) ? SB : ES;
     default:
         return ES;
     }
@@ -195,10 +197,10 @@ static void test_ps_sm_next_invalid_state_estop(void **state)
 static void test_ps_sm_next_estop_latched_under_every_condition(void **state)
 {
     (void)state;
-    /* Every condition set leaves ESTOP alone unless it holds RESET and no
-     * hard fault. */
+    /* Every condition set leaves ESTOP alone unless it holds RESET and none
+     * of the reset blockers. */
     for (uint32_t c = 0; c < (1u << N_BITS); c++) {
-        const int may_leave = (c & RESET) && !(c & T_HARD);
+        const int may_leave = (c & RESET) && !(c & T_RESET_BLOCK);
         assert_int_equal(ps_sm_next(PS_SM_ESTOP, c), may_leave ? PS_SM_STANDBY : PS_SM_ESTOP);
     }
     /* A held e-stop input keeps it latched tick after tick, reset or not. */
@@ -279,10 +281,11 @@ static void test_ps_sm_edges_table_well_formed(void **state)
         assert_true((e[i].trigger & ~e[i].blocker) != 0u);
         if (!first_seen[e[i].from]) {
             /* ESTOP is checked first in every state: the state's first edge
-             * goes to ESTOP on exactly the hard faults, unblocked */
+             * goes to ESTOP on exactly the hard faults, unblocked (in ESTOP
+             * itself: the latch holds on the reset blockers) */
             first_seen[e[i].from] = 1;
             assert_int_equal(e[i].to, PS_SM_ESTOP);
-            assert_int_equal(e[i].trigger, T_HARD);
+            assert_int_equal(e[i].trigger, e[i].from == PS_SM_ESTOP ? T_RESET_BLOCK : T_HARD);
             assert_int_equal(e[i].blocker, 0u);
         }
     }
@@ -297,7 +300,7 @@ static void test_ps_sm_fault_masks_match_spec(void **state)
     assert_int_equal(PS_SM_C_SOFT_FAULTS, T_SOFT);
     assert_int_equal(PS_SM_C_REQUESTS, START | STOP | RESET | REQ_ESTOP);
     assert_int_equal(PS_SM_C_START_BLOCKERS, T_HARD | REPLY_STALE | IMU_STALE);
-    assert_int_equal(PS_SM_C_RESET_BLOCKERS, T_HARD);
+    assert_int_equal(PS_SM_C_RESET_BLOCKERS, T_RESET_BLOCK);
     assert_int_equal(PS_SM_C_ALL, (1u << N_BITS) - 1u);
 }
 
@@ -345,7 +348,7 @@ static const req_case_t REQ_CASES[] = {
     {ES, RESET, ESTOP_IN, ILL, "reset refused: e-stop input still pressed"},
     {ES, RESET, REQ_ESTOP, ILL, "reset refused: e-stop requested"},
     {ES, RESET, BUS_OFF, ILL, "reset refused: CAN bus still off"},
-    {ES, RESET, DRIVE_FAULT, ILL, "reset refused: drive fault persists"},
+    {ES, RESET, DRIVE_FAULT, 0, NULL},
     {ES, RESET, DRIVE_FAULT | ESTOP_IN, ILL, "reset refused: e-stop input still pressed"},
     /* ESTOP: from everywhere, whatever else is going on */
     {SB, REQ_ESTOP, 0u, 0, NULL},
