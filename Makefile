@@ -7,9 +7,12 @@ ARGS    ?=
 CC      ?= cc
 CXX     ?= c++
 
-# Debian 12 packages the build, the tests and `make run` need (see README).
-DEPS_PKGS := gcc g++ libc6-dev make pkg-config libmujoco-dev libcyaml-dev libyaml-dev \
-             libcmocka-dev libcjson-dev libgpiod-dev rt-tests can-utils
+# Debian 12 packages (README says why each is there). BUILD_PKGS build, test
+# and run the system; TOOL_PKGS are for working with targets (cyclictest,
+# can-utils, libgpiod, C++ for the camera side). `make deps` installs both.
+BUILD_PKGS := gcc libc6-dev make pkg-config libmujoco-dev libcyaml-dev libyaml-dev \
+              libcmocka-dev libcjson-dev
+TOOL_PKGS  := g++ libgpiod-dev rt-tests can-utils
 # Extra packages `make bench` needs: load generator, plots, the analysis script.
 BENCH_PKGS := stress-ng gnuplot-nox python3
 
@@ -36,11 +39,12 @@ FAKE_OBJS    := $(call OBJ,$(FAKE_SRCS))
 FAKE_SANOBJS := $(call SANOBJ,$(FAKE_SRCS))
 TEST_BINS := $(addprefix $(BUILD)/tests/,$(SAN_TESTS) $(NOSAN_TESTS))
 
-.PHONY: all deps deps-bench run test clean format help bench
+.PHONY: all deps deps-build deps-bench run test clean format help bench
 all: $(BUILD)/pushstep
 
 help:
-	@echo "make deps    install missing Debian packages (as root; idempotent)"
+	@echo "make deps    install missing Debian packages, build and target tools (as root;"
+	@echo "             idempotent); make run/test install only what building needs"
 	@echo "make all     build $(BUILD)/pushstep (default)"
 	@echo "make run     deps + build + run against the simulated crowd, board sim"
 	@echo "             options pass through: make run ARGS=\"--duration 5 --lockstep\""
@@ -50,8 +54,11 @@ help:
 	@echo "make format  clang-format every C source in place"
 	@echo "make clean   remove $(BUILD)/"
 
-deps:
-	@bash tools/deps.sh $(DEPS_PKGS)
+deps: deps-build
+	@bash tools/deps.sh $(TOOL_PKGS)
+
+deps-build:
+	@bash tools/deps.sh $(BUILD_PKGS)
 
 deps-bench: deps
 	@bash tools/deps.sh $(BENCH_PKGS)
@@ -75,10 +82,10 @@ $(addprefix $(BUILD)/tests/,$(NOSAN_TESTS)): $(BUILD)/tests/%: $(BUILD)/obj/test
 	@mkdir -p $(@D)
 	$(CC) $(CFLAGS) -o $@ $^ $(LDLIBS) -lcmocka
 
-run: deps $(BUILD)/pushstep
+run: deps-build $(BUILD)/pushstep
 	$(BUILD)/pushstep --board sim $(ARGS)
 
-test: deps $(BUILD)/pushstep $(TEST_BINS)
+test: deps-build $(BUILD)/pushstep $(TEST_BINS)
 	@PUSHSTEP_BIN=$(BUILD)/pushstep bash tools/run-tests.sh $(TEST_BINS)
 
 bench: deps-bench $(BUILD)/pushstep

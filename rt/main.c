@@ -59,6 +59,7 @@ static struct {
     ps_logger_t logger;
     ps_trace_t trace;
     pid_t stress_pid;
+    int cpu_latency_fd;
     int64_t start_ns, end_ns;
     unsigned rt_missing;
     ps_guard_counts_t guard;
@@ -249,24 +250,36 @@ static int parse_options(int argc, char **argv, options_t *o)
     return 0;
 }
 
-/* The installed data (boards/, robots/, scenarios/, sim/models/) sits one
- * level above the binary's directory (build/pushstep -> repo root). */
+/* Where boards/, robots/, scenarios/ and sim/models/ are: $PUSHSTEP_DATA_DIR,
+ * else one level above the binary (build/pushstep -> repository root) when
+ * boards/ is there, else the current directory. */
 static void find_data_dir(char *out, size_t len)
 {
-    char exe[PATH_MAX];
-    ssize_t n = readlink("/proc/self/exe", exe, sizeof(exe) - 1);
-    if (n <= 0) {
-        snprintf(out, len, ".");
+    const char *env = getenv("PUSHSTEP_DATA_DIR");
+    if (env != NULL && env[0] != '\0') {
+        snprintf(out, len, "%s", env);
         return;
     }
-    exe[n] = '\0';
-    snprintf(out, len, "%s/..", dirname(exe));
+    char exe[PATH_MAX];
+    ssize_t n = readlink("/proc/self/exe", exe, sizeof(exe) - 1);
+    if (n > 0) {
+        exe[n] = '\0';
+        snprintf(out, len, "%s/..", dirname(exe));
+        char probe[PATH_MAX + 16];
+        snprintf(probe, sizeof(probe), "%s/boards", out);
+        if (access(probe, R_OK) == 0)
+            return;
+    }
+    snprintf(out, len, ".");
 }
 
 /* ---- real-time setup -------------------------------------------------- */
 
 static int setup_process_rt(void)
 {
+    g.cpu_latency_fd = -1;
+    if (!g.opt.is_lockstep && ps_rtsetup_hold_cpu_latency(&g.cpu_latency_fd) < 0)
+        g.rt_missing |= PS_RT_MISSING_CPU_LATENCY;
     int rc = ps_rtsetup_lock_memory();
     if (rc < 0) {
         g.rt_missing |= PS_RT_MISSING_MLOCK;
@@ -282,7 +295,7 @@ static void report_rt(void)
         return;
     char what[200];
     ps_rtsetup_describe(g.rt_missing, what, sizeof(what));
-    if (g.opt.is_rt_required)
+    if (g.opt.is_rt_required && (g.rt_missing & ~(unsigned)PS_RT_MISSING_CPU_LATENCY) != 0)
         fprintf(stderr, "pushstep: real-time setup not permitted: %s\n", what);
     else
         fprintf(stderr,
@@ -299,7 +312,9 @@ static void *loop_thread_main(void *arg)
     if (!g.opt.is_lockstep)
         g.rt_missing |= ps_rtsetup_thread(g.app.board.rt.priority, g.app.board.rt.loop_cpu);
     report_rt(); /* still INIT: the loop has not started */
-    if (g.opt.is_rt_required && g.rt_missing != 0) {
+    /* The PM QoS request lowers latency but is not a precondition of real
+     * time: it warns, never fails the run. */
+    if (g.opt.is_rt_required && (g.rt_missing & ~(unsigned)PS_RT_MISSING_CPU_LATENCY) != 0) {
         g.loop_rc = -PS_ERR_RT_UNAVAILABLE;
         atomic_store(&g.is_loop_done, true);
         return NULL;
@@ -336,8 +351,9 @@ static int64_t wall_ns(void)
     return (int64_t)ts.tv_sec * PS_NS_PER_S + ts.tv_nsec;
 }
 
-/* Ground truth is sampled from the main thread while the loop runs: whether
- * the robot really fell while the controller was in charge. */
+/* The lowest CoM while the controller is in charge, sampled from the main
+ * thread every TRUTH_POLL_NS of wall time (informative; whether the robot
+ * fell is decided exactly at the end from the plant's fall time). */
 static void watch_truth(ps_summary_t *sum)
 {
     const struct timespec poll = {0, TRUTH_POLL_NS};
@@ -351,8 +367,6 @@ static void watch_truth(ps_summary_t *sum)
             continue;
         ps_sim_truth_t t;
         ps_sim_get_truth(g.app.sim, &t);
-        if (t.is_fallen)
-            sum->truth_fell_while_active = true;
         if (t.com_m[2] < sum->truth_min_com_height_active_m)
             sum->truth_min_com_height_active_m = t.com_m[2];
     }
@@ -400,13 +414,41 @@ static int run_loop(ps_summary_t *sum)
     return rc;
 }
 
+/* Did the plant's first fall happen while the controller was in charge:
+ * in ACTIVE, or in the DAMPING that the loop's own fall detection started
+ * (the estimator sees the tilt before a body touches the floor)? Both
+ * times count from the start of the run. */
+static bool fell_while_active(double first_fall_t_s)
+{
+    if (first_fall_t_s < 0)
+        return false;
+    const ps_logger_t *lg = &g.logger;
+    uint32_t n = lg->n_transitions < PS_LOGGER_MAX_TRANSITIONS ? lg->n_transitions
+                                                               : PS_LOGGER_MAX_TRANSITIONS;
+    double since = -1;
+    for (uint32_t i = 0; i < n; i++) {
+        const ps_logger_transition_t *t = &lg->transitions[i];
+        bool is_fall_damping =
+            t->from == PS_SM_ACTIVE && t->to == PS_SM_DAMPING && (t->cond & PS_SM_C_FALL);
+        if (t->to == PS_SM_ACTIVE) {
+            since = t->t_s;
+        } else if (since >= 0 && !is_fall_damping) {
+            if (first_fall_t_s >= since && first_fall_t_s <= t->t_s)
+                return true;
+            since = -1;
+        }
+    }
+    return since >= 0 && first_fall_t_s >= since;
+}
+
 static void finish_summary(ps_summary_t *sum)
 {
     sum->board_path = g.app.board_path;
     sum->robot_path = g.app.robot_path;
     sum->scenario_path = g.app.scenario_path[0] ? g.app.scenario_path : NULL;
     sum->is_lockstep = g.opt.is_lockstep;
-    sum->loop_s = ps_ns_to_s((int64_t)g.app.loop.counters.n_ticks * g.app.loop.period_ns);
+    /* loop time from the schedule, so deadlines skipped by overruns count */
+    sum->loop_s = ps_ns_to_s(g.app.loop.pacer.next_ns - g.start_ns);
     sum->loop = &g.app.loop;
     sum->logger = &g.logger;
     sum->guard = g.guard;
@@ -431,6 +473,8 @@ static void finish_summary(ps_summary_t *sum)
         ps_sim_truth_t t;
         ps_sim_get_truth(g.app.sim, &t);
         sum->has_truth = true;
+        sum->truth_fell_while_active = fell_while_active(t.first_fall_t_s);
+        sum->truth_first_fall_t_s = t.first_fall_t_s;
         sum->truth_cmd_out_of_limits = t.n_cmd_out_of_limits;
         sum->truth_plant_overruns = t.n_plant_overruns;
     }
@@ -465,6 +509,7 @@ static int finish_profile(const ps_summary_t *sum)
 
 int main(int argc, char **argv)
 {
+    g.cpu_latency_fd = -1;
     if (parse_options(argc, argv, &g.opt) < 0)
         return 2;
     find_data_dir(g.data_dir, sizeof(g.data_dir));
@@ -509,6 +554,7 @@ int main(int argc, char **argv)
     if (rc == 0)
         rc = run_loop(&sum);
     ps_profile_stop_stress(g.stress_pid);
+    ps_rtsetup_release_cpu_latency(g.cpu_latency_fd);
     if (rc == -PS_ERR_RT_UNAVAILABLE)
         fprintf(stderr, "pushstep: --require-rt: %s\n", ps_strerror(rc));
     else if (rc < 0)

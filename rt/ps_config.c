@@ -1029,8 +1029,8 @@ enum { RA_JOINTS = 1, RA_DRIVERS = 2 };
 static const range_rule_t ROBOT_RANGES[] = {
     {0, NUM_U32, 0, "control.servo_hz", R_OFF(cfg.control.servo_hz), 100.0, 4000.0},
     {0, NUM_U32, 0, "control.policy_hz", R_OFF(cfg.control.policy_hz), 1.0, 1000.0},
-    {0, NUM_F32, 0, "control.ramp_s", R_OFF(cfg.control.ramp_s), 0.0, 10.0},
-    {0, NUM_F32, 0, "control.damping_s", R_OFF(cfg.control.damping_s), 0.0, 60.0},
+    {0, NUM_F32, 0, "control.ramp_s", R_OFF(cfg.control.ramp_s), 0.1, 10.0},
+    {0, NUM_F32, 0, "control.damping_s", R_OFF(cfg.control.damping_s), 0.2, 60.0},
     {0, NUM_F32, 0, "control.damping_kd_nm_s_rad", R_OFF(cfg.control.damping_kd_nm_s_rad), 0.0,
      100.0},
     {0, NUM_F32, 0, "control.still_vel_rad_s", R_OFF(cfg.control.still_vel_rad_s), 0.0, 10.0},

@@ -51,8 +51,7 @@ static bool is_schedule_valid(const ps_board_cfg_t *b, const ps_robot_cfg_t *r)
             jc->reply_id > PS_CAN_SFF_MASK)
             return false;
     }
-    return r->imu.bus_idx < b->n_buses && r->imu.rate_div != 0 &&
-           r->imu.base_id < PS_CAN_SFF_MASK;
+    return r->imu.bus_idx < b->n_buses && r->imu.rate_div != 0 && r->imu.base_id < PS_CAN_SFF_MASK;
 }
 
 int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg)

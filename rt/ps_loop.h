@@ -113,8 +113,8 @@ typedef struct {
     uint64_t n_policy_runs;
     uint64_t n_policy_late;
     uint64_t n_rx_frames;
-    uint64_t n_rx_unknown; /**< frames with an id nobody expects */
-    uint64_t n_rx_bad;     /**< malformed replies/IMU frames, saturated IMU samples */
+    uint64_t n_rx_unknown;   /**< frames with an id nobody expects */
+    uint64_t n_rx_bad;       /**< malformed replies/IMU frames, saturated IMU samples */
     uint64_t n_rx_capped;    /**< ticks a bus still had frames after PS_LOOP_MAX_RX_BATCHES */
     uint64_t n_imu_repeated; /**< IMU samples whose seq did not advance (ignored) */
     uint64_t n_tx_frames;
@@ -149,7 +149,7 @@ typedef struct {
     bool is_entered[PS_MAX_JOINTS]; /**< ENTER sent since the last EXIT */
     bool has_policy_late;
     bool has_target_invalid;
-    bool has_cmd_fault;          /**< a command had to be replaced (TARGET_INVALID) */
+    bool has_cmd_fault; /**< a command had to be replaced (TARGET_INVALID) */
     uint32_t bus_off_mask;
     int16_t reply_joint[PS_MAX_BUSES][PS_CAN_SFF_MASK + 1]; /**< reply id -> joint, -1 */
     ps_imu_msg_rx_t imu_rx;
@@ -157,7 +157,8 @@ typedef struct {
     uint8_t imu_seq; /**< seq of the last IMU sample taken */
     ps_can_frame_t rx_buf[64];
     ps_can_frame_t tx_buf[PS_MAX_BUSES][PS_MAX_JOINTS + 2];
-    int8_t tx_mode_joint[PS_MAX_BUSES][PS_MAX_JOINTS + 2]; /**< per tx frame: ENTER/EXIT joint, -1 */
+    int8_t tx_mode_joint[PS_MAX_BUSES]
+                        [PS_MAX_JOINTS + 2]; /**< per tx frame: ENTER/EXIT joint, -1 */
     uint32_t n_tx[PS_MAX_BUSES];
     int64_t t_deadline_ns; /**< deadline of the current tick */
     ps_perf_hist_t perf[PS_STAGE_COUNT];

@@ -23,6 +23,7 @@
  * because the loop, plant and worker threads each set themselves up and the
  * main thread describes. */
 static atomic_int g_mlock_errno;
+static atomic_int g_cpu_latency_errno;
 static atomic_int g_fifo_errno;
 static atomic_uint g_fifo_priority;
 static atomic_int g_affinity_errno;
@@ -36,6 +37,27 @@ int ps_rtsetup_lock_memory(void)
         return -err;
     }
     return 0;
+}
+
+int ps_rtsetup_hold_cpu_latency(int *out_fd)
+{
+    int fd = open("/dev/cpu_dma_latency", O_WRONLY | O_CLOEXEC);
+    const int32_t zero_us = 0;
+    if (fd < 0 || write(fd, &zero_us, sizeof(zero_us)) != (ssize_t)sizeof(zero_us)) {
+        const int err = errno;
+        if (fd >= 0)
+            (void)close(fd); /* the request failed; nothing held */
+        atomic_store(&g_cpu_latency_errno, err);
+        return -err;
+    }
+    *out_fd = fd;
+    return 0;
+}
+
+void ps_rtsetup_release_cpu_latency(int fd)
+{
+    if (fd >= 0)
+        (void)close(fd); /* closing ends the PM QoS request */
 }
 
 static int set_fifo(unsigned priority)
@@ -265,4 +287,7 @@ void ps_rtsetup_describe(unsigned missing, char *buf, size_t len)
     if (missing & PS_RT_MISSING_AFFINITY)
         append_item(buf, len, &off, "CPU affinity", atomic_load(&g_affinity_errno), "cpu",
                     (long)atomic_load(&g_affinity_cpu));
+    if (missing & PS_RT_MISSING_CPU_LATENCY)
+        append_item(buf, len, &off, "/dev/cpu_dma_latency", atomic_load(&g_cpu_latency_errno), NULL,
+                    0);
 }

@@ -25,6 +25,7 @@ typedef enum {
     PS_RT_MISSING_MLOCK = 1u << 0,
     PS_RT_MISSING_FIFO = 1u << 1,
     PS_RT_MISSING_AFFINITY = 1u << 2,
+    PS_RT_MISSING_CPU_LATENCY = 1u << 3,
 } ps_rt_missing_t;
 
 /** Mappings larger than this are skipped by ps_rtsetup_prefault_maps(): they
@@ -69,6 +70,15 @@ void ps_rtsetup_prefault_stack(size_t stack_bytes);
  *  @return pages touched (> 0) | -errno opening/reading /proc/self/maps
  *  @rt INIT, main thread, before other threads create or drop mappings */
 long ps_rtsetup_prefault_maps(void);
+
+/** Ask the kernel's PM QoS for a 0 us CPU wake-up latency (no deep C-states)
+ *  by writing 0 to /dev/cpu_dma_latency and keeping it open, as cyclictest
+ *  does: the request holds while the descriptor is open.
+ *  @post *out_fd open on success  @return 0 | -errno  @rt INIT */
+int ps_rtsetup_hold_cpu_latency(int *out_fd);
+
+/** Drop the request. Safe with fd < 0. @rt INIT */
+void ps_rtsetup_release_cpu_latency(int fd);
 
 /** Describe missing bits in one line, comma-separated, each with the errno
  *  text of its last failed attempt when there was one, e.g.

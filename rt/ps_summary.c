@@ -93,6 +93,8 @@ static cJSON *rt_json(const ps_summary_t *s)
     cJSON_AddBoolToObject(
         o, "is_fifo", !s->is_lockstep && s->priority > 0 && !(s->rt_missing & PS_RT_MISSING_FIFO));
     cJSON_AddBoolToObject(o, "is_mlocked", !(s->rt_missing & PS_RT_MISSING_MLOCK));
+    cJSON_AddBoolToObject(o, "is_cpu_latency_held",
+                          !s->is_lockstep && !(s->rt_missing & PS_RT_MISSING_CPU_LATENCY));
     cJSON_AddBoolToObject(o, "is_pinned",
                           !s->is_lockstep && s->loop_cpu >= 0 &&
                               !(s->rt_missing & PS_RT_MISSING_AFFINITY));
@@ -142,6 +144,7 @@ static cJSON *summary_json(const ps_summary_t *s)
     if (s->has_truth) {
         cJSON *sim = cJSON_AddObjectToObject(root, "sim_truth");
         cJSON_AddBoolToObject(sim, "fell_while_active", s->truth_fell_while_active);
+        cJSON_AddNumberToObject(sim, "first_fall_t_s", s->truth_first_fall_t_s);
         cJSON_AddNumberToObject(sim, "min_com_height_active_m", s->truth_min_com_height_active_m);
         cJSON_AddNumberToObject(sim, "commands_out_of_limits", (double)s->truth_cmd_out_of_limits);
         cJSON_AddNumberToObject(sim, "plant_overruns", (double)s->truth_plant_overruns);

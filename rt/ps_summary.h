@@ -37,6 +37,7 @@ typedef struct {
     unsigned hist_us;   /**< profile: wake-up histogram buckets */
     bool has_truth;     /**< simulation ground truth below is valid */
     bool truth_fell_while_active;
+    double truth_first_fall_t_s; /**< plant's first fall since start, -1: none */
     double truth_min_com_height_active_m;
     uint64_t truth_cmd_out_of_limits;
     uint64_t truth_plant_overruns;

@@ -18,8 +18,17 @@ void ps_trace_init(ps_trace_t *t)
     t->fd = -1;
 }
 
+void ps_trace_close(ps_trace_t *t)
+{
+    if (t->is_open)
+        (void)close(t->fd); /* nothing to flush: marks are already in the kernel */
+    t->is_open = false;
+    t->fd = -1;
+}
+
 int ps_trace_open(ps_trace_t *t, const char *path, char *err, size_t err_len)
 {
+    ps_trace_close(t);
     ps_trace_init(t);
     const char *const *paths = path ? &path : DEFAULT_PATHS;
     size_t n = path ? 1 : sizeof(DEFAULT_PATHS) / sizeof(DEFAULT_PATHS[0]);
@@ -29,8 +38,10 @@ int ps_trace_open(ps_trace_t *t, const char *path, char *err, size_t err_len)
         err[0] = '\0';
     for (size_t i = 0; i < n; i++) {
         t->fd = open(paths[i], O_WRONLY | O_NONBLOCK | O_CLOEXEC);
-        if (t->fd >= 0)
+        if (t->fd >= 0) {
+            t->is_open = true;
             return 0;
+        }
         rc = -errno;
         if (err != NULL && used < err_len) {
             ps_err_format(err + used, err_len - used, "%s%s: %s", used ? "; " : "", paths[i],
@@ -68,7 +79,7 @@ static size_t put_int(char *buf, size_t at, size_t cap, int64_t v)
 void ps_trace_mark(ps_trace_t *t, const char *what, const char *key1, int64_t v1, const char *key2,
                    int64_t v2)
 {
-    if (t == NULL || t->fd < 0)
+    if (t == NULL || !t->is_open)
         return;
     char line[160];
     const size_t cap = sizeof(line) - 1;
@@ -88,11 +99,4 @@ void ps_trace_mark(ps_trace_t *t, const char *what, const char *key1, int64_t v1
     t->n_marks++;
     if (write(t->fd, line, at) != (ssize_t)at)
         t->n_failed++;
-}
-
-void ps_trace_close(ps_trace_t *t)
-{
-    if (t->fd >= 0)
-        (void)close(t->fd); /* nothing to flush: marks are already in the kernel */
-    t->fd = -1;
 }

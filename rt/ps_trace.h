@@ -18,11 +18,13 @@
 #ifndef PS_TRACE_H
 #define PS_TRACE_H
 
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 
 typedef struct {
-    int fd; /**< -1: closed, marks are no-ops */
+    bool is_open; /**< false: marks are no-ops (a zeroed struct is closed) */
+    int fd;
     uint64_t n_marks;
     uint64_t n_failed;
 } ps_trace_t;
@@ -31,8 +33,9 @@ typedef struct {
 void ps_trace_init(ps_trace_t *t);
 
 /** Open trace_marker: path, or NULL to try /sys/kernel/tracing and then
- *  /sys/kernel/debug/tracing.  @post err says which paths failed and why
- *  @return 0 | -errno  @rt INIT */
+ *  /sys/kernel/debug/tracing. Closes t first if it was open.
+ *  @pre t initialised (ps_trace_init) or zeroed  @post err says which paths
+ *  failed and why  @return 0 | -errno  @rt INIT */
 int ps_trace_open(ps_trace_t *t, const char *path, char *err, size_t err_len);
 
 /** Write "pushstep: <what> <key1>=<v1> <key2>=<v2>\n". key2 may be NULL.

@@ -71,6 +71,7 @@ struct ps_sim {
     atomic_bool is_running;
 
     pthread_mutex_t truth_mu;
+    double first_fall_t_s; /**< plant time of the first fall, -1: none yet */
     bool has_mutex;
     ps_sim_truth_t truth;
 };
@@ -232,6 +233,9 @@ static void update_truth(ps_sim_t *s)
     t.n_imu_samples = s->imu.n_samples;
     t.n_dev_tx_dropped = s->n_dev_tx_dropped;
     t.n_plant_overruns = s->n_overruns;
+    if (pt.is_fallen && s->first_fall_t_s < 0)
+        s->first_fall_t_s = pt.t_s;
+    t.first_fall_t_s = s->first_fall_t_s;
     t.plant_err = s->plant_err;
     /* Held only for the copy, so the plant thread is never delayed for long. */
     pthread_mutex_lock(&s->truth_mu);
@@ -387,11 +391,19 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
     s->is_lockstep = cfg->is_lockstep;
     s->period_ns = cfg->period_ns;
     atomic_init(&s->now_ns, 0);
+    s->first_fall_t_s = -1.0;
     atomic_init(&s->requests, 0u);
     atomic_init(&s->is_running, false);
     s->clock = (ps_clock_t){.now_ns = sim_now_ns, .sleep_until_ns = sim_sleep_until_ns, .ctx = s};
 
-    if (pthread_mutex_init(&s->truth_mu, NULL) != 0) {
+    /* Priority inheritance: the SCHED_FIFO plant thread and the SCHED_OTHER
+     * main thread share this mutex. */
+    pthread_mutexattr_t attr;
+    bool is_attr_ok = pthread_mutexattr_init(&attr) == 0 &&
+                      pthread_mutexattr_setprotocol(&attr, PTHREAD_PRIO_INHERIT) == 0;
+    int mutex_rc = pthread_mutex_init(&s->truth_mu, is_attr_ok ? &attr : NULL);
+    (void)pthread_mutexattr_destroy(&attr); /* nothing to undo if init failed */
+    if (mutex_rc != 0) {
         ps_err_format(err, err_len, "sim: mutex init failed");
         free(s);
         return -ENOMEM;

@@ -74,6 +74,7 @@ typedef struct {
     double max_temp_c;
     /* Added by sim/ps_sim.c (documented extensions): */
     double pelvis_m[3];         /**< pelvis origin, world */
+    double first_fall_t_s;      /**< simulated time since start of the first fall, -1: none */
     uint64_t n_plant_overruns;  /**< real time: plant periods skipped because physics
                                      fell behind the clock (0 in lockstep) */
     uint64_t n_cmd_ignored;     /**< command frames received outside motor mode */

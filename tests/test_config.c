@@ -604,6 +604,16 @@ static void test_load_robot_unknown_driver_rejected(void **state)
     expect_robot_error(f);
 }
 
+/* A zero ramp would step to full stiffness; no braking time would drop the
+ * robot on Ctrl-C: both are refused. */
+static void test_load_robot_zero_ramp_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "ramp_s: 1.0", "ramp_s: 0");
+    want(f, "%s:%d: control.ramp_s: value 0 outside [0.1, 10]", f->path, line_of(f, "ramp_s"));
+    expect_robot_error(f);
+}
+
 static void test_load_robot_servo_not_multiple_rejected(void **state)
 {
     fx_t *f = *state;
@@ -892,6 +902,7 @@ int main(void)
         T(test_load_robot_reply_id_on_imu_rejected),
         T(test_load_robot_can_id_high_rejected),
         T(test_load_robot_unknown_driver_rejected),
+        T(test_load_robot_zero_ramp_rejected),
         T(test_load_robot_servo_not_multiple_rejected),
         T(test_load_robot_pos_outside_wire_rejected),
         T(test_load_robot_pos_min_not_below_max_rejected),

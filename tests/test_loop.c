@@ -498,7 +498,6 @@ static void test_loop_commands_each_joint_at_its_rate(void **state)
         assert_int_equal(n_cmd[j], 200 / fx->robot.joints[j].rate_div);
 }
 
-
 /* ---- findings of the review: each a regression test ------------------------ */
 
 static uint32_t count_special(int which)

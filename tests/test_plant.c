@@ -586,23 +586,6 @@ static void test_model_kinematics_match_convention(void **st)
     mj_deleteModel(m);
 }
 
-/* ---- physics speed -------------------------------------------------------- */
-
-static void test_ps_plant_step_speed_report(void **st)
-{
-    state_t *s = *st;
-    double tau[PS_MAX_JOINTS];
-    pd_stance(s, tau);
-    ps_plant_set_torques(s->plant, tau);
-    const double t0 = now_s();
-    for (int k = 0; k < 20000; k++)
-        assert_int_equal(ps_plant_step(s->plant), 0);
-    const double wall_s = now_s() - t0;
-    printf("  20000 steps in %.3f s: %.0f physics steps per wall second (%.1fx real time)\n",
-           wall_s, 20000.0 / wall_s, 20000.0 * ps_plant_timestep_s(s->plant) / wall_s);
-    assert_true(wall_s > 0.0);
-}
-
 /* ---- the robot file -------------------------------------------------------- */
 
 static void test_ps_config_load_robot_ps1_matches_model(void **st)
@@ -671,7 +654,6 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_ps_plant_set_external_force_sustained_push_falls,
                                         setup, teardown),
         cmocka_unit_test(test_model_kinematics_match_convention),
-        cmocka_unit_test_setup_teardown(test_ps_plant_step_speed_report, setup, teardown),
         cmocka_unit_test(test_ps_config_load_robot_ps1_matches_model),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -36,7 +36,7 @@ enum {
 #define T_HARD (REQ_ESTOP | ESTOP_IN | DRIVE_FAULT | BUS_OFF)
 /* A drive fault does not block a reset: the drive is re-enabled in STANDBY. */
 #define T_RESET_BLOCK (REQ_ESTOP | ESTOP_IN | BUS_OFF)
-#define T_SOFT (REPLY_STALE | IMU_STALE | POLICY_LATE | TARGET_INVALID | FALL)
+#define T_SOFT        (REPLY_STALE | IMU_STALE | POLICY_LATE | TARGET_INVALID | FALL)
 
 enum {
     SB = PS_SM_STANDBY,

@@ -31,6 +31,7 @@ static void test_ps_trace_open_missing_path_names_it(void **state)
 {
     (void)state;
     ps_trace_t t;
+    ps_trace_init(&t);
     char err[256];
     assert_int_equal(ps_trace_open(&t, "/nonexistent/trace_marker", err, sizeof(err)), -ENOENT);
     assert_non_null(strstr(err, "/nonexistent/trace_marker"));
@@ -46,6 +47,7 @@ static void test_ps_trace_mark_writes_lines(void **state)
     assert_true(fd >= 0);
     close(fd);
     ps_trace_t t;
+    ps_trace_init(&t);
     char err[256];
     assert_int_equal(ps_trace_open(&t, path, err, sizeof(err)), 0);
     ps_trace_mark(&t, "tick", "n", 42, "wake_ns", 12345);
@@ -67,11 +69,22 @@ static void test_ps_trace_mark_failed_write_counted(void **state)
 {
     (void)state;
     ps_trace_t t;
+    ps_trace_init(&t);
     char err[256];
     assert_int_equal(ps_trace_open(&t, "/dev/full", err, sizeof(err)), 0);
     ps_trace_mark(&t, "tick", "n", 1, NULL, 0);
     assert_int_equal(t.n_failed, 1);
     ps_trace_close(&t);
+}
+
+/* Deinit on a zeroed struct must not close fd 0 (stdin). */
+static void test_ps_trace_close_zeroed_leaves_fd0(void **state)
+{
+    (void)state;
+    ps_trace_t t;
+    memset(&t, 0, sizeof(t));
+    ps_trace_close(&t);
+    assert_true(fcntl(0, F_GETFD) >= 0);
 }
 
 int main(void)
@@ -80,6 +93,7 @@ int main(void)
         cmocka_unit_test(test_ps_trace_open_missing_path_names_it),
         cmocka_unit_test(test_ps_trace_mark_writes_lines),
         cmocka_unit_test(test_ps_trace_mark_failed_write_counted),
+        cmocka_unit_test(test_ps_trace_close_zeroed_leaves_fd0),
     };
     return cmocka_run_group_tests_name("trace", tests, NULL, NULL);
 }
