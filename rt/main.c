@@ -537,6 +537,11 @@ int main(int argc, char **argv)
         return 2;
     }
     rc = setup_process_rt();
+    /* The main thread (truth sampling, summary) is not real-time: keep it off
+     * the loop's CPU, with the logger. Threads created later inherit this;
+     * the loop thread pins itself to its own CPU. */
+    if (!g.opt.is_lockstep)
+        (void)ps_rtsetup_thread_best_effort(0, g.app.board.rt.worker_cpu);
     if (rc == 0)
         rc = install_signals();
     if (rc == 0 && g.opt.stress != NULL) {
