@@ -107,6 +107,8 @@ static const char USAGE[] =
     "\n"
     "Ctrl-C (or the end of --duration) brakes the robot through DAMPING to STANDBY\n"
     "before exiting; a second Ctrl-C while braking requests e-stop.\n"
+    "Board, robot and scenario NAMEs are looked up in $PUSHSTEP_DATA_DIR, else next\n"
+    "to the binary's folder (build/.. = the repository), else the current folder.\n"
     "Exit status: 0 ok, 1 runtime failure, 2 bad usage or configuration.\n";
 
 /* ---- options and paths ------------------------------------------------ */
