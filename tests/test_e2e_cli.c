@@ -13,6 +13,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -206,6 +207,53 @@ static void test_cli_bad_option_exit_2(void **state)
     assert_non_null(strstr(out, "--duration"));
     assert_int_equal(run("--out /tmp/x"), 2); /* profile-only option */
     assert_int_equal(run("profile --lockstep"), 2);
+    assert_int_equal(run("profile --stress bogus"), 2);
+    assert_non_null(strstr(out, "cpu, mem, io"));
+    assert_int_equal(run("profile --hist-us 0"), 2);
+}
+
+/* Without real-time privileges: profile runs, says what it lacks, and its
+ * JSON records the conditions; --require-rt refuses. Needs root to drop to
+ * user nobody (setpriv), and a binary nobody can reach. */
+static void test_cli_profile_without_rt_privileges_says_so(void **state)
+{
+    (void)state;
+    char probe[512];
+    snprintf(probe, sizeof(probe),
+             "setpriv --reuid=65534 --regid=65534 --clear-groups test -x %s 2>/dev/null", bin());
+    if (geteuid() != 0 || system(probe) != 0)
+        skip(); /* not root, or the checkout is not readable by nobody */
+    char dir[] = "/tmp/ps_norq_XXXXXX";
+    assert_non_null(mkdtemp(dir));
+    assert_int_equal(chmod(dir, 0777), 0);
+    char args[512];
+    snprintf(args, sizeof(args), "profile --duration 1 --quiet --out %s", dir);
+    char cmd[1024];
+    snprintf(cmd, sizeof(cmd), "setpriv --reuid=65534 --regid=65534 --clear-groups %s %s 2>&1",
+             bin(), args);
+    FILE *p = popen(cmd, "r");
+    assert_non_null(p);
+    size_t n = fread(out, 1, sizeof(out) - 1, p);
+    out[n] = '\0';
+    int status = pclose(p);
+    if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
+        fail_msg("profile as nobody failed:\n%s", out);
+    assert_non_null(strstr(out, "warning: real-time setup incomplete"));
+    assert_non_null(strstr(out, "SCHED_FIFO"));
+    char path[512];
+    snprintf(path, sizeof(path), "%s/profile.json", dir);
+    cJSON *j = read_json(path);
+    assert_true(cJSON_IsFalse(obj(obj(j, "profile"), "is_fifo")));
+    assert_true(num(j, "ticks") >= 1000);
+    cJSON_Delete(j);
+    snprintf(cmd, sizeof(cmd),
+             "setpriv --reuid=65534 --regid=65534 --clear-groups %s --duration 1 --require-rt "
+             ">/dev/null 2>&1",
+             bin());
+    status = system(cmd);
+    assert_true(WIFEXITED(status) && WEXITSTATUS(status) == 1);
+    snprintf(cmd, sizeof(cmd), "rm -rf %s", dir);
+    assert_int_equal(system(cmd), 0);
 }
 
 static void test_cli_bad_config_names_file_and_field(void **state)
@@ -246,6 +294,7 @@ int main(void)
         cmocka_unit_test(test_cli_lockstep_summary_json_has_the_figures),
         cmocka_unit_test(test_cli_realtime_run_paced_in_real_time),
         cmocka_unit_test(test_cli_profile_writes_json_and_cyclictest_histogram),
+        cmocka_unit_test(test_cli_profile_without_rt_privileges_says_so),
         cmocka_unit_test(test_cli_bad_option_exit_2),
         cmocka_unit_test(test_cli_bad_config_names_file_and_field),
         cmocka_unit_test(test_cli_linux_board_says_drivers_missing),
