@@ -94,7 +94,7 @@ fi
 # and pushstep each hold /dev/cpu_dma_latency at 0 while they run; the bench
 # holds it for the whole run too, so no block starts from deep idle states.
 DMA_HELD=no
-if [ -w /dev/cpu_dma_latency ] && exec {DMA_FD}>/dev/cpu_dma_latency 2>/dev/null; then
+if [ -w /dev/cpu_dma_latency ] && { exec {DMA_FD}>/dev/cpu_dma_latency; } 2>/dev/null; then
     if printf 0 >&"$DMA_FD"; then DMA_HELD=yes; fi
 fi
 

@@ -6,6 +6,11 @@
  * SocketCAN, later), sim/ps_can_sim.c (simulated wire with bit timing),
  * tests/fakes/ps_can_fake.c (scripted). The loop never knows which it has.
  *
+ * Only data frames reach the loop: an implementation drops remote (RTR) and
+ * error frames (SocketCAN's CAN_RTR_FLAG / CAN_ERR_FLAG) and reports bus
+ * errors through get_state, and never hands over an 11-bit frame with an
+ * id above 0x7ff (the loop counts such a frame as bad, it does not mask it).
+ *
  * Threads: a port is used by one thread (the loop) unless an implementation
  * says otherwise. Allocation: none here; implementations allocate in their own
  * INIT-phase open function.

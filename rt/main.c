@@ -297,8 +297,13 @@ static void report_rt(void)
         return;
     char what[200];
     ps_rtsetup_describe(g.rt_missing, what, sizeof(what));
-    if (g.opt.is_rt_required && (g.rt_missing & ~(unsigned)PS_RT_MISSING_CPU_LATENCY) != 0)
+    bool is_fatal =
+        g.opt.is_rt_required && (g.rt_missing & ~(unsigned)PS_RT_MISSING_CPU_LATENCY) != 0;
+    if (is_fatal)
         fprintf(stderr, "pushstep: real-time setup not permitted: %s\n", what);
+    else if (g.opt.is_rt_required)
+        fprintf(stderr, "pushstep: warning: %s; --require-rt does not require it, running on\n",
+                what);
     else
         fprintf(stderr,
                 "pushstep: warning: real-time setup incomplete: %s; running on without "
@@ -405,6 +410,11 @@ static int run_loop(ps_summary_t *sum)
     pthread_t th;
     int64_t wall0 = wall_ns();
     rc = -pthread_create(&th, NULL, loop_thread_main, NULL);
+    /* The main thread (truth sampling, summary) is not real-time: keep it off
+     * the loop's CPU, with the logger. Only now, so that no thread or child
+     * process (stress-ng) inherits its CPU mask. */
+    if (rc == 0 && !g.opt.is_lockstep)
+        (void)ps_rtsetup_thread_best_effort(0, g.app.board.rt.worker_cpu);
     if (rc == 0) {
         watch_truth(sum);
         (void)pthread_join(th, NULL); /* the thread always ends */
@@ -536,14 +546,10 @@ int main(int argc, char **argv)
     if (rc < 0) {
         fprintf(stderr, "pushstep: %s\n", err);
         ps_app_deinit(&g.app);
+        ps_trace_close(&g.trace);
         return 2;
     }
     rc = setup_process_rt();
-    /* The main thread (truth sampling, summary) is not real-time: keep it off
-     * the loop's CPU, with the logger. Threads created later inherit this;
-     * the loop thread pins itself to its own CPU. */
-    if (!g.opt.is_lockstep)
-        (void)ps_rtsetup_thread_best_effort(0, g.app.board.rt.worker_cpu);
     if (rc == 0)
         rc = install_signals();
     if (rc == 0 && g.opt.stress != NULL) {
@@ -551,7 +557,9 @@ int main(int argc, char **argv)
                                      sizeof(err));
         if (rc < 0) {
             fprintf(stderr, "pushstep: %s\n", err);
+            ps_rtsetup_release_cpu_latency(g.cpu_latency_fd);
             ps_app_deinit(&g.app);
+            ps_trace_close(&g.trace);
             return 2;
         }
         printf("load: stress-ng --%s on every CPU\n", g.opt.stress);

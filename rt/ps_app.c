@@ -95,6 +95,8 @@ static int wire_sim(ps_app_t *app, ps_loop_cfg_t *lc, char *err, size_t len)
     lc->gpio = ps_sim_gpio_port(app->sim);
     lc->clock = ps_sim_clock(app->sim);
     lc->perf_clock = ps_clock_monotonic();
+    if (app->is_lockstep)
+        lc->deadline_clock = ps_clock_thread_cpu();
     return 0;
 }
 

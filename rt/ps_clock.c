@@ -42,3 +42,29 @@ const ps_clock_t *ps_clock_monotonic(void)
 {
     return &MONOTONIC;
 }
+
+static int64_t thread_cpu_now_ns(void *ctx)
+{
+    (void)ctx;
+    struct timespec ts;
+    (void)clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts); /* valid pointer: cannot fail */
+    return (int64_t)ts.tv_sec * PS_NS_PER_S + (int64_t)ts.tv_nsec;
+}
+
+static int thread_cpu_sleep_until_ns(void *ctx, int64_t deadline_ns)
+{
+    (void)ctx;
+    (void)deadline_ns;
+    return -EINVAL; /* CPU time cannot be slept on: a measuring clock only */
+}
+
+static const ps_clock_t THREAD_CPU = {
+    .now_ns = thread_cpu_now_ns,
+    .sleep_until_ns = thread_cpu_sleep_until_ns,
+    .ctx = NULL,
+};
+
+const ps_clock_t *ps_clock_thread_cpu(void)
+{
+    return &THREAD_CPU;
+}

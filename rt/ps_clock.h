@@ -28,6 +28,12 @@ typedef struct {
  *  @return pointer to a static, thread-safe clock  @rt RT-SAFE */
 const ps_clock_t *ps_clock_monotonic(void);
 
+/** The calling thread's CPU time (CLOCK_THREAD_CPUTIME_ID): time the thread
+ *  actually ran, which preemption does not advance. For measuring work, e.g.
+ *  the policy deadline in lockstep; sleep_until_ns returns -EINVAL.
+ *  @return pointer to a static clock  @rt RT-SAFE */
+const ps_clock_t *ps_clock_thread_cpu(void);
+
 /** @return clock's current time  @units ns  @rt RT-SAFE */
 static inline int64_t ps_clock_now_ns(const ps_clock_t *c)
 {

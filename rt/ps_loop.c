@@ -21,8 +21,10 @@ static const char *const STAGE_NAMES[PS_STAGE_COUNT] = {
 _Static_assert(sizeof(STAGE_NAMES) / sizeof(STAGE_NAMES[0]) == PS_STAGE_COUNT,
                "one name per stage");
 
-#define IMU_STATUS_REJECTED                                                                        \
-    (PS_IMU_STATUS_SELFTEST_FAIL | PS_IMU_STATUS_GYRO_SAT | PS_IMU_STATUS_ACCEL_SAT)
+/* A saturated gyro or a failed self-test makes the sample useless. A
+ * saturated accelerometer (an impact) does not: the gyro still counts and the
+ * estimator's gravity gate ignores an accelerometer far from 1 g. */
+#define IMU_STATUS_REJECTED (PS_IMU_STATUS_SELFTEST_FAIL | PS_IMU_STATUS_GYRO_SAT)
 
 /* DAMPING may end early on stillness only after this long, so that a robot
  * that is momentarily still at the instant damping starts is still braked. */
@@ -75,6 +77,8 @@ int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg)
     loop->cfg = *cfg;
     if (loop->cfg.perf_clock == NULL)
         loop->cfg.perf_clock = cfg->clock;
+    if (loop->cfg.deadline_clock == NULL)
+        loop->cfg.deadline_clock = cfg->clock;
     loop->period_ns = PS_NS_PER_S / c->servo_hz;
     loop->policy_div = c->servo_hz / c->policy_hz;
     loop->state = PS_SM_STANDBY;
@@ -143,8 +147,10 @@ static void take_frame(ps_loop_t *loop, uint32_t bus_idx, const ps_can_frame_t *
     int rc = ps_imu_msg_rx_feed(&loop->imu_rx, f, &sample);
     if (rc == -ENOENT) {
         loop->counters.n_rx_unknown++;
-    } else if (rc < 0 || (rc == 1 && (sample.status & IMU_STATUS_REJECTED))) {
-        loop->counters.n_rx_bad++; /* saturated or failed: not a measurement */
+    } else if (rc < 0) {
+        loop->counters.n_rx_bad++;
+    } else if (rc == 1 && (sample.status & IMU_STATUS_REJECTED)) {
+        loop->counters.n_imu_rejected++; /* saturated gyro or failed: not a measurement */
     } else if (rc == 1 && loop->has_imu_seq && sample.seq == loop->imu_seq) {
         loop->counters.n_imu_repeated++; /* a hung IMU repeating itself is not fresh */
     } else if (rc == 1) {
@@ -219,17 +225,17 @@ static void stage_policy(ps_loop_t *loop, uint64_t tick)
 {
     if (tick % loop->policy_div != 0)
         return;
-    /* Statistics on the perf clock; the deadline on the pacing clock, so that
-     * in lockstep (simulated time) a preempted policy is not "late" and the
-     * run stays deterministic. On hardware both are the monotonic clock. */
-    const ps_clock_t *perf = loop->cfg.perf_clock, *pace = loop->cfg.clock;
-    int64_t t0 = ps_clock_now_ns(perf), t0_pace = ps_clock_now_ns(pace);
+    /* Statistics on the perf clock; the deadline on the deadline clock (the
+     * pacing clock on hardware, the thread's CPU time in lockstep, so that a
+     * preempted policy is not late and the run stays deterministic). */
+    const ps_clock_t *perf = loop->cfg.perf_clock, *dl = loop->cfg.deadline_clock;
+    int64_t t0 = ps_clock_now_ns(perf), t0_dl = ps_clock_now_ns(dl);
     int rc = loop->cfg.policy.ops->step(loop->cfg.policy.ctx, &loop->meas, &loop->estimator.est,
                                         &loop->targets);
-    int64_t dt = ps_clock_now_ns(perf) - t0, dt_pace = ps_clock_now_ns(pace) - t0_pace;
+    int64_t dt = ps_clock_now_ns(perf) - t0, dt_dl = ps_clock_now_ns(dl) - t0_dl;
     ps_perf_record(&loop->perf[PS_STAGE_POLICY], dt);
     loop->counters.n_policy_runs++;
-    loop->has_policy_late = dt_pace > ps_s_to_ns(loop->cfg.robot->control.policy_deadline_s);
+    loop->has_policy_late = dt_dl > ps_s_to_ns(loop->cfg.robot->control.policy_deadline_s);
     if (loop->has_policy_late)
         loop->counters.n_policy_late++;
     loop->has_target_invalid = rc < 0 || !is_target_valid(loop->cfg.robot, &loop->targets);
@@ -315,6 +321,12 @@ static uint32_t timer_conditions(const ps_loop_t *loop)
     return 0;
 }
 
+/* Stopping: after an operator's stop request or the end of the run. */
+static bool is_stopping(const ps_loop_t *loop)
+{
+    return loop->is_ending || loop->n_stops_handled > 0;
+}
+
 /* Operator requests are checked one by one so that each refusal is logged
  * with its reason; accepted ones join the conditions of this tick. */
 static uint32_t take_requests(ps_loop_t *loop, uint32_t cond)
@@ -322,7 +334,7 @@ static uint32_t take_requests(ps_loop_t *loop, uint32_t cond)
     uint32_t req = atomic_exchange(&loop->external_requests, 0u);
     if (loop->cfg.op.take != NULL)
         req |= loop->cfg.op.take(loop->cfg.op.ctx) & PS_SM_C_REQUESTS;
-    if (loop->n_stops_handled > 0)
+    if (is_stopping(loop))
         req &= ~(uint32_t)PS_SM_C_REQ_START; /* stopping: no new start */
     uint32_t accepted = 0;
     for (uint32_t bit = 1; bit != 0 && bit <= PS_SM_C_REQUESTS; bit <<= 1) {
@@ -573,7 +585,9 @@ void ps_loop_request_stop(ps_loop_t *loop)
  * from the first stop on, START is refused and STOP is asked on every tick
  * the robot is in RAMP or ACTIVE, so a START accepted in the same tick as
  * the stop cannot outlive it. A stop request that arrives in a later tick
- * than the first one (a second Ctrl-C while braking) asks for e-stop. */
+ * than the operator's first one (a second Ctrl-C while braking) asks for
+ * e-stop; the end of the run is not an operator request, so one Ctrl-C
+ * during its braking only confirms the stop. */
 static void handle_stop_requests(ps_loop_t *loop)
 {
     uint32_t n = atomic_load(&loop->n_stop_requests);
@@ -585,7 +599,7 @@ static void handle_stop_requests(ps_loop_t *loop)
             return;
         }
     }
-    if (loop->n_stops_handled > 0 && (loop->state == PS_SM_RAMP || loop->state == PS_SM_ACTIVE))
+    if (is_stopping(loop) && (loop->state == PS_SM_RAMP || loop->state == PS_SM_ACTIVE))
         ps_loop_request(loop, PS_SM_C_REQ_STOP);
 }
 
@@ -619,7 +633,7 @@ int ps_loop_step(ps_loop_t *loop)
 
 bool ps_loop_is_stopped(const ps_loop_t *loop)
 {
-    return loop->n_stops_handled > 0 && is_at_rest(loop);
+    return is_stopping(loop) && is_at_rest(loop);
 }
 
 void ps_loop_release_drives(ps_loop_t *loop)
@@ -647,8 +661,8 @@ int ps_loop_run(ps_loop_t *loop, int64_t start_ns, int64_t end_ns)
 {
     int rc = ps_loop_start(loop, start_ns);
     while (rc == 0 && !ps_loop_is_stopped(loop)) {
-        if (end_ns > 0 && loop->pacer.next_ns >= end_ns && atomic_load(&loop->n_stop_requests) == 0)
-            ps_loop_request_stop(loop);
+        if (end_ns > 0 && loop->pacer.next_ns >= end_ns)
+            loop->is_ending = true;
         rc = ps_loop_step(loop);
     }
     if (rc < 0) {

@@ -75,6 +75,9 @@ typedef struct {
     const ps_clock_t *perf_clock;      /**< stage timestamps and the policy deadline; NULL: clock.
                                             In lockstep this is the real clock, so the figures
                                             are the loop's own compute time */
+    const ps_clock_t *deadline_clock;  /**< judges the policy deadline; NULL: clock. In
+                                            lockstep the thread's CPU time: a slow policy
+                                            is late, a preempted one is not */
     ps_can_port_t buses[PS_MAX_BUSES]; /**< one per board bus */
     ps_gpio_port_t gpio;
     ps_policy_t policy;
@@ -114,7 +117,8 @@ typedef struct {
     uint64_t n_policy_late;
     uint64_t n_rx_frames;
     uint64_t n_rx_unknown;   /**< frames with an id nobody expects */
-    uint64_t n_rx_bad;       /**< malformed replies/IMU frames, saturated IMU samples */
+    uint64_t n_rx_bad;       /**< malformed replies or IMU frames */
+    uint64_t n_imu_rejected; /**< IMU samples with a saturated gyro or failed self-test */
     uint64_t n_rx_capped;    /**< ticks a bus still had frames after PS_LOOP_MAX_RX_BATCHES */
     uint64_t n_imu_repeated; /**< IMU samples whose seq did not advance (ignored) */
     uint64_t n_tx_frames;
@@ -141,6 +145,7 @@ typedef struct {
     atomic_uint external_requests; /**< from ps_loop_request (any thread) */
     atomic_uint n_stop_requests;   /**< from ps_loop_request_stop (any thread) */
     uint32_t n_stops_handled;
+    bool is_ending; /**< end of the run reached: stopping, no operator request */
     ps_meas_t meas;
     ps_estimator_t estimator;
     ps_targets_t targets;

@@ -71,6 +71,9 @@ static cJSON *counters_json(const ps_loop_counters_t *c)
     cJSON_AddNumberToObject(o, "rx_frames", (double)c->n_rx_frames);
     cJSON_AddNumberToObject(o, "rx_unknown", (double)c->n_rx_unknown);
     cJSON_AddNumberToObject(o, "rx_bad", (double)c->n_rx_bad);
+    cJSON_AddNumberToObject(o, "rx_capped_ticks", (double)c->n_rx_capped);
+    cJSON_AddNumberToObject(o, "imu_rejected", (double)c->n_imu_rejected);
+    cJSON_AddNumberToObject(o, "imu_repeated", (double)c->n_imu_repeated);
     cJSON_AddNumberToObject(o, "tx_frames", (double)c->n_tx_frames);
     cJSON_AddNumberToObject(o, "tx_refused", (double)c->n_tx_refused);
     cJSON_AddNumberToObject(o, "bus_errors", (double)c->n_bus_errors);
@@ -206,16 +209,16 @@ void ps_summary_print(const ps_summary_t *s, FILE *out)
     fprintf(out, " after init on the loop thread: %llu mallocs%s, %llu frees, %llu page faults\n",
             (unsigned long long)s->guard.n_allocs, s->is_guard_exact ? "" : " (not counted)",
             (unsigned long long)s->guard.n_frees, (unsigned long long)s->guard.n_faults);
+    const ps_loop_counters_t *c = &loop->counters;
     fprintf(out,
             " policy runs %llu (late %llu), transitions %llu, requests refused %llu, "
-            "commands replaced %llu, rx bad %llu, unknown %llu\n",
-            (unsigned long long)loop->counters.n_policy_runs,
-            (unsigned long long)loop->counters.n_policy_late,
-            (unsigned long long)loop->counters.n_transitions,
-            (unsigned long long)loop->counters.n_refused,
-            (unsigned long long)loop->counters.n_cmd_replaced,
-            (unsigned long long)loop->counters.n_rx_bad,
-            (unsigned long long)loop->counters.n_rx_unknown);
+            "commands replaced %llu\n rx bad %llu, unknown %llu, capped ticks %llu; IMU samples "
+            "rejected %llu, repeated %llu\n",
+            (unsigned long long)c->n_policy_runs, (unsigned long long)c->n_policy_late,
+            (unsigned long long)c->n_transitions, (unsigned long long)c->n_refused,
+            (unsigned long long)c->n_cmd_replaced, (unsigned long long)c->n_rx_bad,
+            (unsigned long long)c->n_rx_unknown, (unsigned long long)c->n_rx_capped,
+            (unsigned long long)c->n_imu_rejected, (unsigned long long)c->n_imu_repeated);
     fprintf(out, " fall detected: %s\n", loop->counters.has_fallen ? "yes" : "no");
     if (s->has_truth)
         fprintf(out,

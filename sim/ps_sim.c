@@ -399,10 +399,14 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
     /* Priority inheritance: the SCHED_FIFO plant thread and the SCHED_OTHER
      * main thread share this mutex. */
     pthread_mutexattr_t attr;
-    bool is_attr_ok = pthread_mutexattr_init(&attr) == 0 &&
-                      pthread_mutexattr_setprotocol(&attr, PTHREAD_PRIO_INHERIT) == 0;
+    bool is_attr_ok = pthread_mutexattr_init(&attr) == 0;
+    if (is_attr_ok && pthread_mutexattr_setprotocol(&attr, PTHREAD_PRIO_INHERIT) != 0) {
+        (void)pthread_mutexattr_destroy(&attr); /* fall back to a plain mutex */
+        is_attr_ok = false;
+    }
     int mutex_rc = pthread_mutex_init(&s->truth_mu, is_attr_ok ? &attr : NULL);
-    (void)pthread_mutexattr_destroy(&attr); /* nothing to undo if init failed */
+    if (is_attr_ok)
+        (void)pthread_mutexattr_destroy(&attr); /* the mutex keeps its own copy */
     if (mutex_rc != 0) {
         ps_err_format(err, err_len, "sim: mutex init failed");
         free(s);

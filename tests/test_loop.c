@@ -49,8 +49,11 @@ typedef struct {
     bool is_imu_frozen; /* repeats the same seq */
     uint8_t imu_status;
     uint8_t imu_seq;
-    float policy_value;      /* NAN: the policy returns a NaN target */
-    int64_t policy_extra_ns; /* time the policy takes */
+    float policy_value;        /* NAN: the policy returns a NaN target */
+    int64_t policy_extra_ns;   /* time the policy takes */
+    ps_clock_fake_t cpu_clock; /* stands for the thread's CPU time */
+    bool is_policy_preempted;  /* policy time passes on the wall clock only */
+    bool is_ctrl_c_in_damping; /* the operator presses Ctrl-C once while braking */
     ps_ring_t ring;
     ps_loop_rec_t ring_storage[256];
     ps_loop_t loop;
@@ -166,7 +169,13 @@ static int fake_policy_step(void *ctx, const ps_meas_t *m, const ps_estimate_t *
         out->qd_rad_s[j] = 0;
         out->tau_ff_nm[j] = 0;
     }
+    if (fx->is_ctrl_c_in_damping && fx->loop.state == PS_SM_DAMPING) {
+        ps_loop_request_stop(&fx->loop);
+        fx->is_ctrl_c_in_damping = false;
+    }
     ps_clock_fake_advance(&fx->clock, fx->policy_extra_ns);
+    if (!fx->is_policy_preempted)
+        ps_clock_fake_advance(&fx->cpu_clock, fx->policy_extra_ns);
     return 0;
 }
 static void fake_policy_reset(void *ctx)
@@ -391,6 +400,28 @@ static void test_loop_policy_late_damps(void **state)
     assert_int_equal(fx->loop.counters.n_policy_late, 1);
 }
 
+/* With a separate deadline clock (CPU time in lockstep): a policy that was
+ * preempted is not late, one that computed too long is. */
+static void test_loop_policy_deadline_on_deadline_clock(void **state)
+{
+    (void)state;
+    static ps_loop_t loop2;
+    ps_clock_fake_init(&fx->cpu_clock, 0);
+    ps_loop_cfg_t lc = fx->loop.cfg;
+    lc.deadline_clock = &fx->cpu_clock.clock;
+    assert_int_equal(ps_loop_init(&loop2, &lc), 0);
+    assert_int_equal(ps_loop_start(&loop2, fx->clock.now_ns), 0);
+    fx->policy_extra_ns = ps_s_to_ns(fx->robot.control.policy_deadline_s) + 1000;
+    fx->is_policy_preempted = true;
+    for (unsigned i = 0; i < loop2.policy_div + 1; i++)
+        assert_int_equal(ps_loop_step(&loop2), 0);
+    assert_int_equal(loop2.counters.n_policy_late, 0);
+    fx->is_policy_preempted = false;
+    for (unsigned i = 0; i < loop2.policy_div; i++)
+        assert_int_equal(ps_loop_step(&loop2), 0);
+    assert_int_equal(loop2.counters.n_policy_late, 1);
+}
+
 static void test_loop_estop_input_latches_estop_sends_exit(void **state)
 {
     (void)state;
@@ -465,6 +496,19 @@ static void test_loop_run_until_end_goes_through_damping_to_standby(void **state
     assert_true(n >= 2);
     assert_int_equal(seen[n - 2], PS_SM_DAMPING);
     assert_int_equal(seen[n - 1], PS_SM_STANDBY);
+}
+
+/* The end of the run is not an operator's stop: one Ctrl-C while it brakes
+ * does not turn the braking into an e-stop. */
+static void test_loop_run_end_then_one_ctrl_c_still_damps(void **state)
+{
+    (void)state;
+    go_active();
+    fx->is_ctrl_c_in_damping = true;
+    int64_t end = fx->loop.pacer.next_ns + 50 * PERIOD_NS;
+    assert_int_equal(ps_loop_run(&fx->loop, fx->loop.pacer.next_ns, end), 0);
+    assert_false(fx->is_ctrl_c_in_damping); /* it was pressed */
+    assert_int_equal(fx->loop.state, PS_SM_STANDBY);
 }
 
 static void test_loop_second_stop_request_estops(void **state)
@@ -554,10 +598,15 @@ static void test_loop_saturated_imu_sample_rejected(void **state)
 {
     (void)state;
     go_active();
-    fx->imu_status = PS_IMU_STATUS_ACCEL_SAT;
-    uint64_t bad0 = fx->loop.counters.n_rx_bad;
-    steps((unsigned)(fx->robot.control.imu_timeout_s * 1000) + fx->robot.imu.rate_div + 2);
-    assert_true(fx->loop.counters.n_rx_bad > bad0);
+    unsigned timeout_ticks =
+        (unsigned)(fx->robot.control.imu_timeout_s * 1000) + fx->robot.imu.rate_div + 2;
+    fx->imu_status = PS_IMU_STATUS_ACCEL_SAT; /* an impact: the gyro still counts */
+    steps(timeout_ticks);
+    assert_int_equal(fx->loop.state, PS_SM_ACTIVE);
+    assert_int_equal(fx->loop.counters.n_imu_rejected, 0);
+    fx->imu_status = PS_IMU_STATUS_GYRO_SAT;
+    steps(timeout_ticks);
+    assert_true(fx->loop.counters.n_imu_rejected > 0);
     assert_int_equal(fx->loop.state, PS_SM_DAMPING); /* no valid IMU: stale */
 }
 
@@ -601,7 +650,7 @@ static void test_loop_bad_sff_id_counted_not_indexed(void **state)
     fake_bus_t *b = &fx->buses[0];
     ps_can_frame_t *f = &b->pending[b->n_pending++];
     memset(f, 0, sizeof(*f));
-    f->id = 0x7ff + 0x101; /* would alias reply 0x101 if masked */
+    f->id = 0x800 + 0x101; /* masked to 11 bits it would alias reply 0x101 */
     f->len = 8;
     steps(1);
     assert_int_equal(fx->loop.counters.n_rx_bad, 1);
@@ -671,11 +720,13 @@ int main(void)
         T(test_loop_stale_imu_in_active_damps),
         T(test_loop_nan_target_damps),
         T(test_loop_policy_late_damps),
+        T(test_loop_policy_deadline_on_deadline_clock),
         T(test_loop_estop_input_latches_estop_sends_exit),
         T(test_loop_gpio_error_counts_as_estop),
         T(test_loop_drive_fault_estops),
         T(test_loop_bus_off_estops),
         T(test_loop_run_until_end_goes_through_damping_to_standby),
+        T(test_loop_run_end_then_one_ctrl_c_still_damps),
         T(test_loop_second_stop_request_estops),
         T(test_loop_commands_each_joint_at_its_rate),
         T(test_loop_refused_enter_is_sent_again),

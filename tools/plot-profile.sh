@@ -23,6 +23,21 @@ plot_hist() {
     last=$(awk '!/^#/ && NF >= 2 && $2 + 0 > 0 { l = $1 + 0 } END { print l + 0 }' "$hist")
     max=$(awk -F: '/^# Max Latencies/ { gsub(/ /, "", $2); print $2 + 0 }' "$hist")
     overflows=$(awk -F: '/^# Histogram Overflows/ { gsub(/ /, "", $2); print $2 + 0 }' "$hist")
+    if ! awk '!/^#/ && NF >= 2 && $2 + 0 > 0 { found = 1 } END { exit !found }' "$hist"; then
+        # Every sample beyond the table (or none at all): nothing to draw as
+        # boxes, so say so on the picture instead of failing.
+        gnuplot <<EOF
+set terminal pngcairo size 1000,560 noenhanced font ",10"
+set output "$png"
+set title "$title  (max ${max:-?} us, overflows ${overflows:-0})"
+unset key
+set xrange [0:1]
+set yrange [0:1]
+set label "no sample inside the histogram (overflows ${overflows:-0}); see profile.json" at 0.5,0.5 center
+plot 2 notitle
+EOF
+        return
+    fi
     gnuplot <<EOF
 set terminal pngcairo size 1000,560 noenhanced font ",10"
 set output "$png"
@@ -67,7 +82,11 @@ plot_stages() {
     [ -s "$dat" ] || { rm -f "$dat"; die "no latency stages in $json"; }
     local period extra="" ymax="*"
     period=$(sed -n 's/.*"period_us":[[:space:]]*\([0-9.]*\).*/\1/p' "$json" | head -1)
-    [ -n "$period" ] && extra=", $period with lines dt 2 lc rgb 'red' title 'period'" ymax=$((${period%.*} * 3))
+    if [ -n "$period" ]; then
+        extra=", $period with lines dt 2 lc rgb 'red' title 'period'"
+        # room for the period line and for every bar, the largest max included
+        ymax=$(awk -v p="$period" 'BEGIN { m = 3 * p } $5 * 2 > m { m = $5 * 2 } END { print m }' "$dat")
+    fi
     gnuplot <<EOF
 set terminal pngcairo size 1000,560 noenhanced font ",10"
 set output "$png"
