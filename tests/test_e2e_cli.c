@@ -117,6 +117,7 @@ static void test_cli_lockstep_summary_json_has_the_figures(void **state)
     assert_int_equal((int)num(after, "mallocs"), 0);
     assert_int_equal((int)num(after, "page_faults"), 0);
     assert_true(cJSON_IsFalse(obj(j, "fall_detected")));
+    assert_true(cJSON_IsFalse(obj(obj(j, "sim_truth"), "fell_while_active")));
     assert_true(cJSON_GetArraySize(obj(j, "transitions")) == 4);
     assert_int_equal(cJSON_GetArraySize(obj(j, "buses")), 4);
     const cJSON *bus0 = cJSON_GetArrayItem(obj(j, "buses"), 0);
@@ -125,6 +126,46 @@ static void test_cli_lockstep_summary_json_has_the_figures(void **state)
     assert_string_equal(cJSON_GetStringValue(obj(j, "final_state")), "STANDBY");
     cJSON_Delete(j);
     unlink(path);
+}
+
+/* A shove the controller cannot take: the loop detects the fall and brakes,
+ * and the summary's ground truth says it fell while in charge; the standing
+ * run above says it did not. */
+static void test_cli_lockstep_shove_fall_detected_and_in_truth(void **state)
+{
+    (void)state;
+    char path[] = "/tmp/ps_cli_XXXXXX";
+    int fd = mkstemp(path);
+    assert_true(fd >= 0);
+    close(fd);
+    char args[256];
+    snprintf(args, sizeof(args), "--lockstep --quiet --scenario scenarios/shove.yaml --summary %s",
+             path);
+    int rc = run(args);
+    if (rc != 0)
+        fail_msg("exit %d:\n%s", rc, out);
+    assert_non_null(strstr(out, "state ACTIVE -> DAMPING (FALL)"));
+    cJSON *j = read_json(path);
+    assert_true(cJSON_IsTrue(obj(j, "fall_detected")));
+    const cJSON *truth = obj(j, "sim_truth");
+    assert_true(cJSON_IsTrue(obj(truth, "fell_while_active")));
+    assert_true(num(truth, "first_fall_t_s") > 5.0);
+    cJSON_Delete(j);
+    unlink(path);
+}
+
+/* Names are looked up in $PUSHSTEP_DATA_DIR when set, and an error names
+ * the path it tried. */
+static void test_cli_data_dir_from_environment(void **state)
+{
+    (void)state;
+    char args[512];
+    snprintf(args, sizeof(args), "--lockstep --duration 1 --quiet");
+    assert_int_equal(setenv("PUSHSTEP_DATA_DIR", "/nonexistent-ps", 1), 0);
+    int rc = run(args);
+    assert_int_equal(unsetenv("PUSHSTEP_DATA_DIR"), 0);
+    assert_int_equal(rc, 2);
+    assert_non_null(strstr(out, "/nonexistent-ps/boards/sim.yaml"));
 }
 
 static void test_cli_realtime_run_paced_in_real_time(void **state)
@@ -292,6 +333,8 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_cli_help_documents_every_option),
         cmocka_unit_test(test_cli_lockstep_summary_json_has_the_figures),
+        cmocka_unit_test(test_cli_lockstep_shove_fall_detected_and_in_truth),
+        cmocka_unit_test(test_cli_data_dir_from_environment),
         cmocka_unit_test(test_cli_realtime_run_paced_in_real_time),
         cmocka_unit_test(test_cli_profile_writes_json_and_cyclictest_histogram),
         cmocka_unit_test(test_cli_profile_without_rt_privileges_says_so),

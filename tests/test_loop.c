@@ -34,6 +34,7 @@ typedef struct {
     bool is_bus_off;
     uint32_t n_refuse_batches; /* the next N send_batch calls queue nothing */
     uint32_t n_exit_total;     /* EXIT frames accepted, never cleared */
+    bool is_babbling;          /* a node floods the bus: every recv is full */
 } fake_bus_t;
 
 typedef struct {
@@ -109,6 +110,14 @@ static int fake_recv(void *ctx, ps_can_frame_t *out, size_t max)
 {
     fake_bus_t *b = ctx;
     size_t n = 0;
+    if (b->is_babbling) {
+        for (; n < max; n++) {
+            memset(&out[n], 0, sizeof(out[n]));
+            out[n].id = 0x555;
+            out[n].len = 8;
+        }
+        return (int)n;
+    }
     if (b->bus_idx == fx->robot.imu.bus_idx && !fx->is_imu_mute && max >= 2) {
         ps_imu_sample_t s = {.accel_body_m_s2 = {0, 0, 9.81f},
                              .seq = fx->is_imu_frozen ? fx->imu_seq : fx->imu_seq++,
@@ -644,6 +653,20 @@ static void test_loop_init_rejects_unsafe_tables(void **state)
     assert_int_equal(ps_loop_init(&other, &lc), 0);
 }
 
+/* A babbling node cannot hold the tick in READ: the drain stops after
+ * PS_LOOP_MAX_RX_BATCHES batches per bus and says so. */
+static void test_loop_babbling_bus_read_capped(void **state)
+{
+    (void)state;
+    fx->buses[2].is_babbling = true;
+    steps(3);
+    assert_int_equal(fx->loop.counters.n_rx_capped, 3);
+    assert_int_equal(fx->loop.counters.n_rx_unknown,
+                     3 * PS_LOOP_MAX_RX_BATCHES *
+                         (sizeof(fx->loop.rx_buf) / sizeof(fx->loop.rx_buf[0])));
+    assert_int_equal(fx->loop.counters.n_ticks, 3);
+}
+
 static void test_loop_bad_sff_id_counted_not_indexed(void **state)
 {
     (void)state;
@@ -734,6 +757,7 @@ int main(void)
         T(test_loop_saturated_imu_sample_rejected),
         T(test_loop_frozen_imu_seq_goes_stale),
         T(test_loop_init_rejects_unsafe_tables),
+        T(test_loop_babbling_bus_read_capped),
         T(test_loop_bad_sff_id_counted_not_indexed),
         T(test_loop_drive_fault_reset_then_back_to_estop_if_persists),
         T(test_loop_run_end_releases_drives),

@@ -8,6 +8,7 @@
 #include <stdint.h>
 #include <setjmp.h>
 #include <cmocka.h>
+#include <fcntl.h>
 
 #include <errno.h>
 #include <pthread.h>
@@ -72,6 +73,27 @@ static void test_ps_rtsetup_thread_best_effort_not_recorded(void **state)
     snprintf(want, sizeof(want), "SCHED_FIFO priority 1000 (%s), CPU affinity cpu %d (%s)",
              strerror(EINVAL), CPU_SETSIZE + 5, strerror(EINVAL));
     assert_string_equal(buf, want);
+}
+
+/* Held (root): an open descriptor; refused: the reason names the file. */
+static void test_ps_rtsetup_hold_cpu_latency_held_or_described(void **state)
+{
+    (void)state;
+    int fd = -1;
+    int rc = ps_rtsetup_hold_cpu_latency(&fd);
+    if (rc == 0) {
+        assert_true(fd >= 0);
+        assert_true(fcntl(fd, F_GETFD) >= 0);
+        ps_rtsetup_release_cpu_latency(fd);
+        assert_true(fcntl(fd, F_GETFD) < 0); /* released */
+    } else {
+        assert_true(rc < 0);
+        assert_int_equal(fd, -1); /* untouched on failure */
+        char buf[256];
+        ps_rtsetup_describe(PS_RT_MISSING_CPU_LATENCY, buf, sizeof(buf));
+        assert_non_null(strstr(buf, "/dev/cpu_dma_latency ("));
+    }
+    ps_rtsetup_release_cpu_latency(-1); /* safe */
 }
 
 static void test_ps_rtsetup_describe_truncates_nul_terminated(void **state)
@@ -234,6 +256,7 @@ int main(void)
         cmocka_unit_test(test_ps_rtsetup_describe_nothing_missing_empty),
         cmocka_unit_test(test_ps_rtsetup_thread_bad_priority_and_cpu_described),
         cmocka_unit_test(test_ps_rtsetup_thread_best_effort_not_recorded),
+        cmocka_unit_test(test_ps_rtsetup_hold_cpu_latency_held_or_described),
         cmocka_unit_test(test_ps_rtsetup_describe_truncates_nul_terminated),
         cmocka_unit_test(test_ps_rtsetup_lock_memory_result_described),
         cmocka_unit_test(test_ps_rtsetup_thread_fifo_affinity_consistent),
