@@ -90,6 +90,8 @@ int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg)
     if (rc < 0)
         return rc;
     build_reply_table(loop);
+    for (uint32_t j = 0; j < PS_MAX_JOINTS; j++)
+        loop->fault_grace_until_ns[j] = INT64_MAX; /* drives not enabled yet */
     ps_imu_msg_rx_init(&loop->imu_rx, cfg->robot->imu.base_id);
     for (int s = 0; s < PS_STAGE_COUNT; s++)
         ps_perf_reset(&loop->perf[s]);
@@ -283,7 +285,8 @@ static uint32_t watchdog_conditions(const ps_loop_t *loop)
         const ps_joint_cfg_t *jc = &r->joints[j];
         if (is_stale(m->t_ns, now, reply_timeout + (int64_t)jc->rate_div * loop->period_ns))
             cond |= PS_SM_C_REPLY_STALE;
-        else if (m->fault != PS_MIT_FAULT_NONE || m->temp_c > jc->temp_max_c)
+        else if (now >= loop->fault_grace_until_ns[j] &&
+                 (m->fault != PS_MIT_FAULT_NONE || m->temp_c > jc->temp_max_c))
             cond |= PS_SM_C_DRIVE_FAULT;
     }
     if (is_stale(loop->meas.imu.t_ns, now,
@@ -362,6 +365,7 @@ static void enter_state(ps_loop_t *loop, ps_sm_state_t to)
         for (uint32_t j = 0; j < loop->meas.n_joints; j++) {
             loop->meas.joints[j].fault = PS_MIT_FAULT_NONE;
             loop->meas.joints[j].t_ns = 0;
+            loop->fault_grace_until_ns[j] = INT64_MAX; /* until its ENTER is sent */
         }
     }
     loop->state = to;
@@ -420,6 +424,17 @@ static void queue_frame(ps_loop_t *loop, uint32_t bus_idx, uint32_t id, const ui
 
 /* Drives need ENTER before they obey commands and get EXIT when the robot is
  * e-stopped, so that a reset starts from a known, disabled driver state. */
+/* A drive reports a latched fault until it is enabled again; replies already
+ * on their way when ENTER goes out still carry it. So a joint's fault is
+ * believed only from one reply period after its ENTER (at start and after an
+ * e-stop reset alike); until then it cannot e-stop the robot, and START
+ * waits for fresh replies anyway. */
+static int64_t fault_grace_end_ns(const ps_loop_t *loop, const ps_joint_cfg_t *jc)
+{
+    return loop->t_deadline_ns + ps_s_to_ns(loop->cfg.robot->control.reply_timeout_s) +
+           (int64_t)jc->rate_div * loop->period_ns;
+}
+
 static bool queue_mode_change(ps_loop_t *loop, uint32_t j)
 {
     const ps_joint_cfg_t *jc = &loop->cfg.robot->joints[j];
@@ -430,6 +445,8 @@ static bool queue_mode_change(ps_loop_t *loop, uint32_t j)
     ps_mit_encode_special(want_entered ? PS_MIT_SPECIAL_ENTER : PS_MIT_SPECIAL_EXIT, data);
     queue_frame(loop, jc->bus_idx, jc->can_id, data, (int)j);
     loop->is_entered[j] = want_entered;
+    if (want_entered)
+        loop->fault_grace_until_ns[j] = fault_grace_end_ns(loop, jc);
     return true;
 }
 

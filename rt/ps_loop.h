@@ -151,7 +151,8 @@ typedef struct {
     ps_targets_t targets;
     bool has_targets;
     float ramp_from_q_rad[PS_MAX_JOINTS];
-    bool is_entered[PS_MAX_JOINTS]; /**< ENTER sent since the last EXIT */
+    bool is_entered[PS_MAX_JOINTS];              /**< ENTER sent since the last EXIT */
+    int64_t fault_grace_until_ns[PS_MAX_JOINTS]; /**< drive faults ignored until (ENTER) */
     bool has_policy_late;
     bool has_target_invalid;
     bool has_cmd_fault; /**< a command had to be replaced (TARGET_INVALID) */

@@ -31,6 +31,8 @@ typedef struct {
     uint32_t n_sent;
     ps_can_frame_t pending[MAX_SENT]; /* delivered on the next recv */
     uint32_t n_pending;
+    ps_can_frame_t late[MAX_SENT]; /* fx->is_reply_late: one tick later still */
+    uint32_t n_late;
     bool is_bus_off;
     uint32_t n_refuse_batches; /* the next N send_batch calls queue nothing */
     uint32_t n_exit_total;     /* EXIT frames accepted, never cleared */
@@ -50,11 +52,13 @@ typedef struct {
     bool is_imu_frozen; /* repeats the same seq */
     uint8_t imu_status;
     uint8_t imu_seq;
-    float policy_value;        /* NAN: the policy returns a NaN target */
-    int64_t policy_extra_ns;   /* time the policy takes */
-    ps_clock_fake_t cpu_clock; /* stands for the thread's CPU time */
-    bool is_policy_preempted;  /* policy time passes on the wall clock only */
-    bool is_ctrl_c_in_damping; /* the operator presses Ctrl-C once while braking */
+    float policy_value;             /* NAN: the policy returns a NaN target */
+    int64_t policy_extra_ns;        /* time the policy takes */
+    ps_clock_fake_t cpu_clock;      /* stands for the thread's CPU time */
+    bool is_policy_preempted;       /* policy time passes on the wall clock only */
+    bool is_ctrl_c_in_damping;      /* the operator presses Ctrl-C once while braking */
+    bool is_fault_cleared_by_enter; /* drives clear a latched fault on ENTER, like real ones */
+    bool is_reply_late;             /* replies arrive two ticks after their command */
     ps_ring_t ring;
     ps_loop_rec_t ring_storage[256];
     ps_loop_t loop;
@@ -80,7 +84,9 @@ static void answer(fake_bus_t *b, int j)
                           .p_rad = jc->stance_rad,
                           .temp_mos_c = 30,
                           .temp_rotor_c = 30};
-    ps_can_frame_t *f = &b->pending[b->n_pending++];
+    if (fx->is_reply_late && b->n_late >= MAX_SENT)
+        return;
+    ps_can_frame_t *f = fx->is_reply_late ? &b->late[b->n_late++] : &b->pending[b->n_pending++];
     memset(f, 0, sizeof(*f));
     f->id = jc->reply_id;
     f->len = 8;
@@ -97,9 +103,12 @@ static int fake_send(void *ctx, const ps_can_frame_t *frames, size_t n)
     for (size_t i = 0; i < n; i++) {
         if (b->n_sent < MAX_SENT)
             b->sent[b->n_sent++] = frames[i];
-        if (ps_mit_classify_special(frames[i].data, frames[i].len) == PS_MIT_SPECIAL_EXIT)
+        int special = ps_mit_classify_special(frames[i].data, frames[i].len);
+        if (special == PS_MIT_SPECIAL_EXIT)
             b->n_exit_total++;
         int j = joint_of(fx, b->bus_idx, frames[i].id);
+        if (j >= 0 && special == PS_MIT_SPECIAL_ENTER && fx->is_fault_cleared_by_enter)
+            fx->fault[j] = PS_MIT_FAULT_NONE;
         if (j >= 0)
             answer(b, j);
     }
@@ -128,6 +137,9 @@ static int fake_recv(void *ctx, ps_can_frame_t *out, size_t max)
     for (uint32_t i = 0; i < b->n_pending && n < max; i++)
         out[n++] = b->pending[i];
     b->n_pending = 0;
+    memcpy(b->pending, b->late, b->n_late * sizeof(b->late[0]));
+    b->n_pending = b->n_late;
+    b->n_late = 0;
     return (int)n;
 }
 
@@ -702,6 +714,32 @@ static void test_loop_drive_fault_reset_then_back_to_estop_if_persists(void **st
     assert_int_equal(fx->loop.state, PS_SM_RAMP);
 }
 
+/* A drive that comes up with a latched fault (a previous run's comms loss)
+ * clears it on ENTER: that must not e-stop the start, and after an e-stop
+ * the replies still in flight with the old fault must not defeat the reset. */
+static void test_loop_latched_fault_cleared_by_enter_no_estop(void **state)
+{
+    (void)state;
+    fx->is_reply_late = true; /* replies sent before ENTER arrive after it */
+    fx->is_fault_cleared_by_enter = true;
+    fx->fault[5] = PS_MIT_FAULT_COMMS_LOST;
+    steps(40);
+    assert_int_equal(fx->loop.state, PS_SM_STANDBY);
+    go_active();
+    fx->is_fault_cleared_by_enter = false;
+    fx->fault[5] = PS_MIT_FAULT_ROTOR_OVERTEMP;
+    steps(fx->robot.joints[5].rate_div + 2);
+    assert_int_equal(fx->loop.state, PS_SM_ESTOP);
+    steps(20);                            /* ESTOP keeps polling: replies carry the fault */
+    fx->is_fault_cleared_by_enter = true; /* cooled down: ENTER clears it */
+    ps_loop_request(&fx->loop, PS_SM_C_REQ_RESET);
+    steps(40);
+    assert_int_equal(fx->loop.state, PS_SM_STANDBY);
+    ps_loop_request(&fx->loop, PS_SM_C_REQ_START);
+    steps(1);
+    assert_int_equal(fx->loop.state, PS_SM_RAMP);
+}
+
 /* The end of a run leaves the drives disabled and the enable output off. */
 static void test_loop_run_end_releases_drives(void **state)
 {
@@ -760,6 +798,7 @@ int main(void)
         T(test_loop_babbling_bus_read_capped),
         T(test_loop_bad_sff_id_counted_not_indexed),
         T(test_loop_drive_fault_reset_then_back_to_estop_if_persists),
+        T(test_loop_latched_fault_cleared_by_enter_no_estop),
         T(test_loop_run_end_releases_drives),
         T(test_loop_run_clock_failure_estops),
 #undef T
