@@ -250,6 +250,33 @@ rt_detail=$RT
     die "analysis failed"
 }
 
+# ---- simulation speed (lockstep) -----------------------------------------------
+# The whole system (loop, emulated devices, MuJoCo plant) on simulated time, as
+# fast as it goes: simulated seconds per wall second, beside real time (1.0).
+SIM_S=${BENCH_SIM_S:-20}
+log "lockstep: $SIM_S simulated s"
+sim_cmd=("$BIN" --lockstep --board "$BOARD_FILE" --robot "$ROBOT" --duration "$SIM_S" --quiet
+    --summary "$RUN/lockstep.json")
+"${sim_cmd[@]}" >"$RUN/lockstep.log" 2>&1 || {
+    cat "$RUN/lockstep.log" >&2
+    die "lockstep run failed"
+}
+"$PY" - "$RUN/lockstep.json" "$RESULTS/sim.json" "$RESULTS/summary.md" "${sim_cmd[*]}" <<'EOF'
+import json, sys
+d = json.load(open(sys.argv[1]))
+speed = d["loop_s"] / d["wall_s"]
+out = {"command": sys.argv[4], "loop_s": d["loop_s"], "wall_s": d["wall_s"],
+       "sim_s_per_wall_s": speed, "ratio_to_real_time": speed,
+       "ticks": d["ticks"], "fall_detected": d["fall_detected"]}
+json.dump(out, open(sys.argv[2], "w"), indent=2)
+with open(sys.argv[3], "a") as f:
+    f.write("\n## Simulation speed (lockstep)\n\n")
+    f.write("| figure | value | peer | ratio |\n|---|---|---|---|\n")
+    f.write("| simulated s per wall s | %.1f | real time (1.0) | %.1f |\n" % (speed, speed))
+    f.write("| loop time / wall time | %.2f s / %.2f s | | |\n\n" % (d["loop_s"], d["wall_s"]))
+    f.write("    %s\n" % sys.argv[4])
+EOF
+
 if command -v gnuplot >/dev/null; then
     for sec in latency stress_cpu; do
         [ -f "$RESULTS/${sec}_pushstep.dat" ] || continue
