@@ -43,6 +43,15 @@ static int run(const char *args)
     return WEXITSTATUS(status);
 }
 
+/* An empty file under /tmp for a summary to be written to. */
+static void make_temp_file(char *path, size_t len)
+{
+    snprintf(path, len, "/tmp/ps_cli_XXXXXX");
+    int fd = mkstemp(path);
+    assert_true(fd >= 0);
+    close(fd);
+}
+
 static cJSON *read_json(const char *path)
 {
     FILE *f = fopen(path, "r");
@@ -88,10 +97,8 @@ static void test_cli_help_documents_every_option(void **state)
 static void test_cli_lockstep_summary_json_has_the_figures(void **state)
 {
     (void)state;
-    char path[] = "/tmp/ps_cli_XXXXXX";
-    int fd = mkstemp(path);
-    assert_true(fd >= 0);
-    close(fd);
+    char path[32];
+    make_temp_file(path, sizeof(path));
     char args[256];
     snprintf(args, sizeof(args), "--lockstep --duration 6 --quiet --summary %s", path);
     int rc = run(args);
@@ -134,10 +141,8 @@ static void test_cli_lockstep_summary_json_has_the_figures(void **state)
 static void test_cli_lockstep_shove_fall_detected_and_in_truth(void **state)
 {
     (void)state;
-    char path[] = "/tmp/ps_cli_XXXXXX";
-    int fd = mkstemp(path);
-    assert_true(fd >= 0);
-    close(fd);
+    char path[32];
+    make_temp_file(path, sizeof(path));
     char args[256];
     snprintf(args, sizeof(args), "--lockstep --quiet --scenario scenarios/shove.yaml --summary %s",
              path);
@@ -171,10 +176,8 @@ static void test_cli_data_dir_from_environment(void **state)
 static void test_cli_realtime_run_paced_in_real_time(void **state)
 {
     (void)state;
-    char path[] = "/tmp/ps_cli_XXXXXX";
-    int fd = mkstemp(path);
-    assert_true(fd >= 0);
-    close(fd);
+    char path[32];
+    make_temp_file(path, sizeof(path));
     char args[256];
     snprintf(args, sizeof(args), "--duration 2 --quiet --summary %s", path);
     int rc = run(args);
