@@ -18,23 +18,46 @@
 #ifndef PS_CAN_H
 #define PS_CAN_H
 
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 
-#define PS_CAN_MAX_DLEN 8u     /**< classical CAN payload bytes */
-#define PS_CAN_SFF_MASK 0x7ffu /**< 11-bit identifier mask */
-#define PS_CAN_EFF_MASK 0x1fffffffu
+#define PS_CAN_MAX_DLEN    8u     /**< classical CAN payload bytes */
+#define PS_CAN_FD_MAX_DLEN 64u    /**< CAN FD payload bytes */
+#define PS_CAN_SFF_MASK    0x7ffu /**< 11-bit identifier mask */
+#define PS_CAN_EFF_MASK    0x1fffffffu
 
-/** One classical CAN data frame. */
+/** One CAN data frame, classical or FD. */
 typedef struct {
     uint32_t id;    /**< 11- or 29-bit identifier */
-    uint8_t len;    /**< payload length, 0..8 */
+    uint8_t len;    /**< payload bytes: 0..8 classical; FD also 12, 16, 20, 24, 32, 48, 64 */
     uint8_t is_ext; /**< 1: 29-bit identifier */
-    uint8_t pad[2];
-    uint8_t data[PS_CAN_MAX_DLEN];
+    uint8_t is_fd;  /**< 1: CAN FD frame (FDF bit) */
+    uint8_t is_brs; /**< 1: FD bit rate switch, data phase at the bus's data bitrate */
+    uint8_t data[PS_CAN_FD_MAX_DLEN];
     int64_t t_ns; /**< rx: time the frame was complete on the wire (CLOCK_MONOTONIC
                        or simulated time); tx: ignored */
 } ps_can_frame_t;
+
+/** @return true if len is a payload length the frame kind can carry: 0..8, and
+ *  for FD also 12, 16, 20, 24, 32, 48 and 64 (the DLC codes 9..15)  @rt RT-SAFE */
+static inline bool ps_can_is_valid_len(uint8_t len, bool is_fd)
+{
+    if (len <= PS_CAN_MAX_DLEN)
+        return true;
+    if (!is_fd)
+        return false;
+    return len == 12u || len == 16u || len == 20u || len == 24u || len == 32u || len == 48u ||
+           len == 64u;
+}
+
+/** @return true if the identifier fits its width, the length its kind, and BRS
+ *  is set only on FD frames  @rt RT-SAFE */
+static inline bool ps_can_is_valid_frame(const ps_can_frame_t *f)
+{
+    return f->id <= (f->is_ext ? PS_CAN_EFF_MASK : PS_CAN_SFF_MASK) &&
+           ps_can_is_valid_len(f->len, f->is_fd != 0) && (f->is_fd || !f->is_brs);
+}
 
 /** ISO 11898 fault confinement state of the controller. */
 typedef enum {

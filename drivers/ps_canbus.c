@@ -46,12 +46,80 @@ int64_t ps_canbus_bits_to_ns(unsigned bits, uint32_t bitrate)
     return (int64_t)(num / bitrate);
 }
 
+/* CAN FD (ISO 11898-1:2015). Arbitration: SOF 1, id 11, RRS 1, IDE 1, FDF 1,
+ * res 1, BRS 1 = 17 (29-bit: SOF 1, id 11, SRR 1, IDE 1, id 18, RRS 1, FDF 1,
+ * res 1, BRS 1 = 36). Data phase: ESI 1, DLC 4, data 8n; dynamic stuffing
+ * from SOF to the end of the data field; then the stuff count (4) and the CRC
+ * (17 or 21), which carry fixed stuff bits, one before every 4 bits. End: CRC
+ * delimiter 1, ACK 2, EOF 7, intermission 3 at the nominal rate. */
+#define FD_ARB_SFF 17u
+#define FD_ARB_EFF 36u
+#define FD_END     13u
+
+static unsigned fd_round_len(uint8_t len)
+{
+    static const uint8_t LENS[] = {8, 12, 16, 20, 24, 32, 48, 64};
+    if (len <= 8u)
+        return len;
+    for (unsigned i = 0; i < sizeof(LENS); i++)
+        if (len <= LENS[i])
+            return LENS[i];
+    return 64u;
+}
+
+void ps_canbus_fd_frame_bits_max(uint8_t len, bool is_ext, bool is_brs, unsigned *out_nominal,
+                                 unsigned *out_data)
+{
+    const unsigned n = fd_round_len(len);
+    const unsigned arb = is_ext ? FD_ARB_EFF : FD_ARB_SFF;
+    const unsigned data_fields = 1u + 4u + 8u * n; /* ESI, DLC, data */
+    const unsigned dyn_stuff = (arb + data_fields - 1u) / 4u;
+    const unsigned crc = n <= 16u ? 17u : 21u;
+    const unsigned fixed = 4u + crc + (4u + crc + 3u) / 4u; /* stuff count, CRC, fixed stuff */
+    /* The dynamic stuff bits fall across both phases; count them in the data
+     * phase in proportion is not worth it: put the arbitration part's share
+     * (at most (arb - 1) / 4 + 1) in the nominal phase, the rest in data. */
+    const unsigned arb_stuff = (arb - 1u) / 4u + 1u;
+    const unsigned nominal = arb + arb_stuff + FD_END;
+    const unsigned data =
+        data_fields + (dyn_stuff > arb_stuff ? dyn_stuff - arb_stuff : 0u) + fixed;
+    if (is_brs) {
+        *out_nominal = nominal;
+        *out_data = data;
+    } else {
+        *out_nominal = nominal + data;
+        *out_data = 0u;
+    }
+}
+
+int64_t ps_canbus_frame_ns_max(const ps_canbus_frame_shape_t *f, const ps_canbus_bus_cfg_t *bus)
+{
+    if (!f->is_fd)
+        return ps_canbus_bits_to_ns(ps_canbus_frame_bits_max(f->len, f->is_ext), bus->bitrate);
+    unsigned nominal = 0u, data = 0u;
+    ps_canbus_fd_frame_bits_max(f->len, f->is_ext, f->is_brs, &nominal, &data);
+    const uint32_t data_rate = bus->data_bitrate > 0u ? bus->data_bitrate : bus->bitrate;
+    return ps_canbus_bits_to_ns(nominal, bus->bitrate) + ps_canbus_bits_to_ns(data, data_rate);
+}
+
+unsigned ps_canbus_frame_nominal_bits_max(const ps_canbus_frame_shape_t *f,
+                                          const ps_canbus_bus_cfg_t *bus)
+{
+    if (!f->is_fd)
+        return ps_canbus_frame_bits_max(f->len, f->is_ext);
+    unsigned nominal = 0u, data = 0u;
+    ps_canbus_fd_frame_bits_max(f->len, f->is_ext, f->is_brs, &nominal, &data);
+    const uint64_t data_rate = bus->data_bitrate > 0u ? bus->data_bitrate : bus->bitrate;
+    /* data bits at the data rate, expressed in nominal bit times, rounded up */
+    return nominal + (unsigned)(((uint64_t)data * bus->bitrate + data_rate - 1u) / data_rate);
+}
+
 /* ---- planner ---------------------------------------------------------- */
 
 typedef struct {
-    uint32_t bits;     /* worst-case bits each time the source is due */
-    uint32_t div;      /* due every div servo ticks */
-    int32_t joint_idx; /* -1: the IMU */
+    uint32_t bits; /* worst-case bits each time the source is due */
+    uint32_t div;  /* due every div servo ticks */
+    uint32_t idx;  /* index into the caller's sources */
 } source_t;
 
 static uint32_t gcd_u32(uint32_t a, uint32_t b)
@@ -72,7 +140,7 @@ static bool goes_before(const source_t *a, const source_t *b)
         return a->bits > b->bits;
     if (a->div != b->div)
         return a->div < b->div;
-    return a->joint_idx < b->joint_idx; /* IMU (-1) before joints on a full tie */
+    return a->idx < b->idx;
 }
 
 static void sort_sources(source_t *s, uint32_t n)
@@ -119,88 +187,120 @@ static uint32_t place_source(uint32_t *tick_bits, uint32_t hyper, const source_t
     return best_phase;
 }
 
-static int check_inputs(const ps_board_cfg_t *b, const ps_robot_cfg_t *r, char *err, size_t err_len)
+static int check_bus(const ps_canbus_cfg_t *c, uint32_t i, char *err, size_t err_len)
 {
-    if (b->n_buses == 0u || b->n_buses > PS_MAX_BUSES) {
-        ps_err_format(err, err_len, "board %s: n_buses %u outside [1, %u]", b->name, b->n_buses,
-                      PS_MAX_BUSES);
+    const ps_canbus_bus_cfg_t *b = &c->buses[i];
+    if (b->bitrate / c->servo_hz == 0u) {
+        ps_err_format(err, err_len, "bus %u (%s): bitrate %u gives no bits per tick at %u Hz", i,
+                      b->ifname, b->bitrate, c->servo_hz);
         return -PS_ERR_CONFIG;
     }
-    if (r->n_joints > PS_MAX_JOINTS) {
-        ps_err_format(err, err_len, "robot %s: n_joints %u outside [0, %u]", r->name, r->n_joints,
-                      PS_MAX_JOINTS);
-        return -PS_ERR_CONFIG;
-    }
-    if (r->control.servo_hz == 0u) {
-        ps_err_format(err, err_len, "robot %s: control.servo_hz is 0", r->name);
-        return -PS_ERR_CONFIG;
-    }
-    if (!isfinite(b->bus_budget) || !(b->bus_budget > 0.0f) || b->bus_budget > 1.0f) {
-        ps_err_format(err, err_len, "board %s: bus_budget %g outside (0, 1]", b->name,
-                      (double)b->bus_budget);
-        return -PS_ERR_CONFIG;
-    }
-    for (uint32_t i = 0; i < b->n_buses; i++) {
-        if (b->buses[i].bitrate / r->control.servo_hz == 0u) {
-            ps_err_format(err, err_len, "bus %u (%s): bitrate %u gives no bits per tick at %u Hz",
-                          i, b->buses[i].ifname, b->buses[i].bitrate, r->control.servo_hz);
-            return -PS_ERR_CONFIG;
-        }
-    }
-    for (uint32_t j = 0; j < r->n_joints; j++) {
-        const ps_joint_cfg_t *jc = &r->joints[j];
-        if (jc->bus_idx >= b->n_buses) {
-            ps_err_format(err, err_len,
-                          "joint %u (%s): bus_idx %u but board %s has %u bus(es) (0..%u)", j,
-                          jc->name, jc->bus_idx, b->name, b->n_buses, b->n_buses - 1u);
-            return -PS_ERR_CONFIG;
-        }
-        if (jc->rate_div == 0u || jc->rate_div > PS_CANBUS_MAX_HYPERPERIOD) {
-            ps_err_format(err, err_len, "joint %u (%s): rate_div %u outside [1, %u]", j, jc->name,
-                          jc->rate_div, PS_CANBUS_MAX_HYPERPERIOD);
-            return -PS_ERR_CONFIG;
-        }
-    }
-    if (r->imu.bus_idx >= b->n_buses) {
-        ps_err_format(err, err_len, "imu: bus_idx %u but board %s has %u bus(es) (0..%u)",
-                      r->imu.bus_idx, b->name, b->n_buses, b->n_buses - 1u);
-        return -PS_ERR_CONFIG;
-    }
-    if (r->imu.rate_div == 0u || r->imu.rate_div > PS_CANBUS_MAX_HYPERPERIOD) {
-        ps_err_format(err, err_len, "imu: rate_div %u outside [1, %u]", r->imu.rate_div,
-                      PS_CANBUS_MAX_HYPERPERIOD);
+    if (b->is_fd && b->data_bitrate < b->bitrate) {
+        ps_err_format(err, err_len, "bus %u (%s): FD data_bitrate %u below bitrate %u", i,
+                      b->ifname, b->data_bitrate, b->bitrate);
         return -PS_ERR_CONFIG;
     }
     return 0;
 }
 
-int ps_canbus_plan(const ps_board_cfg_t *b, const ps_robot_cfg_t *r, ps_canbus_plan_t *out,
-                   char *err, size_t err_len)
+static int check_source(const ps_canbus_cfg_t *c, const ps_canbus_source_t *s, size_t k, char *err,
+                        size_t err_len)
+{
+    const char *name = s->name != NULL ? s->name : "?";
+    if (s->bus_idx >= c->n_buses) {
+        ps_err_format(err, err_len, "source %zu (%s): bus %u but the board has %u bus(es) (0..%u)",
+                      k, name, s->bus_idx, c->n_buses, c->n_buses - 1u);
+        return -PS_ERR_CONFIG;
+    }
+    if (s->rate_div == 0u || s->rate_div > PS_CANBUS_MAX_HYPERPERIOD) {
+        ps_err_format(err, err_len, "source %zu (%s): rate_div %u outside [1, %u]", k, name,
+                      s->rate_div, PS_CANBUS_MAX_HYPERPERIOD);
+        return -PS_ERR_CONFIG;
+    }
+    if (s->n_frames == 0u || s->n_frames > PS_CANBUS_MAX_SOURCE_FRAMES) {
+        ps_err_format(err, err_len, "source %zu (%s): %u frames outside [1, %u]", k, name,
+                      s->n_frames, PS_CANBUS_MAX_SOURCE_FRAMES);
+        return -PS_ERR_CONFIG;
+    }
+    const ps_canbus_bus_cfg_t *b = &c->buses[s->bus_idx];
+    for (uint32_t f = 0; f < s->n_frames; f++) {
+        if (s->frames[f].is_fd && !b->is_fd) {
+            ps_err_format(err, err_len,
+                          "source %zu (%s): sends CAN FD frames but bus %u (%s) is classical CAN",
+                          k, name, s->bus_idx, b->ifname);
+            return -PS_ERR_CONFIG;
+        }
+    }
+    return 0;
+}
+
+static int check_inputs(const ps_canbus_cfg_t *c, const ps_canbus_source_t *src, size_t n,
+                        char *err, size_t err_len)
+{
+    if (c->n_buses == 0u || c->n_buses > PS_MAX_BUSES || c->buses == NULL) {
+        ps_err_format(err, err_len, "n_buses %u outside [1, %u]", c->n_buses, PS_MAX_BUSES);
+        return -PS_ERR_CONFIG;
+    }
+    if (n > PS_CANBUS_MAX_SOURCES || (n > 0u && src == NULL)) {
+        ps_err_format(err, err_len, "%zu sources outside [0, %u]", n, PS_CANBUS_MAX_SOURCES);
+        return -PS_ERR_CONFIG;
+    }
+    if (c->servo_hz == 0u) {
+        ps_err_format(err, err_len, "servo_hz is 0");
+        return -PS_ERR_CONFIG;
+    }
+    if (!isfinite(c->bus_budget) || !(c->bus_budget > 0.0f) || c->bus_budget > 1.0f) {
+        ps_err_format(err, err_len, "bus_budget %g outside (0, 1]", (double)c->bus_budget);
+        return -PS_ERR_CONFIG;
+    }
+    for (uint32_t i = 0; i < c->n_buses; i++) {
+        const int rc = check_bus(c, i, err, err_len);
+        if (rc < 0)
+            return rc;
+    }
+    for (size_t k = 0; k < n; k++) {
+        const int rc = check_source(c, &src[k], k, err, err_len);
+        if (rc < 0)
+            return rc;
+    }
+    return 0;
+}
+
+static uint32_t source_bits(const ps_canbus_source_t *s, const ps_canbus_bus_cfg_t *bus)
+{
+    uint32_t bits = 0u;
+    for (uint32_t f = 0; f < s->n_frames; f++)
+        bits += ps_canbus_frame_nominal_bits_max(&s->frames[f], bus);
+    return bits;
+}
+
+int ps_canbus_plan(const ps_canbus_cfg_t *c, const ps_canbus_source_t *sources, size_t n_sources,
+                   ps_canbus_plan_t *out, char *err, size_t err_len)
 {
     ps_canbus_plan_t plan;
     memset(&plan, 0, sizeof plan);
     if (err != NULL && err_len > 0u)
         err[0] = '\0';
-    const int rc = check_inputs(b, r, err, err_len);
+    if (c == NULL || out == NULL) {
+        ps_err_format(err, err_len, "no bus configuration");
+        return -PS_ERR_CONFIG;
+    }
+    const int rc = check_inputs(c, sources, n_sources, err, err_len);
     if (rc < 0)
         return rc;
 
-    const uint32_t hz = r->control.servo_hz;
-    /* Command and reply, both 8-byte 11-bit frames, per joint per due tick. */
-    const uint32_t joint_bits = 2u * ps_canbus_frame_bits_max(PS_MIT_FRAME_LEN, false);
-    /* Gyro and accel frames per IMU sample. */
-    const uint32_t imu_bits = 2u * ps_canbus_frame_bits_max(8u, false);
-
-    plan.n_buses = b->n_buses;
-    for (uint32_t bus = 0; bus < b->n_buses; bus++) {
-        source_t src[PS_MAX_JOINTS + 1u];
+    const uint32_t hz = c->servo_hz;
+    plan.n_buses = c->n_buses;
+    plan.n_sources_total = (uint32_t)n_sources;
+    for (uint32_t bus = 0; bus < c->n_buses; bus++) {
+        const ps_canbus_bus_cfg_t *bc = &c->buses[bus];
+        source_t src[PS_CANBUS_MAX_SOURCES];
         uint32_t n = 0u;
-        for (uint32_t j = 0; j < r->n_joints; j++) {
-            if (r->joints[j].bus_idx == bus)
-                src[n++] = (source_t){joint_bits, r->joints[j].rate_div, (int32_t)j};
+        for (size_t k = 0; k < n_sources; k++) {
+            if (sources[k].bus_idx == bus)
+                src[n++] =
+                    (source_t){source_bits(&sources[k], bc), sources[k].rate_div, (uint32_t)k};
         }
-        if (r->imu.bus_idx == bus)
-            src[n++] = (source_t){imu_bits, r->imu.rate_div, -1};
 
         uint32_t hyper = 1u;
         for (uint32_t k = 0; k < n; k++) {
@@ -209,7 +309,7 @@ int ps_canbus_plan(const ps_board_cfg_t *b, const ps_robot_cfg_t *r, ps_canbus_p
                 ps_err_format(err, err_len,
                               "bus %u (%s): the rate_div values on it repeat only every %u+ ticks, "
                               "more than %u; use divisors of %u",
-                              bus, b->buses[bus].ifname, hyper, PS_CANBUS_MAX_HYPERPERIOD,
+                              bus, bc->ifname, hyper, PS_CANBUS_MAX_HYPERPERIOD,
                               PS_CANBUS_MAX_HYPERPERIOD);
                 return -PS_ERR_CONFIG;
             }
@@ -219,34 +319,29 @@ int ps_canbus_plan(const ps_board_cfg_t *b, const ps_robot_cfg_t *r, ps_canbus_p
         uint32_t tick_bits[PS_CANBUS_MAX_HYPERPERIOD] = {0};
         double bits_per_s = 0.0;
         for (uint32_t k = 0; k < n; k++) {
-            const uint32_t ph = place_source(tick_bits, hyper, &src[k]);
-            if (src[k].joint_idx < 0)
-                plan.imu_phase = (uint8_t)ph;
-            else
-                plan.joint_phase[src[k].joint_idx] = (uint8_t)ph;
+            plan.phase[src[k].idx] = (uint8_t)place_source(tick_bits, hyper, &src[k]);
             bits_per_s += (double)src[k].bits * (double)hz / (double)src[k].div;
         }
         uint32_t peak = 0u;
         for (uint32_t t = 0; t < hyper; t++)
             peak = tick_bits[t] > peak ? tick_bits[t] : peak;
 
-        const uint32_t bitrate = b->buses[bus].bitrate;
         plan.n_sources[bus] = n;
         plan.tick_bits_max[bus] = peak;
-        plan.tick_capacity_bits[bus] = bitrate / hz;
+        plan.tick_capacity_bits[bus] = bc->bitrate / hz;
         plan.load_peak[bus] = (double)peak / (double)plan.tick_capacity_bits[bus];
-        plan.load_avg[bus] = bits_per_s / (double)bitrate;
+        plan.load_avg[bus] = bits_per_s / (double)bc->bitrate;
     }
     *out = plan;
 
     for (uint32_t bus = 0; bus < plan.n_buses; bus++) {
-        if (plan.load_peak[bus] > (double)b->bus_budget) {
+        if (plan.load_peak[bus] > (double)c->bus_budget) {
             ps_err_format(
                 err, err_len,
                 "bus %u (%s): worst-case tick load %.1f%% (%u of %u bits at %u Hz) exceeds "
                 "budget %.3g%%; raise rate_div of its joints or move joints to another bus",
-                bus, b->buses[bus].ifname, plan.load_peak[bus] * 100.0, plan.tick_bits_max[bus],
-                plan.tick_capacity_bits[bus], hz, (double)b->bus_budget * 100.0);
+                bus, c->buses[bus].ifname, plan.load_peak[bus] * 100.0, plan.tick_bits_max[bus],
+                plan.tick_capacity_bits[bus], hz, (double)c->bus_budget * 100.0);
             return -PS_ERR_BUS_BUDGET;
         }
     }

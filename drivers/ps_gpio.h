@@ -13,6 +13,18 @@
 
 #include <stdbool.h>
 #include <stddef.h>
+#include <stdint.h>
+
+#include "../rt/ps_limits.h"
+
+/** GPIO lines of a board (board file, `gpio:`), for the libgpiod port. */
+typedef struct {
+    char chip[PS_NAME_LEN]; /**< "gpiochip0" */
+    uint32_t estop_line;
+    bool is_estop_active_low;
+    uint32_t enable_line;
+    uint32_t led_line;
+} ps_gpio_cfg_t;
 
 typedef enum {
     PS_GPIO_LED_OFF = 0,

@@ -17,6 +17,13 @@
 
 #include "ps_can.h"
 
+/** Where the IMU sits on the wire (robot file, `imu:`). */
+typedef struct {
+    uint32_t bus_idx;
+    uint32_t base_id;  /**< gyro frame on base_id, accel frame on base_id + 1 (11-bit) */
+    uint32_t rate_div; /**< one sample every rate_div servo ticks */
+} ps_imu_cfg_t;
+
 #define PS_IMU_GYRO_LSB_RAD_S       0.001f
 #define PS_IMU_ACCEL_LSB_M_S2       0.002f
 #define PS_IMU_STATUS_GYRO_SAT      0x01u

@@ -42,7 +42,7 @@ static bool range_ok(float lo, float hi)
     return isfinite(lo) && isfinite(hi) && lo < hi;
 }
 
-int ps_mit_check_range(const ps_mit_range_t *r)
+int ps_mit_check_range(const ps_act_range_t *r)
 {
     if (r == NULL)
         return -EINVAL;
@@ -59,7 +59,7 @@ static bool in_wire(float x, float lo, float hi)
     return isfinite(x) && x >= lo && x <= hi;
 }
 
-int ps_mit_encode_cmd(const ps_mit_range_t *r, const ps_mit_cmd_t *cmd,
+int ps_mit_encode_cmd(const ps_act_range_t *r, const ps_mit_cmd_t *cmd,
                       uint8_t out[PS_MIT_FRAME_LEN])
 {
     if (!in_wire(cmd->p_rad, r->p_min_rad, r->p_max_rad) ||
@@ -97,7 +97,7 @@ int ps_mit_encode_cmd(const ps_mit_range_t *r, const ps_mit_cmd_t *cmd,
     return 0;
 }
 
-int ps_mit_decode_cmd(const ps_mit_range_t *r, const uint8_t *data, uint8_t len, ps_mit_cmd_t *out)
+int ps_mit_decode_cmd(const ps_act_range_t *r, const uint8_t *data, uint8_t len, ps_mit_cmd_t *out)
 {
     if (len != PS_MIT_FRAME_LEN || ps_mit_classify_special(data, len) != 0)
         return -PS_ERR_PROTOCOL;
@@ -134,7 +134,7 @@ int ps_mit_classify_special(const uint8_t *data, uint8_t len)
     return 0;
 }
 
-void ps_mit_encode_reply(const ps_mit_range_t *r, const ps_mit_reply_t *rep,
+void ps_mit_encode_reply(const ps_act_range_t *r, const ps_mit_reply_t *rep,
                          uint8_t out[PS_MIT_FRAME_LEN])
 {
     const uint32_t p = ps_mit_float_to_uint(rep->p_rad, r->p_min_rad, r->p_max_rad, PS_MIT_P_BITS);
@@ -151,7 +151,7 @@ void ps_mit_encode_reply(const ps_mit_range_t *r, const ps_mit_reply_t *rep,
     out[7] = (uint8_t)rep->temp_rotor_c;
 }
 
-int ps_mit_decode_reply(const ps_mit_range_t *r, const uint8_t *data, uint8_t len,
+int ps_mit_decode_reply(const ps_act_range_t *r, const uint8_t *data, uint8_t len,
                         ps_mit_reply_t *out)
 {
     if (len != PS_MIT_FRAME_LEN)
@@ -169,3 +169,207 @@ int ps_mit_decode_reply(const ps_mit_range_t *r, const uint8_t *data, uint8_t le
     out->temp_rotor_c = (int8_t)data[7];
     return 0;
 }
+
+/* ---- MIT mode as an actuator protocol --------------------------------- */
+
+static const struct {
+    uint8_t code;
+    uint32_t bit;
+} FAULT_MAP[] = {
+    {PS_MIT_FAULT_OVERVOLTAGE, PS_ACT_FAULT_OVERVOLTAGE},
+    {PS_MIT_FAULT_UNDERVOLTAGE, PS_ACT_FAULT_UNDERVOLTAGE},
+    {PS_MIT_FAULT_OVERCURRENT, PS_ACT_FAULT_OVERCURRENT},
+    {PS_MIT_FAULT_MOS_OVERTEMP, PS_ACT_FAULT_DRIVER_OVERTEMP},
+    {PS_MIT_FAULT_ROTOR_OVERTEMP, PS_ACT_FAULT_MOTOR_OVERTEMP},
+    {PS_MIT_FAULT_COMMS_LOST, PS_ACT_FAULT_COMMS_LOST},
+    {PS_MIT_FAULT_OVERLOAD, PS_ACT_FAULT_OVERLOAD},
+};
+
+uint32_t ps_mit_fault_bits(uint8_t code)
+{
+    if (code == PS_MIT_FAULT_NONE)
+        return 0u;
+    for (unsigned i = 0; i < sizeof(FAULT_MAP) / sizeof(FAULT_MAP[0]); i++)
+        if (FAULT_MAP[i].code == code)
+            return FAULT_MAP[i].bit;
+    return PS_ACT_FAULT_OTHER;
+}
+
+uint8_t ps_mit_fault_code(uint32_t bits)
+{
+    for (unsigned i = 0; i < sizeof(FAULT_MAP) / sizeof(FAULT_MAP[0]); i++)
+        if (bits & FAULT_MAP[i].bit)
+            return FAULT_MAP[i].code;
+    return bits != 0u ? PS_MIT_FAULT_OVERLOAD : PS_MIT_FAULT_NONE;
+}
+
+static void mit_frame(uint32_t id, const uint8_t data[PS_MIT_FRAME_LEN], ps_can_frame_t *out)
+{
+    memset(out, 0, sizeof *out);
+    out->id = id;
+    out->len = PS_MIT_FRAME_LEN;
+    memcpy(out->data, data, PS_MIT_FRAME_LEN);
+}
+
+static bool is_in_wire(const ps_act_range_t *r, const ps_mit_cmd_t *c)
+{
+    return in_wire(c->p_rad, r->p_min_rad, r->p_max_rad) &&
+           in_wire(c->v_rad_s, r->v_min_rad_s, r->v_max_rad_s) &&
+           in_wire(c->kp_nm_rad, 0.0f, r->kp_max_nm_rad) &&
+           in_wire(c->kd_nm_s_rad, 0.0f, r->kd_max_nm_s_rad) &&
+           in_wire(c->t_ff_nm, r->t_min_nm, r->t_max_nm);
+}
+
+static int mit_encode_cmd(const ps_act_cfg_t *a, const ps_act_cmd_t *m, ps_can_frame_t *out,
+                          size_t max)
+{
+    if (max < 1u)
+        return -ENOSPC;
+    ps_mit_cmd_t cmd = {
+        .p_rad = m->q_rad,
+        .v_rad_s = m->qd_rad_s,
+        .kp_nm_rad = m->kp_nm_rad,
+        .kd_nm_s_rad = m->kd_nm_s_rad,
+        .t_ff_nm = m->tau_ff_nm,
+    };
+    uint8_t data[PS_MIT_FRAME_LEN];
+    int rc = ps_mit_encode_cmd(&a->wire, &cmd, data);
+    if (rc == -PS_ERR_LIMIT && is_in_wire(&a->wire, &cmd)) {
+        /* In range but refused: the corner that packs into a special frame
+         * (p, v, kp, kd at their maxima, t near its maximum). Step kd down two
+         * LSB (0.05 % of its range) so it is sent as the set-point it is. */
+        const ps_act_range_t *w = &a->wire;
+        cmd.kd_nm_s_rad -= 2.0f * w->kd_max_nm_s_rad / (float)((1u << PS_MIT_KD_BITS) - 1u);
+        rc = ps_mit_encode_cmd(w, &cmd, data);
+    }
+    if (rc < 0)
+        return rc;
+    mit_frame(a->can_id, data, out);
+    return 1;
+}
+
+static int mit_encode_request(const ps_act_cfg_t *a, ps_act_request_t req, ps_can_frame_t *out,
+                              size_t max)
+{
+    static const ps_mit_special_t SPECIAL[PS_ACT_REQ_COUNT] = {
+        [PS_ACT_REQ_ENABLE] = PS_MIT_SPECIAL_ENTER,
+        [PS_ACT_REQ_DISABLE] = PS_MIT_SPECIAL_EXIT,
+        [PS_ACT_REQ_SET_ZERO] = PS_MIT_SPECIAL_ZERO,
+        [PS_ACT_REQ_CLEAR_FAULT] = PS_MIT_SPECIAL_ENTER,
+    };
+    if ((unsigned)req >= PS_ACT_REQ_COUNT)
+        return -ENOTSUP;
+    if (max < 1u)
+        return -ENOSPC;
+    uint8_t data[PS_MIT_FRAME_LEN];
+    ps_mit_encode_special(SPECIAL[req], data);
+    mit_frame(a->can_id, data, out);
+    return 1;
+}
+
+static bool mit_match_reply(const ps_act_cfg_t *a, const ps_can_frame_t *f)
+{
+    return !f->is_ext && !f->is_fd && f->id == a->reply_id;
+}
+
+static int mit_decode_reply(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_act_meas_t *out)
+{
+    ps_mit_reply_t rep;
+    if (ps_mit_decode_reply(&a->wire, f->data, f->len, &rep) < 0 ||
+        rep.motor_id != (a->can_id & 0x0fu) || !isfinite(rep.p_rad))
+        return -PS_ERR_PROTOCOL;
+    out->q_rad = rep.p_rad;
+    out->qd_rad_s = rep.v_rad_s;
+    out->tau_nm = rep.i_a * a->kt_nm_a;
+    out->temp_c = (float)(rep.temp_mos_c > rep.temp_rotor_c ? rep.temp_mos_c : rep.temp_rotor_c);
+    out->fault_bits = ps_mit_fault_bits(rep.fault);
+    return 0;
+}
+
+static bool mit_is_for_drive(const ps_act_cfg_t *a, const ps_can_frame_t *f)
+{
+    return !f->is_ext && f->id == a->can_id;
+}
+
+static int mit_classify_request(const ps_act_cfg_t *a, const ps_can_frame_t *f)
+{
+    (void)a;
+    switch (ps_mit_classify_special(f->data, f->len)) {
+    case PS_MIT_SPECIAL_ENTER:
+        return PS_ACT_REQ_ENABLE; /* also clears a latched fault */
+    case PS_MIT_SPECIAL_EXIT:
+        return PS_ACT_REQ_DISABLE;
+    case PS_MIT_SPECIAL_ZERO:
+        return PS_ACT_REQ_SET_ZERO;
+    default:
+        return -ENOENT;
+    }
+}
+
+static int mit_decode_cmd(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_act_cmd_t *out)
+{
+    if (f->is_fd)
+        return -PS_ERR_PROTOCOL;
+    ps_mit_cmd_t c;
+    const int rc = ps_mit_decode_cmd(&a->wire, f->data, f->len, &c);
+    if (rc < 0)
+        return rc;
+    out->q_rad = c.p_rad;
+    out->qd_rad_s = c.v_rad_s;
+    out->kp_nm_rad = c.kp_nm_rad;
+    out->kd_nm_s_rad = c.kd_nm_s_rad;
+    out->tau_ff_nm = c.t_ff_nm;
+    return 0;
+}
+
+static int8_t to_int8_c(float t_c)
+{
+    const float r = nearbyintf(t_c);
+    if (!(r > -128.0f))
+        return -128;
+    return r > 127.0f ? 127 : (int8_t)r;
+}
+
+/* MIT carries two temperatures (power stage, rotor); the neutral measurement
+ * holds only the hottest, which goes in both bytes, so the host reads it back. */
+static int mit_encode_reply(const ps_act_cfg_t *a, const ps_act_meas_t *m, ps_can_frame_t *out,
+                            size_t max)
+{
+    if (max < 1u)
+        return -ENOSPC;
+    const float kt = a->kt_nm_a > 0.0f ? a->kt_nm_a : 1.0f;
+    const ps_mit_reply_t rep = {
+        .motor_id = (uint8_t)(a->can_id & 0xFu),
+        .fault = ps_mit_fault_code(m->fault_bits),
+        .p_rad = m->q_rad,
+        .v_rad_s = m->qd_rad_s,
+        .i_a = m->tau_nm / kt,
+        .temp_mos_c = to_int8_c(m->temp_c),
+        .temp_rotor_c = to_int8_c(m->temp_c),
+    };
+    uint8_t data[PS_MIT_FRAME_LEN];
+    ps_mit_encode_reply(&a->wire, &rep, data);
+    mit_frame(a->reply_id, data, out);
+    return 1;
+}
+
+const ps_act_proto_t ps_mit_proto = {
+    .name = "mit",
+    .id_bits = 11,
+    .is_fd = false,
+    .cmd_len = PS_MIT_FRAME_LEN,
+    .reply_len = PS_MIT_FRAME_LEN,
+    .n_cmd = 1,
+    .n_reply = 1,
+    .id_max = 0x7ffu,
+    .resolution_bits = {PS_MIT_P_BITS, PS_MIT_V_BITS, PS_MIT_KP_BITS, PS_MIT_KD_BITS,
+                        PS_MIT_T_BITS},
+    .encode_cmd = mit_encode_cmd,
+    .encode_request = mit_encode_request,
+    .match_reply = mit_match_reply,
+    .decode_reply = mit_decode_reply,
+    .is_for_drive = mit_is_for_drive,
+    .classify_request = mit_classify_request,
+    .decode_cmd = mit_decode_cmd,
+    .encode_reply = mit_encode_reply,
+};

@@ -19,6 +19,8 @@
 
 #include <stdint.h>
 
+#include "ps_actuator.h"
+
 #define PS_MIT_FRAME_LEN 8u
 #define PS_MIT_P_BITS    16u
 #define PS_MIT_V_BITS    12u
@@ -27,16 +29,8 @@
 #define PS_MIT_T_BITS    12u
 #define PS_MIT_I_BITS    12u
 
-/** Wire ranges of one driver's packing (firmware constants of that motor
- *  model). kp and kd ranges start at 0. */
-typedef struct {
-    float p_min_rad, p_max_rad;
-    float v_min_rad_s, v_max_rad_s;
-    float kp_max_nm_rad;
-    float kd_max_nm_s_rad;
-    float t_min_nm, t_max_nm;
-    float i_min_a, i_max_a; /**< reply current range */
-} ps_mit_range_t;
+/* Wire ranges: ps_act_range_t (drivers/ps_actuator.h), the firmware constants
+ * of one motor model. */
 
 typedef struct {
     float p_rad;       /**< position set-point */
@@ -76,7 +70,7 @@ typedef enum {
 
 /** Check a range table: min < max, kp/kd max > 0, all finite.
  *  @return 0 | -EINVAL  @rt RT-SAFE */
-int ps_mit_check_range(const ps_mit_range_t *r);
+int ps_mit_check_range(const ps_act_range_t *r);
 
 /** Encode a command. A field outside its wire range, NaN or infinite is
  *  refused, never clamped silently (the servo layer clamps to the tighter joint
@@ -86,12 +80,12 @@ int ps_mit_check_range(const ps_mit_range_t *r);
  *  would read it as a mode change.
  *  @pre r checked  @post out written on success only  @return 0 | -PS_ERR_LIMIT
  *  @rt RT-SAFE O(1) */
-int ps_mit_encode_cmd(const ps_mit_range_t *r, const ps_mit_cmd_t *cmd,
+int ps_mit_encode_cmd(const ps_act_range_t *r, const ps_mit_cmd_t *cmd,
                       uint8_t out[PS_MIT_FRAME_LEN]);
 
 /** Decode a command frame (the driver's side, used by the emulated actuator).
  *  @return 0 | -PS_ERR_PROTOCOL (len != 8 or a special frame)  @rt RT-SAFE */
-int ps_mit_decode_cmd(const ps_mit_range_t *r, const uint8_t *data, uint8_t len, ps_mit_cmd_t *out);
+int ps_mit_decode_cmd(const ps_act_range_t *r, const uint8_t *data, uint8_t len, ps_mit_cmd_t *out);
 
 /** @post out = the 8-byte special frame  @rt RT-SAFE */
 void ps_mit_encode_special(ps_mit_special_t which, uint8_t out[PS_MIT_FRAME_LEN]);
@@ -101,11 +95,11 @@ int ps_mit_classify_special(const uint8_t *data, uint8_t len);
 
 /** Encode a reply (driver side). Values outside the range saturate, as a
  *  driver's packing does.  @rt RT-SAFE */
-void ps_mit_encode_reply(const ps_mit_range_t *r, const ps_mit_reply_t *rep,
+void ps_mit_encode_reply(const ps_act_range_t *r, const ps_mit_reply_t *rep,
                          uint8_t out[PS_MIT_FRAME_LEN]);
 
 /** Decode a reply. @return 0 | -PS_ERR_PROTOCOL (len != 8)  @rt RT-SAFE */
-int ps_mit_decode_reply(const ps_mit_range_t *r, const uint8_t *data, uint8_t len,
+int ps_mit_decode_reply(const ps_act_range_t *r, const uint8_t *data, uint8_t len,
                         ps_mit_reply_t *out);
 
 /** Linear float <-> unsigned mapping used by every field, exposed for tests.
@@ -116,5 +110,20 @@ int ps_mit_decode_reply(const ps_mit_range_t *r, const uint8_t *data, uint8_t le
  *  @pre bits 1..32  @rt RT-SAFE */
 uint32_t ps_mit_float_to_uint(float x, float min, float max, unsigned bits);
 float ps_mit_uint_to_float(uint32_t u, float min, float max, unsigned bits);
+
+/** MIT mode as an actuator protocol (ps_actuator.h): 11-bit ids, command on
+ *  can_id, reply on reply_id whose byte 0 low nibble is can_id's low nibble;
+ *  ENABLE = ENTER, DISABLE = EXIT, SET_ZERO = ZERO, CLEAR_FAULT = ENTER
+ *  (MIT drivers clear a latched fault when motor mode is entered again).
+ *  Fault codes map to ps_act_fault_t bits by ps_mit_fault_bits. */
+extern const ps_act_proto_t ps_mit_proto;
+
+/** @return ps_act_fault_t bits for an MIT fault nibble (0: none; unknown
+ *  codes: PS_ACT_FAULT_OTHER)  @rt RT-SAFE */
+uint32_t ps_mit_fault_bits(uint8_t code);
+
+/** @return the MIT fault nibble for the most serious of the bits (for the
+ *  emulated driver), 0 for none  @rt RT-SAFE */
+uint8_t ps_mit_fault_code(uint32_t fault_bits);
 
 #endif /* PS_MIT_H */

@@ -123,32 +123,31 @@ void ps_estimate_leg_fk(const ps_kinematics_cfg_t *k, int side, const float q_ra
 
 /* ---- init ---------------------------------------------------------------- */
 
-static int find_joint(const ps_robot_cfg_t *r, const char *name)
+static int find_joint(const char (*names)[PS_NAME_LEN], uint32_t n, const char *name)
 {
-    /* Local lookup instead of ps_config_find_joint: keeps this module free of
-     * the YAML loader, so it links and tests on its own. */
-    const uint32_t n = r->n_joints < PS_MAX_JOINTS ? r->n_joints : PS_MAX_JOINTS;
     for (uint32_t i = 0; i < n; i++) {
-        if (strncmp(r->joints[i].name, name, PS_NAME_LEN) == 0)
+        if (strncmp(names[i], name, PS_NAME_LEN) == 0)
             return (int)i;
     }
     return -ENOENT;
 }
 
-int ps_estimate_init(ps_estimator_t *e, const ps_robot_cfg_t *robot, float dt_s)
+int ps_estimate_init(ps_estimator_t *e, const ps_kinematics_cfg_t *kin,
+                     const char (*joint_name)[PS_NAME_LEN], uint32_t n_joints, float dt_s)
 {
-    if (!e || !robot || !(dt_s > 0.0f) || !(robot->kin.mass_kg > 0.0f))
+    if (!e || !kin || !joint_name || n_joints > PS_MAX_JOINTS || !(dt_s > 0.0f) ||
+        !(kin->mass_kg > 0.0f))
         return -EINVAL;
     int idx[2][PS_LEG_N_JOINTS];
     for (int s = 0; s < 2; s++) {
         for (int j = 0; j < PS_LEG_N_JOINTS; j++) {
-            idx[s][j] = find_joint(robot, LEG_NAMES[s][j]);
+            idx[s][j] = find_joint(joint_name, n_joints, LEG_NAMES[s][j]);
             if (idx[s][j] < 0)
                 return -ENOENT;
         }
     }
     memset(e, 0, sizeof(*e));
-    e->robot = robot;
+    e->kin = *kin;
     memcpy(e->leg_idx, idx, sizeof(idx));
     e->dt_s = dt_s;
     e->filter_tau_s = PS_ESTIMATE_FILTER_TAU_S;
@@ -247,9 +246,9 @@ static float joint_val(const ps_meas_t *m, int idx, bool is_tau)
 
 void ps_estimate_update(ps_estimator_t *e, const ps_meas_t *m)
 {
-    if (!e || !m || !e->robot)
+    if (!e || !m || !(e->dt_s > 0.0f))
         return;
-    const ps_kinematics_cfg_t *k = &e->robot->kin;
+    const ps_kinematics_cfg_t *k = &e->kin;
     ps_estimate_t *est = &e->est;
 
     update_tilt(e, &m->imu);

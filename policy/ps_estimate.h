@@ -25,6 +25,21 @@
 
 #include "ps_state.h"
 
+/** Geometry the estimator needs (a 6-DoF leg per side, lumped trunk CoM). */
+typedef struct {
+    float mass_kg;
+    float hip_offset_y_m; /**< pelvis origin (IMU) to hip joint, lateral */
+    float hip_offset_z_m; /**< pelvis origin to hip joint, down (positive) */
+    float thigh_m;        /**< hip pitch to knee */
+    float shank_m;        /**< knee to ankle */
+    float ankle_height_m; /**< ankle axis to sole */
+    float foot_length_m, foot_width_m;
+    float foot_offset_x_m;   /**< sole centre ahead of the ankle axis */
+    float com_offset_z_m;    /**< CoM above the pelvis origin, trunk frame */
+    float fall_tilt_rad;     /**< trunk tilt beyond this: fallen */
+    float fall_com_height_m; /**< CoM lower than this: fallen */
+} ps_kinematics_cfg_t;
+
 /** Leg joints in chain order, hip yaw to ankle roll. */
 enum {
     PS_LEG_HIP_YAW,
@@ -44,7 +59,7 @@ enum {
 #define PS_ESTIMATE_ACCEL_GATE   0.2f  /**< accel used for tilt only if | |a|/g - 1 | <= this */
 
 typedef struct {
-    const ps_robot_cfg_t *robot;
+    ps_kinematics_cfg_t kin;         /**< copy (read-only) */
     int leg_idx[2][PS_LEG_N_JOINTS]; /**< joint index of each leg joint, [0] left */
     float dt_s;
     float filter_tau_s; /**< complementary filter time constant; user may modify */
@@ -55,15 +70,18 @@ typedef struct {
     bool has_prev_com;     /**< prev_com_m holds the previous update's CoM */
 } ps_estimator_t;
 
-/** Finds the leg joints by name ("l_hip_yaw" ... "r_ankle_roll"), zeroes the
- *  estimate, sets filter_tau_s to PS_ESTIMATE_FILTER_TAU_S.
- *  @pre robot outlives e  @post e ready; no tilt until the first IMU sample
+/** Finds the leg joints by name ("l_hip_yaw" ... "r_ankle_roll") among
+ *  joint_name[0..n_joints), copies kin, zeroes the estimate, sets
+ *  filter_tau_s to PS_ESTIMATE_FILTER_TAU_S.
+ *  @pre joint_name indexed like the measurements  @post e ready; no tilt until
+ *       the first IMU sample; nothing of the arguments is kept
  *  @units dt_s: seconds between ps_estimate_update calls (the servo tick)
- *  @return 0 | -EINVAL e or robot NULL, dt_s <= 0 or mass_kg <= 0
- *          | -ENOENT a leg joint is missing  @rt INIT */
-int ps_estimate_init(ps_estimator_t *e, const ps_robot_cfg_t *robot, float dt_s);
+ *  @return 0 | -EINVAL e, kin or joint_name NULL, n_joints > PS_MAX_JOINTS,
+ *          dt_s <= 0 or mass_kg <= 0 | -ENOENT a leg joint is missing  @rt INIT */
+int ps_estimate_init(ps_estimator_t *e, const ps_kinematics_cfg_t *kin,
+                     const char (*joint_name)[PS_NAME_LEN], uint32_t n_joints, float dt_s);
 
-/** @pre init ok, m->joints indexed like robot->joints
+/** @pre init ok, m->joints indexed like joint_name at init
  *  @post e->est updated from m: tilt from an IMU sample newer than the last
  *  used one (t_ns == 0 or not newer: tilt kept), feet/contact/CoM/CoP from the
  *  joints. No-op when e or m is NULL.  @rt RT-SAFE O(joints), loop thread */

@@ -1,5 +1,5 @@
 /*
- * ps_servo: joint targets -> MIT-mode commands, per safety state. See
+ * ps_servo: joint targets -> neutral joint commands, per servo mode. See
  * ps_servo.h for the contract and docs/safety.md for what each state sends.
  */
 #include "ps_servo.h"
@@ -18,17 +18,18 @@ typedef struct {
     float t_lo, t_hi;
 } limits_t;
 
-static limits_t limits_of(const ps_joint_cfg_t *j)
+static limits_t limits_of(const ps_servo_joint_cfg_t *j)
 {
+    const ps_act_limits_t *c = &j->lim;
     const limits_t l = {
-        .p_lo = fmaxf(j->pos_min_rad, j->wire.p_min_rad),
-        .p_hi = fminf(j->pos_max_rad, j->wire.p_max_rad),
-        .v_lo = fmaxf(-j->vel_max_rad_s, j->wire.v_min_rad_s),
-        .v_hi = fminf(j->vel_max_rad_s, j->wire.v_max_rad_s),
-        .kp_hi = fminf(j->kp_max_nm_rad, j->wire.kp_max_nm_rad),
-        .kd_hi = fminf(j->kd_max_nm_s_rad, j->wire.kd_max_nm_s_rad),
-        .t_lo = fmaxf(-j->torque_max_nm, j->wire.t_min_nm),
-        .t_hi = fminf(j->torque_max_nm, j->wire.t_max_nm),
+        .p_lo = fmaxf(c->pos_min_rad, j->wire.p_min_rad),
+        .p_hi = fminf(c->pos_max_rad, j->wire.p_max_rad),
+        .v_lo = fmaxf(-c->vel_max_rad_s, j->wire.v_min_rad_s),
+        .v_hi = fminf(c->vel_max_rad_s, j->wire.v_max_rad_s),
+        .kp_hi = fminf(c->kp_max_nm_rad, j->wire.kp_max_nm_rad),
+        .kd_hi = fminf(c->kd_max_nm_s_rad, j->wire.kd_max_nm_s_rad),
+        .t_lo = fmaxf(-c->torque_max_nm, j->wire.t_min_nm),
+        .t_hi = fminf(c->torque_max_nm, j->wire.t_max_nm),
     };
     return l;
 }
@@ -47,28 +48,28 @@ static float clampf(float x, float lo, float hi)
 /* Set-point for commands with kp = 0: the driver ignores p then, but it
  * must still encode, so keep it where the joint is (or the stance when the
  * measurement is unusable), inside the limits. */
-static float rest_position(const ps_joint_cfg_t *j, const limits_t *l, float meas_q)
+static float rest_position(const ps_servo_joint_cfg_t *j, const limits_t *l, float meas_q)
 {
     const float p = isfinite(meas_q) ? meas_q : j->stance_rad;
     return clampf(p, l->p_lo, l->p_hi);
 }
 
-static ps_mit_cmd_t limp_cmd(const ps_joint_cfg_t *j, const limits_t *l, float meas_q)
+static ps_act_cmd_t limp_cmd(const ps_servo_joint_cfg_t *j, const limits_t *l, float meas_q)
 {
-    const ps_mit_cmd_t cmd = {
-        .p_rad = rest_position(j, l, meas_q),
-        .v_rad_s = clampf(0.0f, l->v_lo, l->v_hi),
+    const ps_act_cmd_t cmd = {
+        .q_rad = rest_position(j, l, meas_q),
+        .qd_rad_s = clampf(0.0f, l->v_lo, l->v_hi),
         .kp_nm_rad = 0.0f,
         .kd_nm_s_rad = 0.0f,
-        .t_ff_nm = clampf(0.0f, l->t_lo, l->t_hi),
+        .tau_ff_nm = clampf(0.0f, l->t_lo, l->t_hi),
     };
     return cmd;
 }
 
-static ps_mit_cmd_t damping_cmd(const ps_joint_cfg_t *j, const limits_t *l,
-                                const ps_control_cfg_t *c, float meas_q)
+static ps_act_cmd_t damping_cmd(const ps_servo_joint_cfg_t *j, const limits_t *l,
+                                const ps_servo_cfg_t *c, float meas_q)
 {
-    ps_mit_cmd_t cmd = limp_cmd(j, l, meas_q);
+    ps_act_cmd_t cmd = limp_cmd(j, l, meas_q);
     cmd.kd_nm_s_rad = clampf(c->damping_kd_nm_s_rad, 0.0f, l->kd_hi);
     return cmd;
 }
@@ -88,31 +89,40 @@ static void limit_spring_torque(const limits_t *l, float q, float budget, float 
         *kp = budget / err; /* err > 0 here, since budget >= 0 */
 }
 
-/* LSB of a field packed into `bits` over [lo, hi]. */
-static float lsb(float lo, float hi, unsigned bits)
+/* The set-point for RAMP, TRACK and HOLD, before clamping. */
+typedef struct {
+    float p, v, tau, kp;
+} setpoint_t;
+
+static setpoint_t hold_setpoint(const ps_servo_joint_cfg_t *j, const ps_servo_mode_t *mode,
+                                unsigned joint_idx)
 {
-    return (hi - lo) / (float)((1u << bits) - 1u);
+    float p = j->stance_rad;
+    if (mode->hold_q_rad != NULL && isfinite(mode->hold_q_rad[joint_idx]))
+        p = mode->hold_q_rad[joint_idx];
+    return (setpoint_t){.p = p, .v = 0.0f, .tau = 0.0f, .kp = j->kp_nm_rad};
 }
 
-/* The MIT special frames (FF FF FF FF FF FF FF FC..FE) are p, v, kp and kd at
- * their packed maxima with t near its maximum: a set-point there would be read
- * as a mode change, and ps_mit_encode_cmd refuses it. Only a joint whose
- * limits reach the wire maxima can get there; if a command is within one LSB
- * of that corner (a conservative float test, ignoring t), step kd down two
- * LSB, which changes the damping by 0.05 % of its range. */
-static void avoid_special_frame(const ps_mit_range_t *w, ps_mit_cmd_t *cmd)
+static ps_act_cmd_t clamped_command(const ps_servo_joint_cfg_t *j, const limits_t *l, float q,
+                                    const setpoint_t *sp)
 {
-    if (cmd->p_rad >= w->p_max_rad - lsb(w->p_min_rad, w->p_max_rad, PS_MIT_P_BITS) &&
-        cmd->v_rad_s >= w->v_max_rad_s - lsb(w->v_min_rad_s, w->v_max_rad_s, PS_MIT_V_BITS) &&
-        cmd->kp_nm_rad >= w->kp_max_nm_rad - lsb(0.0f, w->kp_max_nm_rad, PS_MIT_KP_BITS) &&
-        cmd->kd_nm_s_rad >= w->kd_max_nm_s_rad - lsb(0.0f, w->kd_max_nm_s_rad, PS_MIT_KD_BITS))
-        cmd->kd_nm_s_rad =
-            w->kd_max_nm_s_rad - 2.0f * lsb(0.0f, w->kd_max_nm_s_rad, PS_MIT_KD_BITS);
+    ps_act_cmd_t cmd = {
+        .q_rad = clampf(sp->p, l->p_lo, l->p_hi),
+        .qd_rad_s = clampf(sp->v, l->v_lo, l->v_hi),
+        .kp_nm_rad = clampf(sp->kp, 0.0f, l->kp_hi),
+        .kd_nm_s_rad = clampf(j->kd_nm_s_rad, 0.0f, l->kd_hi), /* full damping in RAMP too */
+        .tau_ff_nm = clampf(sp->tau, l->t_lo, l->t_hi),
+    };
+    float budget = j->lim.torque_max_nm - fabsf(cmd.tau_ff_nm);
+    if (!(budget > 0.0f))
+        budget = 0.0f;
+    limit_spring_torque(l, q, budget, &cmd.q_rad, &cmd.kp_nm_rad);
+    return cmd;
 }
 
-int ps_servo_command(const ps_joint_cfg_t *j, const ps_control_cfg_t *c,
+int ps_servo_command(const ps_servo_joint_cfg_t *j, const ps_servo_cfg_t *c,
                      const ps_servo_mode_t *mode, unsigned joint_idx, const ps_targets_t *t,
-                     ps_mit_cmd_t *out)
+                     ps_act_cmd_t *out)
 {
     if (j == NULL || out == NULL)
         return -EINVAL;
@@ -123,19 +133,27 @@ int ps_servo_command(const ps_joint_cfg_t *j, const ps_control_cfg_t *c,
     }
     const float q = mode->meas_q_rad[joint_idx];
 
-    switch (mode->state) {
-    case PS_SM_STANDBY:
-    case PS_SM_ESTOP:
+    switch (mode->kind) {
+    case PS_SERVO_LIMP:
         *out = limp_cmd(j, &l, q);
         return 0;
-    case PS_SM_DAMPING:
+    case PS_SERVO_DAMP:
         *out = damping_cmd(j, &l, c, q);
         return 0;
-    case PS_SM_RAMP:
-    case PS_SM_ACTIVE:
+    case PS_SERVO_HOLD:
+        if (!isfinite(q)) {
+            *out = damping_cmd(j, &l, c, q);
+            return -PS_ERR_LIMIT;
+        } else {
+            const setpoint_t sp = hold_setpoint(j, mode, joint_idx);
+            *out = clamped_command(j, &l, q, &sp);
+        }
+        return 0;
+    case PS_SERVO_RAMP:
+    case PS_SERVO_TRACK:
         break;
     default:
-        *out = limp_cmd(j, &l, q); /* corrupted state: the state machine says ESTOP */
+        *out = limp_cmd(j, &l, q); /* corrupted mode: the loop's state machine says ESTOP */
         return -EINVAL;
     }
 
@@ -158,48 +176,40 @@ int ps_servo_command(const ps_joint_cfg_t *j, const ps_control_cfg_t *c,
         return -PS_ERR_LIMIT;
     }
 
-    float p = target_q;
-    float v = target_qd;
-    float tau = target_tau;
-    float kp = j->kp_nm_rad;
-    const float kd = j->kd_nm_s_rad; /* full damping in RAMP too: see header */
-    if (mode->state == PS_SM_RAMP) {
+    setpoint_t sp = {.p = target_q, .v = target_qd, .tau = target_tau, .kp = j->kp_nm_rad};
+    if (mode->kind == PS_SERVO_RAMP) {
         const float a = isfinite(mode->ramp_alpha) ? clampf(mode->ramp_alpha, 0.0f, 1.0f) : 0.0f;
         float from = q;
         if (mode->ramp_from_q_rad != NULL && isfinite(mode->ramp_from_q_rad[joint_idx]))
             from = mode->ramp_from_q_rad[joint_idx];
-        p = from + a * (target_q - from);
-        kp *= a;
-        v *= a;
-        tau *= a;
+        sp.p = from + a * (target_q - from);
+        sp.kp *= a;
+        sp.v *= a;
+        sp.tau *= a;
     }
-
-    ps_mit_cmd_t cmd = {
-        .p_rad = clampf(p, l.p_lo, l.p_hi),
-        .v_rad_s = clampf(v, l.v_lo, l.v_hi),
-        .kp_nm_rad = clampf(kp, 0.0f, l.kp_hi),
-        .kd_nm_s_rad = clampf(kd, 0.0f, l.kd_hi),
-        .t_ff_nm = clampf(tau, l.t_lo, l.t_hi),
-    };
-    float budget = j->torque_max_nm - fabsf(cmd.t_ff_nm);
-    if (!(budget > 0.0f))
-        budget = 0.0f;
-    limit_spring_torque(&l, q, budget, &cmd.p_rad, &cmd.kp_nm_rad);
-    avoid_special_frame(&j->wire, &cmd);
-    *out = cmd;
+    *out = clamped_command(j, &l, q, &sp);
     return 0;
 }
 
-bool ps_servo_is_within_limits(const ps_joint_cfg_t *j, const ps_mit_cmd_t *cmd)
+bool ps_servo_is_within_limits(const ps_servo_joint_cfg_t *j, const ps_act_cmd_t *cmd)
 {
     if (j == NULL || cmd == NULL)
         return false;
-    if (!isfinite(cmd->p_rad) || !isfinite(cmd->v_rad_s) || !isfinite(cmd->kp_nm_rad) ||
-        !isfinite(cmd->kd_nm_s_rad) || !isfinite(cmd->t_ff_nm))
+    if (!isfinite(cmd->q_rad) || !isfinite(cmd->qd_rad_s) || !isfinite(cmd->kp_nm_rad) ||
+        !isfinite(cmd->kd_nm_s_rad) || !isfinite(cmd->tau_ff_nm))
         return false;
     const limits_t l = limits_of(j);
-    return cmd->p_rad >= l.p_lo && cmd->p_rad <= l.p_hi && cmd->v_rad_s >= l.v_lo &&
-           cmd->v_rad_s <= l.v_hi && cmd->kp_nm_rad >= 0.0f && cmd->kp_nm_rad <= l.kp_hi &&
-           cmd->kd_nm_s_rad >= 0.0f && cmd->kd_nm_s_rad <= l.kd_hi && cmd->t_ff_nm >= l.t_lo &&
-           cmd->t_ff_nm <= l.t_hi;
+    return cmd->q_rad >= l.p_lo && cmd->q_rad <= l.p_hi && cmd->qd_rad_s >= l.v_lo &&
+           cmd->qd_rad_s <= l.v_hi && cmd->kp_nm_rad >= 0.0f && cmd->kp_nm_rad <= l.kp_hi &&
+           cmd->kd_nm_s_rad >= 0.0f && cmd->kd_nm_s_rad <= l.kd_hi && cmd->tau_ff_nm >= l.t_lo &&
+           cmd->tau_ff_nm <= l.t_hi;
+}
+
+const char *ps_servo_mode_name(ps_servo_mode_kind_t kind)
+{
+    static const char *const NAMES[PS_SERVO_MODE_COUNT] = {
+        [PS_SERVO_LIMP] = "limp",   [PS_SERVO_DAMP] = "damp", [PS_SERVO_RAMP] = "ramp",
+        [PS_SERVO_TRACK] = "track", [PS_SERVO_HOLD] = "hold",
+    };
+    return ((unsigned)kind < PS_SERVO_MODE_COUNT) ? NAMES[kind] : "?";
 }

@@ -40,25 +40,27 @@
 
 #include "../rt/ps_err.h"
 
-static int find_joint(const ps_robot_cfg_t *r, const char *name)
+static int find_joint(const char (*names)[PS_NAME_LEN], uint32_t n, const char *name)
 {
-    for (uint32_t i = 0; i < r->n_joints; i++) {
-        if (strncmp(r->joints[i].name, name, PS_NAME_LEN) == 0)
+    for (uint32_t i = 0; i < n; i++) {
+        if (strncmp(names[i], name, PS_NAME_LEN) == 0)
             return (int)i;
     }
     return -1;
 }
 
-int ps_stand_init(ps_stand_t *st, const ps_robot_cfg_t *robot)
+int ps_stand_init(ps_stand_t *st, uint32_t n_joints, const char (*joint_name)[PS_NAME_LEN],
+                  const ps_servo_joint_cfg_t *joints)
 {
-    if (!st || !robot || robot->n_joints == 0 || robot->n_joints > PS_MAX_JOINTS)
+    if (!st || !joint_name || !joints || n_joints == 0 || n_joints > PS_MAX_JOINTS)
         return -EINVAL;
     memset(st, 0, sizeof(*st));
-    st->robot = robot;
-    st->idx_ankle_pitch[0] = find_joint(robot, "l_ankle_pitch");
-    st->idx_ankle_pitch[1] = find_joint(robot, "r_ankle_pitch");
-    st->idx_ankle_roll[0] = find_joint(robot, "l_ankle_roll");
-    st->idx_ankle_roll[1] = find_joint(robot, "r_ankle_roll");
+    st->n_joints = n_joints;
+    st->joints = joints;
+    st->idx_ankle_pitch[0] = find_joint(joint_name, n_joints, "l_ankle_pitch");
+    st->idx_ankle_pitch[1] = find_joint(joint_name, n_joints, "r_ankle_pitch");
+    st->idx_ankle_roll[0] = find_joint(joint_name, n_joints, "l_ankle_roll");
+    st->idx_ankle_roll[1] = find_joint(joint_name, n_joints, "r_ankle_roll");
     st->k_tilt = PS_STAND_K_TILT_DEFAULT;
     st->k_com = PS_STAND_K_COM_DEFAULT;
     st->k_vel = PS_STAND_K_VEL_DEFAULT;
@@ -106,11 +108,11 @@ static void ankle_correction(const ps_stand_t *st, const ps_estimate_t *est, flo
     *out_roll_rad = clampf(cr, -PS_STAND_CORR_MAX_RAD, PS_STAND_CORR_MAX_RAD);
 }
 
-static void add_target(const ps_joint_cfg_t *j, float *q, float delta_rad)
+static void add_target(const ps_servo_joint_cfg_t *j, float *q, float delta_rad)
 {
     float v = *q + delta_rad;
-    if (j->pos_min_rad < j->pos_max_rad)
-        v = clampf(v, j->pos_min_rad, j->pos_max_rad);
+    if (j->lim.pos_min_rad < j->lim.pos_max_rad)
+        v = clampf(v, j->lim.pos_min_rad, j->lim.pos_max_rad);
     *q = v;
 }
 
@@ -118,26 +120,26 @@ static int stand_step(void *ctx, const ps_meas_t *meas, const ps_estimate_t *est
 {
     (void)meas; /* everything needed is in the estimate */
     const ps_stand_t *st = ctx;
-    if (!st || !st->robot || !out)
+    if (!st || !st->joints || !out)
         return -EINVAL;
-    const ps_robot_cfg_t *r = st->robot;
-    if (r->n_joints == 0 || r->n_joints > PS_MAX_JOINTS)
+    const uint32_t n = st->n_joints;
+    if (n == 0 || n > PS_MAX_JOINTS)
         return -EINVAL;
 
     ps_targets_t t;
     memset(&t, 0, sizeof(t));
-    t.n_joints = r->n_joints;
-    for (uint32_t i = 0; i < r->n_joints; i++)
-        t.q_rad[i] = r->joints[i].stance_rad;
+    t.n_joints = n;
+    for (uint32_t i = 0; i < n; i++)
+        t.q_rad[i] = st->joints[i].stance_rad;
 
     float cp = 0.0f, cr = 0.0f;
     ankle_correction(st, est, &cp, &cr);
     for (int s = 0; s < 2; s++) {
         const int ip = st->idx_ankle_pitch[s], ir = st->idx_ankle_roll[s];
-        if (ip >= 0 && (uint32_t)ip < r->n_joints)
-            add_target(&r->joints[ip], &t.q_rad[ip], cp);
-        if (ir >= 0 && (uint32_t)ir < r->n_joints)
-            add_target(&r->joints[ir], &t.q_rad[ir], cr);
+        if (ip >= 0 && (uint32_t)ip < n)
+            add_target(&st->joints[ip], &t.q_rad[ip], cp);
+        if (ir >= 0 && (uint32_t)ir < n)
+            add_target(&st->joints[ir], &t.q_rad[ir], cr);
     }
 
     for (uint32_t i = 0; i < t.n_joints; i++) {

@@ -8,17 +8,11 @@
 #include <stdbool.h>
 #include <stdint.h>
 
-#include "../rt/ps_config.h"
+#include "../drivers/ps_actuator.h"
+#include "../rt/ps_limits.h"
 
-/** One joint as its driver last reported it. */
-typedef struct {
-    float q_rad;
-    float qd_rad_s;
-    float tau_nm;  /**< current * kt */
-    float temp_c;  /**< max(mos, rotor) */
-    uint8_t fault; /**< ps_mit_fault_t */
-    int64_t t_ns;  /**< time the reply arrived; 0: never */
-} ps_joint_meas_t;
+/* One joint as its drive last reported it: ps_act_meas_t (joint units, fault
+ * bits ps_act_fault_t, t_ns the tick the reply was taken, 0: never). */
 
 typedef struct {
     float gyro_body_rad_s[3];
@@ -28,7 +22,7 @@ typedef struct {
 
 typedef struct {
     uint32_t n_joints;
-    ps_joint_meas_t joints[PS_MAX_JOINTS];
+    ps_act_meas_t joints[PS_MAX_JOINTS];
     ps_imu_meas_t imu;
 } ps_meas_t;
 

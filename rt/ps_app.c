@@ -5,6 +5,8 @@
 #include <string.h>
 
 #include "ps_err.h"
+#include "ps_guard.h"
+#include "ps_rtsetup.h"
 
 static bool is_file_arg(const char *arg)
 {
@@ -62,7 +64,14 @@ static int load_configs(ps_app_t *app, const ps_app_opts_t *o, char *err, size_t
 static uint32_t take_operator_requests(void *ctx)
 {
     ps_app_t *app = ctx;
-    uint32_t bits = app->op.sim ? ps_sim_take_requests(app->op.sim) : 0;
+    uint32_t bits = 0;
+    const uint32_t sim_bits = app->op.sim ? ps_sim_take_requests(app->op.sim) : 0u;
+    if (sim_bits & PS_SIM_REQ_START)
+        bits |= PS_SM_C_REQ_START;
+    if (sim_bits & PS_SIM_REQ_STOP)
+        bits |= PS_SM_C_REQ_STOP;
+    if (sim_bits & PS_SIM_REQ_RESET)
+        bits |= PS_SM_C_REQ_RESET;
     int64_t at = atomic_load(&app->op.start_request_ns);
     if (at > 0 && ps_clock_now_ns(app->op.clock) >= at) {
         bits |= PS_SM_C_REQ_START;
@@ -76,16 +85,115 @@ void ps_app_request_start_at(ps_app_t *app, int64_t t_ns)
     atomic_store(&app->op.start_request_ns, t_ns);
 }
 
+int ps_app_plan_buses(const ps_board_cfg_t *b, const ps_robot_cfg_t *r, ps_canbus_plan_t *out,
+                      char *err, size_t err_len)
+{
+    if (b == NULL || r == NULL || r->n_joints > PS_MAX_JOINTS) {
+        ps_err_format(err, err_len, "bus plan: no board or robot, or too many joints");
+        return -PS_ERR_CONFIG;
+    }
+    char names[PS_CANBUS_MAX_SOURCES][PS_NAME_LEN + 8]; /* for the planner's messages */
+    ps_canbus_source_t src[PS_CANBUS_MAX_SOURCES];
+    memset(src, 0, sizeof(src));
+    for (uint32_t j = 0; j < r->n_joints; j++) {
+        const ps_act_proto_t *p = ps_act_proto_get(r->act[j].protocol);
+        snprintf(names[j], sizeof(names[j]), "joint %s", r->joint_name[j]);
+        src[j].name = names[j];
+        src[j].bus_idx = r->act[j].bus_idx;
+        src[j].rate_div = r->act[j].rate_div;
+        if (p == NULL || p->n_cmd + p->n_reply > PS_CANBUS_MAX_SOURCE_FRAMES)
+            continue; /* n_frames 0: the planner names the joint */
+        const bool is_ext = p->id_bits > 11u;
+        for (uint32_t k = 0; k < p->n_cmd + p->n_reply; k++)
+            src[j].frames[k] = (ps_canbus_frame_shape_t){
+                .len = k < p->n_cmd ? p->cmd_len : p->reply_len,
+                .is_ext = is_ext,
+                .is_fd = p->is_fd,
+                .is_brs = p->is_fd,
+            };
+        src[j].n_frames = p->n_cmd + p->n_reply;
+    }
+    ps_canbus_source_t *imu = &src[r->n_joints];
+    imu->name = "imu";
+    imu->bus_idx = r->imu.bus_idx;
+    imu->rate_div = r->imu.rate_div;
+    imu->n_frames = 2; /* gyro and accel frames per sample */
+    imu->frames[0] = imu->frames[1] = (ps_canbus_frame_shape_t){.len = 8};
+    const ps_canbus_cfg_t cfg = {
+        .n_buses = b->n_buses,
+        .buses = b->buses,
+        .bus_budget = b->bus_budget,
+        .servo_hz = r->control.servo_hz,
+    };
+    return ps_canbus_plan(&cfg, src, r->n_joints + 1u, out, err, err_len);
+}
+
+void ps_app_sim_board(const ps_board_cfg_t *b, ps_sim_board_t *out)
+{
+    memset(out, 0, sizeof(*out));
+    memcpy(out->name, b->name, sizeof(out->name));
+    out->n_buses = b->n_buses;
+    memcpy(out->buses, b->buses, sizeof(out->buses));
+    out->plant_priority = b->rt.priority > 1u ? b->rt.priority - 1u : 0u;
+    out->plant_cpu = b->rt.plant_cpu;
+}
+
+void ps_app_sim_robot(const ps_robot_cfg_t *r, ps_sim_robot_t *out)
+{
+    memset(out, 0, sizeof(*out));
+    memcpy(out->name, r->name, sizeof(out->name));
+    out->n_joints = r->n_joints;
+    memcpy(out->joint_name, r->joint_name, sizeof(out->joint_name));
+    memcpy(out->act, r->act, sizeof(out->act));
+    for (uint32_t j = 0; j < r->n_joints && j < PS_MAX_JOINTS; j++) {
+        out->lim[j] = r->servo[j].lim;
+        out->stance_rad[j] = r->servo[j].stance_rad;
+    }
+    out->imu = r->imu;
+    out->devices = r->sim;
+}
+
+static void hook_setup_thread(void *ctx, unsigned priority, int cpu)
+{
+    (void)ctx;
+    (void)ps_rtsetup_thread_best_effort(priority, cpu); /* the sim runs as it can */
+}
+
+static void hook_pause_guard(void *ctx)
+{
+    (void)ctx;
+    ps_guard_pause();
+}
+
+static void hook_resume_guard(void *ctx)
+{
+    (void)ctx;
+    ps_guard_resume();
+}
+
+ps_sim_hooks_t ps_app_sim_hooks(void)
+{
+    const ps_sim_hooks_t h = {
+        .ctx = NULL,
+        .setup_thread = hook_setup_thread,
+        .pause_guard = hook_pause_guard,
+        .resume_guard = hook_resume_guard,
+    };
+    return h;
+}
+
 static int wire_sim(ps_app_t *app, ps_loop_cfg_t *lc, char *err, size_t len)
 {
+    ps_app_sim_board(&app->board, &app->sim_board);
+    ps_app_sim_robot(&app->robot, &app->sim_robot);
     ps_sim_cfg_t sc = {
-        .board = &app->board,
-        .robot = &app->robot,
+        .board = &app->sim_board,
+        .robot = &app->sim_robot,
         .scenario = &app->scenario,
         .model_path = app->model_path,
         .is_lockstep = app->is_lockstep,
         .period_ns = PS_NS_PER_S / app->robot.control.servo_hz,
-        .joint_phase = app->plan.joint_phase,
+        .hooks = ps_app_sim_hooks(),
     };
     int rc = ps_sim_create(&sc, &app->sim, err, len);
     if (rc < 0)
@@ -121,7 +229,7 @@ static int wire(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t len)
     int rc = wire_sim(app, &lc, err, len);
     if (rc < 0)
         return rc;
-    rc = ps_stand_init(&app->stand, &app->robot);
+    rc = ps_stand_init(&app->stand, app->robot.n_joints, app->robot.joint_name, app->robot.servo);
     if (rc < 0) {
         snprintf(err, len, "standing controller: %s", ps_strerror(rc));
         return rc;
@@ -146,7 +254,7 @@ int ps_app_init(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t err_
     app->is_lockstep = opts->is_lockstep;
     int rc = load_configs(app, opts, err, err_len);
     if (rc == 0)
-        rc = ps_canbus_plan(&app->board, &app->robot, &app->plan, err, err_len);
+        rc = ps_app_plan_buses(&app->board, &app->robot, &app->plan, err, err_len);
     if (rc == 0)
         rc = wire(app, opts, err, err_len);
     if (rc < 0 && rc != -PS_ERR_BUS_BUDGET)

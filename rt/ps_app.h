@@ -4,7 +4,9 @@
  * buses, wires the ports of the board's kind (the simulated plant for `sim`;
  * the SocketCAN/libgpiod drivers for `linux` are not built yet), the policy
  * slot (standing controller), the record ring and the loop. main() and the
- * end-to-end tests both start the system through here.
+ * end-to-end tests both start the system through here. It is the composition
+ * root (with rt/main.c and the config loader): the only application code that
+ * includes sim/ (docs/architecture.md).
  *
  * Threads: main thread. Allocation: INIT only (the sim allocates at create);
  * ps_app_t is large: keep it static or on the heap.
@@ -43,6 +45,8 @@ typedef struct {
     ps_robot_cfg_t robot;
     ps_scenario_cfg_t scenario;
     ps_canbus_plan_t plan;
+    ps_sim_board_t sim_board;
+    ps_sim_robot_t sim_robot;
     ps_sim_t *sim; /**< NULL on real boards */
     ps_stand_t stand;
     ps_ring_t ring;
@@ -61,6 +65,22 @@ typedef struct {
  *  @return 0 | -PS_ERR_CONFIG | -PS_ERR_BUS_BUDGET | -ENOENT | -ENOTSUP (linux
  *          board) | -PS_ERR_PLANT | -ENOMEM  @rt INIT, main thread */
 int ps_app_init(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t err_len);
+
+/** Plan the board's buses for the robot: one source per joint (its
+ *  protocol's command and reply frames, at its rate_div; source index = joint
+ *  index) and one for the IMU (two classical 8-byte frames; source index =
+ *  n_joints). @return as ps_canbus_plan  @rt INIT */
+int ps_app_plan_buses(const ps_board_cfg_t *b, const ps_robot_cfg_t *r, ps_canbus_plan_t *out,
+                      char *err, size_t err_len);
+
+/** The board and robot as the simulation needs them (plant thread one
+ *  priority below the loop).  @rt INIT */
+void ps_app_sim_board(const ps_board_cfg_t *b, ps_sim_board_t *out);
+void ps_app_sim_robot(const ps_robot_cfg_t *r, ps_sim_robot_t *out);
+
+/** Hooks the simulation calls back into the application: RT setup of the
+ *  plant thread, the allocation guard's pause.  @rt INIT */
+ps_sim_hooks_t ps_app_sim_hooks(void);
 
 /** Request START at an absolute loop time (real boards without an operator).
  *  @rt any thread */

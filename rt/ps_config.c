@@ -697,11 +697,19 @@ static int check_ranges(ctx_t *c, const void *work, const range_array_t *arrays,
 /* board                                                                  */
 /* ====================================================================== */
 
+/* One bus as written; fd and data_bitrate are optional (NULL when absent). */
+typedef struct {
+    char ifname[PS_NAME_LEN];
+    uint32_t bitrate;
+    bool *is_fd;
+    uint32_t *data_bitrate;
+} bus_raw_t;
+
 typedef struct {
     char name[PS_NAME_LEN];
     ps_board_kind_t kind;
     float *bus_budget; /* optional: NULL when absent */
-    ps_bus_cfg_t *buses;
+    bus_raw_t *buses;
     uint32_t n_buses;
     ps_gpio_cfg_t gpio;
     ps_rt_cfg_t rt;
@@ -713,12 +721,14 @@ static const cyaml_strval_t BOARD_KINDS[] = {
 };
 
 static const cyaml_schema_field_t BUS_FIELDS[] = {
-    CYAML_FIELD_STRING("ifname", CYAML_FLAG_DEFAULT, ps_bus_cfg_t, ifname, 1),
-    CYAML_FIELD_UINT("bitrate", CYAML_FLAG_DEFAULT, ps_bus_cfg_t, bitrate),
+    CYAML_FIELD_STRING("ifname", CYAML_FLAG_DEFAULT, bus_raw_t, ifname, 1),
+    CYAML_FIELD_UINT("bitrate", CYAML_FLAG_DEFAULT, bus_raw_t, bitrate),
+    CYAML_FIELD_BOOL_PTR("fd", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, bus_raw_t, is_fd),
+    CYAML_FIELD_UINT_PTR("data_bitrate", CYAML_FLAG_OPTIONAL, bus_raw_t, data_bitrate),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_value_t BUS_SCHEMA = {
-    CYAML_VALUE_MAPPING(CYAML_FLAG_DEFAULT, ps_bus_cfg_t, BUS_FIELDS),
+    CYAML_VALUE_MAPPING(CYAML_FLAG_DEFAULT, bus_raw_t, BUS_FIELDS),
 };
 static const cyaml_schema_field_t GPIO_FIELDS[] = {
     CYAML_FIELD_STRING("chip", CYAML_FLAG_DEFAULT, ps_gpio_cfg_t, chip, 1),
@@ -752,11 +762,11 @@ static const cyaml_schema_value_t BOARD_SCHEMA = {
 
 #define B_OFF(m) offsetof(ps_board_cfg_t, m)
 static const range_array_t BOARD_ARRAYS[] = {
-    {"buses", B_OFF(buses), sizeof(ps_bus_cfg_t), B_OFF(n_buses)},
+    {"buses", B_OFF(buses), sizeof(ps_canbus_bus_cfg_t), B_OFF(n_buses)},
 };
 static const range_rule_t BOARD_RANGES[] = {
     {0, NUM_F32, RANGE_OPEN_MIN, "bus_budget", B_OFF(bus_budget), 0.0, 1.0},
-    {1, NUM_U32, 0, "bitrate", offsetof(ps_bus_cfg_t, bitrate), 10000.0, 1000000.0},
+    {1, NUM_U32, 0, "bitrate", offsetof(ps_canbus_bus_cfg_t, bitrate), 10000.0, 1000000.0},
     {0, NUM_U32, 0, "gpio.estop_line", B_OFF(gpio.estop_line), 0.0, MAX_GPIO_LINE},
     {0, NUM_U32, 0, "gpio.enable_line", B_OFF(gpio.enable_line), 0.0, MAX_GPIO_LINE},
     {0, NUM_U32, 0, "gpio.led_line", B_OFF(gpio.led_line), 0.0, MAX_GPIO_LINE},
@@ -775,6 +785,18 @@ static int check_board(ctx_t *c, const ps_board_cfg_t *b)
         return rc;
     char field[FIELD_PATH_LEN];
     for (uint32_t i = 0; i < b->n_buses; i++) {
+        const ps_canbus_bus_cfg_t *bus = &b->buses[i];
+        /* ISO 11898-1 FD controllers: data phase 1..8 Mbit/s in practice,
+         * never slower than the arbitration phase. */
+        if (!bus->is_fd && bus->data_bitrate != bus->bitrate) {
+            (void)snprintf(field, sizeof(field), "buses[%u].data_bitrate", i);
+            return fail_field(c, field, "a data bit rate needs a CAN FD bus (fd: true)");
+        }
+        if (bus->is_fd && (bus->data_bitrate < bus->bitrate || bus->data_bitrate > 8000000u)) {
+            (void)snprintf(field, sizeof(field), "buses[%u].data_bitrate", i);
+            return fail_field(c, field, "value %u outside [bitrate %u, 8000000]", bus->data_bitrate,
+                              bus->bitrate);
+        }
         for (uint32_t k = 0; k < i; k++) {
             if (strcmp(b->buses[i].ifname, b->buses[k].ifname) == 0) {
                 (void)snprintf(field, sizeof(field), "buses[%u].ifname", i);
@@ -849,7 +871,14 @@ int ps_config_load_board(const char *path, ps_board_cfg_t *out, char *err, size_
         b.kind = raw->kind;
         b.bus_budget = raw->bus_budget != NULL ? *raw->bus_budget : DEFAULT_BUS_BUDGET;
         b.n_buses = raw->n_buses; /* libcyaml enforced <= PS_MAX_BUSES */
-        memcpy(b.buses, raw->buses, raw->n_buses * sizeof(b.buses[0]));
+        for (uint32_t i = 0; i < raw->n_buses; i++) {
+            const bus_raw_t *r = &raw->buses[i];
+            memcpy(b.buses[i].ifname, r->ifname, sizeof(b.buses[i].ifname));
+            b.buses[i].bitrate = r->bitrate;
+            b.buses[i].is_fd = r->is_fd != NULL && *r->is_fd;
+            /* Without FD the data phase is the arbitration phase. */
+            b.buses[i].data_bitrate = r->data_bitrate != NULL ? *r->data_bitrate : r->bitrate;
+        }
         b.gpio = raw->gpio;
         b.rt = raw->rt;
     }
@@ -869,18 +898,50 @@ int ps_config_load_board(const char *path, ps_board_cfg_t *out, char *err, size_
 
 typedef struct {
     char name[PS_NAME_LEN];
-    ps_mit_range_t r;
+    ps_act_range_t r;
 } driver_raw_t;
 
+/* The robot file's own shape, flat as written; checked here, then composed
+ * into the modules' structs (ps_act_cfg_t, ps_servo_joint_cfg_t, ...). */
 typedef struct {
-    ps_joint_cfg_t j; /* everything except `wire` comes from the file */
+    uint32_t servo_hz, policy_hz;
+    float ramp_s, damping_s, damping_kd_nm_s_rad, still_vel_rad_s;
+    float reply_timeout_s, imu_timeout_s, policy_deadline_s;
+} control_file_t;
+
+typedef struct {
+    char name[PS_NAME_LEN];
+    uint32_t bus_idx, can_id, reply_id;
+    ps_act_proto_id_t protocol;
+    ps_act_range_t wire; /* the driver's, motor side */
+    float pos_min_rad, pos_max_rad, vel_max_rad_s, torque_max_nm;
+    float kp_nm_rad, kd_nm_s_rad, kp_max_nm_rad, kd_max_nm_s_rad;
+    float stance_rad, kt_nm_a, temp_max_c;
+    uint32_t rate_div;
+    float gear_ratio, direction, zero_offset_rad; /* defaults 1, +1, 0 */
+} joint_file_t;
+
+typedef struct {
+    char name[PS_NAME_LEN];
+    char model[PS_PATH_LEN];
+    control_file_t control;
+    uint32_t n_joints;
+    joint_file_t joints[PS_MAX_JOINTS];
+    ps_imu_cfg_t imu;
+    ps_kinematics_cfg_t kin;
+    ps_sim_devices_cfg_t sim;
+} robot_file_t;
+
+typedef struct {
+    joint_file_t j; /* everything except `wire` and the optional fields comes from here */
     char driver[PS_NAME_LEN];
+    float *gear_ratio, *direction, *zero_offset_rad; /* optional: NULL when absent */
 } joint_raw_t;
 
 typedef struct {
     char name[PS_NAME_LEN];
     char model[PS_PATH_LEN];
-    ps_control_cfg_t control;
+    control_file_t control;
     ps_imu_cfg_t imu;
     ps_kinematics_cfg_t kin;
     ps_sim_devices_cfg_t sim;
@@ -894,12 +955,13 @@ typedef struct {
 typedef struct {
     uint32_t bus_idx;
     uint32_t id;
+    bool is_ext;
     char field[FIELD_PATH_LEN];
 } id_use_t;
 
-/* The caller's struct plus what only the checks need. */
+/* The file's struct plus what only the checks need. */
 typedef struct {
-    ps_robot_cfg_t cfg;
+    robot_file_t cfg;
     uint32_t n_drivers;
     driver_raw_t drivers[MAX_DRIVERS];
     char joint_driver[PS_MAX_JOINTS][PS_NAME_LEN];
@@ -907,20 +969,22 @@ typedef struct {
 } robot_work_t;
 
 static const cyaml_strval_t PROTOCOLS[] = {
-    {"mit", PS_PROTO_MIT},
+    {"mit", PS_ACT_PROTO_MIT},
 };
+static_assert(sizeof(PROTOCOLS) / sizeof(PROTOCOLS[0]) == PS_ACT_PROTO_COUNT,
+              "one YAML name per actuator protocol");
 
 static const cyaml_schema_field_t CONTROL_FIELDS[] = {
-    CYAML_FIELD_UINT("servo_hz", CYAML_FLAG_DEFAULT, ps_control_cfg_t, servo_hz),
-    CYAML_FIELD_UINT("policy_hz", CYAML_FLAG_DEFAULT, ps_control_cfg_t, policy_hz),
-    CYAML_FIELD_FLOAT("ramp_s", CYAML_FLAG_DEFAULT, ps_control_cfg_t, ramp_s),
-    CYAML_FIELD_FLOAT("damping_s", CYAML_FLAG_DEFAULT, ps_control_cfg_t, damping_s),
-    CYAML_FIELD_FLOAT("damping_kd_nm_s_rad", CYAML_FLAG_DEFAULT, ps_control_cfg_t,
+    CYAML_FIELD_UINT("servo_hz", CYAML_FLAG_DEFAULT, control_file_t, servo_hz),
+    CYAML_FIELD_UINT("policy_hz", CYAML_FLAG_DEFAULT, control_file_t, policy_hz),
+    CYAML_FIELD_FLOAT("ramp_s", CYAML_FLAG_DEFAULT, control_file_t, ramp_s),
+    CYAML_FIELD_FLOAT("damping_s", CYAML_FLAG_DEFAULT, control_file_t, damping_s),
+    CYAML_FIELD_FLOAT("damping_kd_nm_s_rad", CYAML_FLAG_DEFAULT, control_file_t,
                       damping_kd_nm_s_rad),
-    CYAML_FIELD_FLOAT("still_vel_rad_s", CYAML_FLAG_DEFAULT, ps_control_cfg_t, still_vel_rad_s),
-    CYAML_FIELD_FLOAT("reply_timeout_s", CYAML_FLAG_DEFAULT, ps_control_cfg_t, reply_timeout_s),
-    CYAML_FIELD_FLOAT("imu_timeout_s", CYAML_FLAG_DEFAULT, ps_control_cfg_t, imu_timeout_s),
-    CYAML_FIELD_FLOAT("policy_deadline_s", CYAML_FLAG_DEFAULT, ps_control_cfg_t, policy_deadline_s),
+    CYAML_FIELD_FLOAT("still_vel_rad_s", CYAML_FLAG_DEFAULT, control_file_t, still_vel_rad_s),
+    CYAML_FIELD_FLOAT("reply_timeout_s", CYAML_FLAG_DEFAULT, control_file_t, reply_timeout_s),
+    CYAML_FIELD_FLOAT("imu_timeout_s", CYAML_FLAG_DEFAULT, control_file_t, imu_timeout_s),
+    CYAML_FIELD_FLOAT("policy_deadline_s", CYAML_FLAG_DEFAULT, control_file_t, policy_deadline_s),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_field_t IMU_FIELDS[] = {
@@ -996,6 +1060,9 @@ static const cyaml_schema_field_t JOINT_FIELDS[] = {
     CYAML_FIELD_FLOAT("kt_nm_a", CYAML_FLAG_DEFAULT, joint_raw_t, j.kt_nm_a),
     CYAML_FIELD_FLOAT("temp_max_c", CYAML_FLAG_DEFAULT, joint_raw_t, j.temp_max_c),
     CYAML_FIELD_UINT("rate_div", CYAML_FLAG_DEFAULT, joint_raw_t, j.rate_div),
+    CYAML_FIELD_FLOAT_PTR("gear_ratio", CYAML_FLAG_OPTIONAL, joint_raw_t, gear_ratio),
+    CYAML_FIELD_FLOAT_PTR("direction", CYAML_FLAG_OPTIONAL, joint_raw_t, direction),
+    CYAML_FIELD_FLOAT_PTR("zero_offset_rad", CYAML_FLAG_OPTIONAL, joint_raw_t, zero_offset_rad),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_value_t JOINT_SCHEMA = {
@@ -1019,10 +1086,10 @@ static const cyaml_schema_value_t ROBOT_SCHEMA = {
 };
 
 #define R_OFF(m) offsetof(robot_work_t, m)
-#define J_OFF(m) offsetof(ps_joint_cfg_t, m)
+#define J_OFF(m) offsetof(joint_file_t, m)
 #define D_OFF(m) offsetof(driver_raw_t, m)
 static const range_array_t ROBOT_ARRAYS[] = {
-    {"joints", R_OFF(cfg.joints), sizeof(ps_joint_cfg_t), R_OFF(cfg.n_joints)},
+    {"joints", R_OFF(cfg.joints), sizeof(joint_file_t), R_OFF(cfg.n_joints)},
     {"drivers", R_OFF(drivers), sizeof(driver_raw_t), R_OFF(n_drivers)},
 };
 enum { RA_JOINTS = 1, RA_DRIVERS = 2 };
@@ -1077,8 +1144,8 @@ static const range_rule_t ROBOT_RANGES[] = {
     {RA_DRIVERS, NUM_F32, 0, "i_min_a", D_OFF(r.i_min_a), -1000.0, 1000.0},
     {RA_DRIVERS, NUM_F32, 0, "i_max_a", D_OFF(r.i_max_a), -1000.0, 1000.0},
     {RA_JOINTS, NUM_U32, 0, "bus", J_OFF(bus_idx), 0.0, PS_MAX_BUSES - 1u},
-    {RA_JOINTS, NUM_U32, RANGE_HEX, "can_id", J_OFF(can_id), 1.0, MAX_CAN_ID},
-    {RA_JOINTS, NUM_U32, RANGE_HEX, "reply_id", J_OFF(reply_id), 1.0, MAX_CAN_ID},
+    {RA_JOINTS, NUM_U32, RANGE_HEX, "can_id", J_OFF(can_id), 1.0, PS_CAN_EFF_MASK},
+    {RA_JOINTS, NUM_U32, RANGE_HEX, "reply_id", J_OFF(reply_id), 1.0, PS_CAN_EFF_MASK},
     {RA_JOINTS, NUM_F32, 0, "pos_min_rad", J_OFF(pos_min_rad), -1000.0, 1000.0},
     {RA_JOINTS, NUM_F32, 0, "pos_max_rad", J_OFF(pos_max_rad), -1000.0, 1000.0},
     {RA_JOINTS, NUM_F32, RANGE_OPEN_MIN, "vel_max_rad_s", J_OFF(vel_max_rad_s), 0.0, 10000.0},
@@ -1091,6 +1158,9 @@ static const range_rule_t ROBOT_RANGES[] = {
     {RA_JOINTS, NUM_F32, RANGE_OPEN_MIN, "kt_nm_a", J_OFF(kt_nm_a), 0.0, 100.0},
     {RA_JOINTS, NUM_F32, 0, "temp_max_c", J_OFF(temp_max_c), 20.0, 200.0},
     {RA_JOINTS, NUM_U32, 0, "rate_div", J_OFF(rate_div), 1.0, MAX_RATE_DIV},
+    {RA_JOINTS, NUM_F32, RANGE_OPEN_MIN, "gear_ratio", J_OFF(gear_ratio), 0.0, 1000.0},
+    {RA_JOINTS, NUM_F32, 0, "direction", J_OFF(direction), -1.0, 1.0},
+    {RA_JOINTS, NUM_F32, 0, "zero_offset_rad", J_OFF(zero_offset_rad), -1000.0, 1000.0},
 };
 #undef R_OFF
 #undef J_OFF
@@ -1157,12 +1227,48 @@ static int resolve_drivers(ctx_t *c, robot_work_t *w)
 }
 
 /* Limits of one joint against each other and against its driver's wire range. */
+/* The actuator part of a joint as the modules see it. */
+static ps_act_cfg_t act_of(const joint_file_t *j)
+{
+    const ps_act_cfg_t a = {
+        .bus_idx = j->bus_idx,
+        .can_id = j->can_id,
+        .reply_id = j->reply_id,
+        .protocol = j->protocol,
+        .wire = j->wire,
+        .gear_ratio = j->gear_ratio,
+        .direction = j->direction,
+        .zero_offset_rad = j->zero_offset_rad,
+        .kt_nm_a = j->kt_nm_a,
+        .temp_max_c = j->temp_max_c,
+        .rate_div = j->rate_div,
+    };
+    return a;
+}
+
+/* Limits of one joint against each other and against its driver's wire
+ * range seen from the joint (gear ratio, direction and zero offset applied). */
 static int check_joint_limits(ctx_t *c, const robot_work_t *w, uint32_t i)
 {
-    const ps_joint_cfg_t *j = &w->cfg.joints[i];
-    const ps_mit_range_t *r = &j->wire;
-    const char *drv = w->joint_driver[i];
+    const joint_file_t *j = &w->cfg.joints[i];
     char field[FIELD_PATH_LEN];
+    if (j->direction != 1.0f && j->direction != -1.0f) {
+        (void)snprintf(field, sizeof(field), "joints[%u].direction", i);
+        return fail_field(c, field, "value %g is not 1 or -1", (double)j->direction);
+    }
+    const ps_act_cfg_t act = act_of(j);
+    const ps_act_proto_t *proto = ps_act_proto_get(j->protocol);
+    if (j->can_id > proto->id_max || j->reply_id > proto->id_max) {
+        const bool is_cmd = j->can_id > proto->id_max;
+        (void)snprintf(field, sizeof(field), "joints[%u].%s", i, is_cmd ? "can_id" : "reply_id");
+        return fail_field(c, field, "value 0x%x above protocol %s's %u-bit maximum 0x%x",
+                          is_cmd ? j->can_id : j->reply_id, proto->name, proto->id_bits,
+                          proto->id_max);
+    }
+    ps_act_range_t wire_joint;
+    ps_act_joint_range(&act, &wire_joint);
+    const ps_act_range_t *r = &wire_joint;
+    const char *drv = w->joint_driver[i];
 #define JFIELD(key) ((void)snprintf(field, sizeof(field), "joints[%u]." key, i), field)
     if (!(j->pos_min_rad < j->pos_max_rad))
         return fail_field(c, JFIELD("pos_max_rad"), "value %g not above pos_min_rad %g",
@@ -1208,16 +1314,18 @@ static int check_joint_limits(ctx_t *c, const robot_work_t *w, uint32_t i)
     return 0;
 }
 
+/* 11-bit and 29-bit identifiers are different frames even with one value. */
 static int claim_id(ctx_t *c, id_use_t *uses, uint32_t *n_uses, uint32_t bus_idx, uint32_t id,
-                    const char *field, const char *yaml_field)
+                    bool is_ext, const char *field, const char *yaml_field)
 {
     for (uint32_t k = 0; k < *n_uses; k++) {
-        if (uses[k].bus_idx == bus_idx && uses[k].id == id)
+        if (uses[k].bus_idx == bus_idx && uses[k].id == id && uses[k].is_ext == is_ext)
             return fail_field(c, yaml_field, "id 0x%03x on bus %u already used by %s", id, bus_idx,
                               uses[k].field);
     }
     uses[*n_uses].bus_idx = bus_idx;
     uses[*n_uses].id = id;
+    uses[*n_uses].is_ext = is_ext;
     (void)snprintf(uses[*n_uses].field, sizeof(uses[0].field), "%s", field);
     (*n_uses)++;
     return 0;
@@ -1234,7 +1342,7 @@ static int check_robot(ctx_t *c, robot_work_t *w)
     if (rc != 0)
         return rc;
 
-    const ps_control_cfg_t *ctl = &w->cfg.control;
+    const control_file_t *ctl = &w->cfg.control;
     if (ctl->policy_hz > ctl->servo_hz || ctl->servo_hz % ctl->policy_hz != 0)
         return fail_field(c, "control.policy_hz", "servo_hz %u is not a multiple of policy_hz %u",
                           ctl->servo_hz, ctl->policy_hz);
@@ -1248,13 +1356,14 @@ static int check_robot(ctx_t *c, robot_work_t *w)
     char field[FIELD_PATH_LEN];
     id_use_t *uses = w->id_uses;
     uint32_t n_uses = 0;
-    rc = claim_id(c, uses, &n_uses, w->cfg.imu.bus_idx, w->cfg.imu.base_id, "imu.base_id",
+    rc = claim_id(c, uses, &n_uses, w->cfg.imu.bus_idx, w->cfg.imu.base_id, false, "imu.base_id",
                   "imu.base_id");
     if (rc == 0)
-        rc = claim_id(c, uses, &n_uses, w->cfg.imu.bus_idx, w->cfg.imu.base_id + 1u,
+        rc = claim_id(c, uses, &n_uses, w->cfg.imu.bus_idx, w->cfg.imu.base_id + 1u, false,
                       "imu.base_id+1", "imu.base_id");
     for (uint32_t i = 0; i < w->cfg.n_joints && rc == 0; i++) {
-        const ps_joint_cfg_t *j = &w->cfg.joints[i];
+        const joint_file_t *j = &w->cfg.joints[i];
+        const bool is_ext = ps_act_proto_get(j->protocol)->id_bits > 11u;
         for (uint32_t k = 0; k < i; k++) {
             if (strcmp(j->name, w->cfg.joints[k].name) == 0) {
                 (void)snprintf(field, sizeof(field), "joints[%u].name", i);
@@ -1272,13 +1381,55 @@ static int check_robot(ctx_t *c, robot_work_t *w)
         }
         char owner[FIELD_PATH_LEN];
         (void)snprintf(owner, sizeof(owner), "joints[%u].can_id", i);
-        rc = claim_id(c, uses, &n_uses, j->bus_idx, j->can_id, owner, owner);
+        rc = claim_id(c, uses, &n_uses, j->bus_idx, j->can_id, is_ext, owner, owner);
         if (rc == 0) {
             (void)snprintf(owner, sizeof(owner), "joints[%u].reply_id", i);
-            rc = claim_id(c, uses, &n_uses, j->bus_idx, j->reply_id, owner, owner);
+            rc = claim_id(c, uses, &n_uses, j->bus_idx, j->reply_id, is_ext, owner, owner);
         }
     }
     return rc;
+}
+
+/* The checked file into the modules' structs. */
+static void compose_robot(const robot_file_t *f, ps_robot_cfg_t *out)
+{
+    memset(out, 0, sizeof(*out));
+    memcpy(out->name, f->name, sizeof(out->name));
+    memcpy(out->model, f->model, sizeof(out->model));
+    const control_file_t *c = &f->control;
+    out->control = (ps_control_cfg_t){
+        .servo_hz = c->servo_hz,
+        .policy_hz = c->policy_hz,
+        .ramp_s = c->ramp_s,
+        .damping_s = c->damping_s,
+        .still_vel_rad_s = c->still_vel_rad_s,
+        .reply_timeout_s = c->reply_timeout_s,
+        .imu_timeout_s = c->imu_timeout_s,
+        .policy_deadline_s = c->policy_deadline_s,
+    };
+    out->servo_common.damping_kd_nm_s_rad = c->damping_kd_nm_s_rad;
+    out->n_joints = f->n_joints;
+    for (uint32_t i = 0; i < f->n_joints; i++) {
+        const joint_file_t *j = &f->joints[i];
+        memcpy(out->joint_name[i], j->name, PS_NAME_LEN);
+        out->act[i] = act_of(j);
+        ps_servo_joint_cfg_t *s = &out->servo[i];
+        s->lim = (ps_act_limits_t){
+            .pos_min_rad = j->pos_min_rad,
+            .pos_max_rad = j->pos_max_rad,
+            .vel_max_rad_s = j->vel_max_rad_s,
+            .torque_max_nm = j->torque_max_nm,
+            .kp_max_nm_rad = j->kp_max_nm_rad,
+            .kd_max_nm_s_rad = j->kd_max_nm_s_rad,
+        };
+        s->kp_nm_rad = j->kp_nm_rad;
+        s->kd_nm_s_rad = j->kd_nm_s_rad;
+        s->stance_rad = j->stance_rad;
+        ps_act_joint_range(&out->act[i], &s->wire);
+    }
+    out->imu = f->imu;
+    out->kin = f->kin;
+    out->sim = f->sim;
 }
 
 int ps_config_load_robot(const char *path, ps_robot_cfg_t *out, char *err, size_t err_len)
@@ -1298,7 +1449,7 @@ int ps_config_load_robot(const char *path, ps_robot_cfg_t *out, char *err, size_
     if (rc == 0 && w == NULL)
         rc = -ENOMEM;
     if (rc == 0) {
-        ps_robot_cfg_t *r = &w->cfg;
+        robot_file_t *r = &w->cfg;
         memcpy(r->name, raw->name, sizeof(r->name));
         memcpy(r->model, raw->model, sizeof(r->model));
         r->control = raw->control;
@@ -1309,8 +1460,13 @@ int ps_config_load_robot(const char *path, ps_robot_cfg_t *out, char *err, size_
         memcpy(w->drivers, raw->drivers, raw->n_drivers * sizeof(w->drivers[0]));
         r->n_joints = raw->n_joints;
         for (uint32_t i = 0; i < raw->n_joints; i++) {
-            r->joints[i] = raw->joints[i].j;
-            memcpy(w->joint_driver[i], raw->joints[i].driver, PS_NAME_LEN);
+            const joint_raw_t *jr = &raw->joints[i];
+            r->joints[i] = jr->j;
+            r->joints[i].gear_ratio = jr->gear_ratio != NULL ? *jr->gear_ratio : 1.0f;
+            r->joints[i].direction = jr->direction != NULL ? *jr->direction : 1.0f;
+            r->joints[i].zero_offset_rad =
+                jr->zero_offset_rad != NULL ? *jr->zero_offset_rad : 0.0f;
+            memcpy(w->joint_driver[i], jr->driver, PS_NAME_LEN);
         }
     }
     if (raw != NULL)
@@ -1318,7 +1474,7 @@ int ps_config_load_robot(const char *path, ps_robot_cfg_t *out, char *err, size_
     if (rc == 0)
         rc = check_robot(&c, w);
     if (rc == 0)
-        *out = w->cfg;
+        compose_robot(&w->cfg, out);
     free(w);
     ctx_close(&c);
     return rc;
@@ -1513,10 +1669,17 @@ int ps_config_check_pair(const ps_board_cfg_t *b, const ps_robot_cfg_t *r,
     if (err != NULL && err_len > 0)
         err[0] = '\0';
     for (uint32_t i = 0; i < r->n_joints; i++) {
-        if (r->joints[i].bus_idx >= b->n_buses)
+        if (r->act[i].bus_idx >= b->n_buses)
             return PAIR_FAIL(err, err_len,
                              "robot %s: joints[%u].bus: bus %u not on board %s (buses 0..%u)",
-                             r->name, i, r->joints[i].bus_idx, b->name, b->n_buses - 1u);
+                             r->name, i, r->act[i].bus_idx, b->name, b->n_buses - 1u);
+        const ps_act_proto_t *p = ps_act_proto_get(r->act[i].protocol);
+        if (p != NULL && p->is_fd && !b->buses[r->act[i].bus_idx].is_fd)
+            return PAIR_FAIL(err, err_len,
+                             "robot %s: joints[%u].protocol: %s needs CAN FD but bus %u (%s) of "
+                             "board %s is classical",
+                             r->name, i, p->name, r->act[i].bus_idx,
+                             b->buses[r->act[i].bus_idx].ifname, b->name);
     }
     if (r->imu.bus_idx >= b->n_buses)
         return PAIR_FAIL(err, err_len, "robot %s: imu.bus: bus %u not on board %s (buses 0..%u)",
@@ -1539,7 +1702,7 @@ int ps_config_find_joint(const ps_robot_cfg_t *r, const char *name)
     if (r == NULL || name == NULL)
         return -ENOENT;
     for (uint32_t i = 0; i < r->n_joints && i < PS_MAX_JOINTS; i++) {
-        if (strncmp(r->joints[i].name, name, PS_NAME_LEN) == 0)
+        if (strncmp(r->joint_name[i], name, PS_NAME_LEN) == 0)
             return (int)i;
     }
     return -ENOENT;

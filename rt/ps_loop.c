@@ -3,8 +3,8 @@
 #include <math.h>
 #include <string.h>
 
-#include "../drivers/ps_mit.h"
 #include "../policy/ps_servo.h"
+#include "ps_config.h"
 #include "ps_err.h"
 
 static const char *const STAGE_NAMES[PS_STAGE_COUNT] = {
@@ -35,12 +35,16 @@ const char *ps_loop_stage_name(ps_stage_t s)
     return (s >= 0 && s < PS_STAGE_COUNT) ? STAGE_NAMES[s] : "?";
 }
 
+/* Which joints' replies can arrive on each bus: a frame is offered to the
+ * protocol of each joint on its bus until one matches. */
 static void build_reply_table(ps_loop_t *loop)
 {
     const ps_robot_cfg_t *r = loop->cfg.robot;
-    memset(loop->reply_joint, 0xff, sizeof(loop->reply_joint)); /* all -1 */
-    for (uint32_t j = 0; j < r->n_joints; j++)
-        loop->reply_joint[r->joints[j].bus_idx][r->joints[j].reply_id] = (int16_t)j;
+    memset(loop->n_bus_joints, 0, sizeof(loop->n_bus_joints));
+    for (uint32_t j = 0; j < r->n_joints; j++) {
+        const uint32_t b = r->act[j].bus_idx;
+        loop->bus_joint[b][loop->n_bus_joints[b]++] = (uint8_t)j;
+    }
 }
 
 /* The config loader checks all of this too; the loop checks again because it
@@ -48,9 +52,10 @@ static void build_reply_table(ps_loop_t *loop)
 static bool is_schedule_valid(const ps_board_cfg_t *b, const ps_robot_cfg_t *r)
 {
     for (uint32_t j = 0; j < r->n_joints; j++) {
-        const ps_joint_cfg_t *jc = &r->joints[j];
-        if (jc->bus_idx >= b->n_buses || jc->rate_div == 0 || jc->can_id > PS_CAN_SFF_MASK ||
-            jc->reply_id > PS_CAN_SFF_MASK)
+        const ps_act_cfg_t *a = &r->act[j];
+        const ps_act_proto_t *p = ps_act_proto_get(a->protocol);
+        if (a->bus_idx >= b->n_buses || a->rate_div == 0 || p == NULL ||
+            p->n_cmd > PS_ACT_MAX_FRAMES || ps_act_check_cfg(a, NULL, 0) < 0)
             return false;
     }
     return r->imu.bus_idx < b->n_buses && r->imu.rate_div != 0 && r->imu.base_id < PS_CAN_SFF_MASK;
@@ -86,7 +91,8 @@ int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg)
     loop->meas.n_joints = cfg->robot->n_joints;
     atomic_init(&loop->external_requests, 0u);
     atomic_init(&loop->n_stop_requests, 0u);
-    int rc = ps_estimate_init(&loop->estimator, cfg->robot, (float)loop->period_ns * 1e-9f);
+    int rc = ps_estimate_init(&loop->estimator, &cfg->robot->kin, cfg->robot->joint_name,
+                              cfg->robot->n_joints, (float)loop->period_ns * 1e-9f);
     if (rc < 0)
         return rc;
     build_reply_table(loop);
@@ -109,38 +115,36 @@ void ps_loop_deinit(ps_loop_t *loop)
 
 /* ---- READ ------------------------------------------------------------- */
 
-static void take_reply(ps_loop_t *loop, int joint_idx, const ps_can_frame_t *f)
+/* @return true if a joint on the bus claimed the frame (decoded or bad). */
+static bool take_reply(ps_loop_t *loop, uint32_t bus_idx, const ps_can_frame_t *f)
 {
-    const ps_joint_cfg_t *j = &loop->cfg.robot->joints[joint_idx];
-    ps_mit_reply_t rep;
-    if (ps_mit_decode_reply(&j->wire, f->data, f->len, &rep) < 0 ||
-        rep.motor_id != (j->can_id & 0x0fu) || !isfinite(rep.p_rad)) {
-        loop->counters.n_rx_bad++;
-        return;
+    const ps_robot_cfg_t *r = loop->cfg.robot;
+    for (uint32_t k = 0; k < loop->n_bus_joints[bus_idx]; k++) {
+        const uint32_t j = loop->bus_joint[bus_idx][k];
+        ps_act_meas_t m = {0};
+        const int rc = ps_act_decode_reply(&r->act[j], f, &m);
+        if (rc == -ENOENT)
+            continue;
+        if (rc < 0 || !isfinite(m.q_rad)) {
+            loop->counters.n_rx_bad++;
+            return true;
+        }
+        m.t_ns = loop->t_deadline_ns;
+        loop->meas.joints[j] = m;
+        return true;
     }
-    ps_joint_meas_t *m = &loop->meas.joints[joint_idx];
-    m->q_rad = rep.p_rad;
-    m->qd_rad_s = rep.v_rad_s;
-    m->tau_nm = rep.i_a * j->kt_nm_a;
-    m->temp_c = (float)(rep.temp_mos_c > rep.temp_rotor_c ? rep.temp_mos_c : rep.temp_rotor_c);
-    m->fault = rep.fault;
-    m->t_ns = loop->t_deadline_ns;
+    return false;
 }
 
 static void take_frame(ps_loop_t *loop, uint32_t bus_idx, const ps_can_frame_t *f)
 {
     loop->counters.n_rx_frames++;
-    if (!f->is_ext && f->id > PS_CAN_SFF_MASK) {
-        loop->counters.n_rx_bad++; /* not a valid 11-bit identifier */
+    if (!ps_can_is_valid_frame(f)) {
+        loop->counters.n_rx_bad++; /* an id beyond its width, or a length no frame has */
         return;
     }
-    if (!f->is_ext) {
-        int joint_idx = loop->reply_joint[bus_idx][f->id];
-        if (joint_idx >= 0) {
-            take_reply(loop, joint_idx, f);
-            return;
-        }
-    }
+    if (take_reply(loop, bus_idx, f))
+        return;
     if (bus_idx != loop->cfg.robot->imu.bus_idx || f->is_ext) {
         loop->counters.n_rx_unknown++;
         return;
@@ -214,9 +218,9 @@ static bool is_target_valid(const ps_robot_cfg_t *r, const ps_targets_t *t)
     if (t->n_joints != r->n_joints)
         return false;
     for (uint32_t j = 0; j < r->n_joints; j++) {
-        const ps_joint_cfg_t *jc = &r->joints[j];
+        const ps_act_limits_t *lim = &r->servo[j].lim;
         float q = t->q_rad[j];
-        if (!isfinite(q) || q < jc->pos_min_rad || q > jc->pos_max_rad ||
+        if (!isfinite(q) || q < lim->pos_min_rad || q > lim->pos_max_rad ||
             !isfinite(t->qd_rad_s[j]) || !isfinite(t->tau_ff_nm[j]))
             return false;
     }
@@ -281,12 +285,12 @@ static uint32_t watchdog_conditions(const ps_loop_t *loop)
     const int64_t reply_timeout = ps_s_to_ns(r->control.reply_timeout_s);
     uint32_t cond = 0;
     for (uint32_t j = 0; j < r->n_joints; j++) {
-        const ps_joint_meas_t *m = &loop->meas.joints[j];
-        const ps_joint_cfg_t *jc = &r->joints[j];
-        if (is_stale(m->t_ns, now, reply_timeout + (int64_t)jc->rate_div * loop->period_ns))
+        const ps_act_meas_t *m = &loop->meas.joints[j];
+        const ps_act_cfg_t *a = &r->act[j];
+        if (is_stale(m->t_ns, now, reply_timeout + (int64_t)a->rate_div * loop->period_ns))
             cond |= PS_SM_C_REPLY_STALE;
         else if (now >= loop->fault_grace_until_ns[j] &&
-                 (m->fault != PS_MIT_FAULT_NONE || m->temp_c > jc->temp_max_c))
+                 (m->fault_bits != 0u || m->temp_c > a->temp_max_c))
             cond |= PS_SM_C_DRIVE_FAULT;
     }
     if (is_stale(loop->meas.imu.t_ns, now,
@@ -363,7 +367,7 @@ static void enter_state(ps_loop_t *loop, ps_sm_state_t to)
     if (loop->state == PS_SM_ESTOP && to == PS_SM_STANDBY) {
         /* Only replies after the drives' new ENTER count (docs/safety.md). */
         for (uint32_t j = 0; j < loop->meas.n_joints; j++) {
-            loop->meas.joints[j].fault = PS_MIT_FAULT_NONE;
+            loop->meas.joints[j].fault_bits = 0u;
             loop->meas.joints[j].t_ns = 0;
             loop->fault_grace_until_ns[j] = INT64_MAX; /* until its ENTER is sent */
         }
@@ -408,80 +412,117 @@ static void stage_state_machine(ps_loop_t *loop)
 
 /* ---- SERVO and WRITE -------------------------------------------------- */
 
-/* mode_joint: the joint whose ENTER/EXIT this frame is, or -1 for a
- * command; stage_write undoes is_entered for mode frames a bus refused. */
-static void queue_frame(ps_loop_t *loop, uint32_t bus_idx, uint32_t id, const uint8_t *data,
-                        int mode_joint)
+/* mode_joint: the joint whose enable/disable this frame is, or -1 for a
+ * command; stage_write undoes is_entered for mode frames a bus refused. The
+ * tx buffer holds every joint's command frames (PS_LOOP_MAX_TX); a protocol
+ * error that leaves no room is counted, never overflows. */
+static bool queue_frames(ps_loop_t *loop, uint32_t bus_idx, const ps_can_frame_t *f, int n,
+                         int mode_joint)
 {
-    uint32_t i = loop->n_tx[bus_idx]++;
-    ps_can_frame_t *f = &loop->tx_buf[bus_idx][i];
-    memset(f, 0, sizeof(*f));
-    f->id = id;
-    f->len = PS_MIT_FRAME_LEN;
-    memcpy(f->data, data, PS_MIT_FRAME_LEN);
-    loop->tx_mode_joint[bus_idx][i] = (int8_t)mode_joint;
+    if (n <= 0 || loop->n_tx[bus_idx] + (uint32_t)n > PS_LOOP_MAX_TX)
+        return false;
+    for (int k = 0; k < n; k++) {
+        const uint32_t i = loop->n_tx[bus_idx]++;
+        loop->tx_buf[bus_idx][i] = f[k];
+        loop->tx_mode_joint[bus_idx][i] = (int8_t)mode_joint;
+    }
+    return true;
 }
 
-/* Drives need ENTER before they obey commands and get EXIT when the robot is
- * e-stopped, so that a reset starts from a known, disabled driver state. */
 /* A drive reports a latched fault until it is enabled again; replies already
- * on their way when ENTER goes out still carry it. So a joint's fault is
- * believed only from one reply period after its ENTER (at start and after an
+ * on their way when the enable goes out still carry it. So a joint's fault is
+ * believed only from one reply period after its enable (at start and after an
  * e-stop reset alike); until then it cannot e-stop the robot, and START
  * waits for fresh replies anyway. */
-static int64_t fault_grace_end_ns(const ps_loop_t *loop, const ps_joint_cfg_t *jc)
+static int64_t fault_grace_end_ns(const ps_loop_t *loop, const ps_act_cfg_t *a)
 {
     return loop->t_deadline_ns + ps_s_to_ns(loop->cfg.robot->control.reply_timeout_s) +
-           (int64_t)jc->rate_div * loop->period_ns;
+           (int64_t)a->rate_div * loop->period_ns;
 }
 
+/* Drives need ENABLE before they obey commands and get DISABLE when the robot
+ * is e-stopped, so that a reset starts from a known, disabled drive state. */
 static bool queue_mode_change(ps_loop_t *loop, uint32_t j)
 {
-    const ps_joint_cfg_t *jc = &loop->cfg.robot->joints[j];
-    uint8_t data[PS_MIT_FRAME_LEN];
-    bool want_entered = loop->state != PS_SM_ESTOP;
+    const ps_act_cfg_t *a = &loop->cfg.robot->act[j];
+    const bool want_entered = loop->state != PS_SM_ESTOP;
     if (loop->is_entered[j] == want_entered)
         return false;
-    ps_mit_encode_special(want_entered ? PS_MIT_SPECIAL_ENTER : PS_MIT_SPECIAL_EXIT, data);
-    queue_frame(loop, jc->bus_idx, jc->can_id, data, (int)j);
+    ps_can_frame_t f[PS_ACT_MAX_FRAMES];
+    const int n = ps_act_encode_request(a, want_entered ? PS_ACT_REQ_ENABLE : PS_ACT_REQ_DISABLE, f,
+                                        PS_ACT_MAX_FRAMES);
+    if (!queue_frames(loop, a->bus_idx, f, n, (int)j)) {
+        loop->counters.n_cmd_replaced++; /* cannot be expressed: the config check forbids it */
+        return false;
+    }
     loop->is_entered[j] = want_entered;
     if (want_entered)
-        loop->fault_grace_until_ns[j] = fault_grace_end_ns(loop, jc);
+        loop->fault_grace_until_ns[j] = fault_grace_end_ns(loop, a);
     return true;
 }
 
 /* Damping for one joint: always inside its limits (the config keeps
  * damping_kd under kd_max), the command of last resort. */
-static void damping_command(const ps_joint_cfg_t *jc, const ps_control_cfg_t *c, float q_rad,
-                            ps_mit_cmd_t *out)
+static void damping_command(const ps_servo_joint_cfg_t *sj, const ps_servo_cfg_t *c, float q_rad,
+                            ps_act_cmd_t *out)
 {
     memset(out, 0, sizeof(*out));
-    out->p_rad = fminf(fmaxf(q_rad, jc->pos_min_rad), jc->pos_max_rad);
-    out->kd_nm_s_rad = fminf(c->damping_kd_nm_s_rad, jc->kd_max_nm_s_rad);
+    out->q_rad = fminf(fmaxf(q_rad, sj->lim.pos_min_rad), sj->lim.pos_max_rad);
+    out->kd_nm_s_rad = fminf(c->damping_kd_nm_s_rad, sj->lim.kd_max_nm_s_rad);
+}
+
+static void disable_joint(ps_loop_t *loop, uint32_t j)
+{
+    const ps_act_cfg_t *a = &loop->cfg.robot->act[j];
+    ps_can_frame_t f[PS_ACT_MAX_FRAMES];
+    const int n = ps_act_encode_request(a, PS_ACT_REQ_DISABLE, f, PS_ACT_MAX_FRAMES);
+    if (queue_frames(loop, a->bus_idx, f, n, (int)j))
+        loop->is_entered[j] = false;
 }
 
 static void servo_joint(ps_loop_t *loop, uint32_t j, const ps_servo_mode_t *mode)
 {
     const ps_robot_cfg_t *r = loop->cfg.robot;
-    const ps_joint_cfg_t *jc = &r->joints[j];
-    ps_mit_cmd_t cmd;
-    if (ps_servo_command(jc, &r->control, mode, j, &loop->targets, &cmd) < 0)
+    const ps_servo_joint_cfg_t *sj = &r->servo[j];
+    const ps_act_cfg_t *a = &r->act[j];
+    ps_act_cmd_t cmd;
+    if (ps_servo_command(sj, &r->servo_common, mode, j, &loop->targets, &cmd) < 0)
         loop->counters.n_target_invalid++;
-    uint8_t data[PS_MIT_FRAME_LEN];
-    if (!ps_servo_is_within_limits(jc, &cmd) || ps_mit_encode_cmd(&jc->wire, &cmd, data) < 0) {
+    ps_can_frame_t f[PS_ACT_MAX_FRAMES];
+    int n = ps_servo_is_within_limits(sj, &cmd)
+                ? ps_act_encode_command(a, &cmd, f, PS_ACT_MAX_FRAMES)
+                : -PS_ERR_LIMIT;
+    if (n < 0) {
         /* Defence in depth: the servo layer already clamps. Brake this joint
          * and let the state machine damp the robot. */
         loop->counters.n_cmd_replaced++;
         loop->has_cmd_fault = true;
-        damping_command(jc, &r->control, loop->meas.joints[j].q_rad, &cmd);
-        if (ps_mit_encode_cmd(&jc->wire, &cmd, data) < 0) {
-            ps_mit_encode_special(PS_MIT_SPECIAL_EXIT, data); /* cannot even damp: disable */
-            queue_frame(loop, jc->bus_idx, jc->can_id, data, (int)j);
-            loop->is_entered[j] = false;
+        damping_command(sj, &r->servo_common, loop->meas.joints[j].q_rad, &cmd);
+        n = ps_act_encode_command(a, &cmd, f, PS_ACT_MAX_FRAMES);
+        if (n < 0) {
+            disable_joint(loop, j); /* cannot even damp: disable */
             return;
         }
     }
-    queue_frame(loop, jc->bus_idx, jc->can_id, data, -1);
+    (void)queue_frames(loop, a->bus_idx, f, n, -1); /* room for every joint: PS_LOOP_MAX_TX */
+}
+
+/* The servo mode of each safety state (the servo layer knows no states). */
+static ps_servo_mode_kind_t servo_mode_of(const ps_loop_t *loop)
+{
+    switch (loop->state) {
+    case PS_SM_RAMP:
+        return loop->has_targets ? PS_SERVO_RAMP : PS_SERVO_DAMP;
+    case PS_SM_ACTIVE:
+        return loop->has_targets ? PS_SERVO_TRACK : PS_SERVO_DAMP;
+    case PS_SM_DAMPING:
+        return PS_SERVO_DAMP;
+    case PS_SM_STANDBY:
+    case PS_SM_ESTOP:
+        return PS_SERVO_LIMP;
+    default:
+        return PS_SERVO_LIMP;
+    }
 }
 
 static void stage_servo(ps_loop_t *loop, uint64_t tick)
@@ -491,13 +532,12 @@ static void stage_servo(ps_loop_t *loop, uint64_t tick)
     for (uint32_t j = 0; j < r->n_joints; j++)
         meas_q[j] = loop->meas.joints[j].q_rad;
     ps_servo_mode_t mode = {
-        .state = loop->has_targets ? loop->state : PS_SM_DAMPING,
+        .kind = servo_mode_of(loop),
         .ramp_alpha = 0.0f,
         .ramp_from_q_rad = loop->ramp_from_q_rad,
         .meas_q_rad = meas_q,
+        .hold_q_rad = NULL,
     };
-    if (!loop->has_targets && (loop->state == PS_SM_STANDBY || loop->state == PS_SM_ESTOP))
-        mode.state = loop->state;
     if (loop->state == PS_SM_RAMP) {
         float alpha = (float)(loop->t_deadline_ns - loop->state_since_ns) /
                       (float)ps_s_to_ns(r->control.ramp_s);
@@ -507,7 +547,7 @@ static void stage_servo(ps_loop_t *loop, uint64_t tick)
         loop->n_tx[b] = 0;
     loop->has_cmd_fault = false; /* the state machine saw last tick's */
     for (uint32_t j = 0; j < r->n_joints; j++) {
-        if (!ps_canbus_is_due(tick, r->joints[j].rate_div, loop->cfg.plan->joint_phase[j]))
+        if (!ps_canbus_is_due(tick, r->act[j].rate_div, loop->cfg.plan->phase[j]))
             continue;
         if (!queue_mode_change(loop, j))
             servo_joint(loop, j, &mode);
@@ -656,12 +696,14 @@ bool ps_loop_is_stopped(const ps_loop_t *loop)
 void ps_loop_release_drives(ps_loop_t *loop)
 {
     const ps_robot_cfg_t *r = loop->cfg.robot;
-    uint8_t data[PS_MIT_FRAME_LEN];
-    ps_mit_encode_special(PS_MIT_SPECIAL_EXIT, data);
     for (uint32_t b = 0; b < loop->cfg.board->n_buses; b++)
         loop->n_tx[b] = 0;
-    for (uint32_t j = 0; j < r->n_joints; j++)
-        queue_frame(loop, r->joints[j].bus_idx, r->joints[j].can_id, data, -1);
+    for (uint32_t j = 0; j < r->n_joints; j++) {
+        ps_can_frame_t f[PS_ACT_MAX_FRAMES];
+        const int n = ps_act_encode_request(&r->act[j], PS_ACT_REQ_DISABLE, f, PS_ACT_MAX_FRAMES);
+        if (!queue_frames(loop, r->act[j].bus_idx, f, n, -1))
+            loop->counters.n_tx_refused++;
+    }
     for (uint32_t b = 0; b < loop->cfg.board->n_buses; b++) {
         int n = ps_can_send_batch(&loop->cfg.buses[b], loop->tx_buf[b], loop->n_tx[b]);
         if (n < 0 || (uint32_t)n < loop->n_tx[b])

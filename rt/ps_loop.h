@@ -3,7 +3,7 @@
  *
  * Each tick: READ (drain every CAN bus, decode actuator replies and IMU
  * samples, sample the e-stop input) -> ESTIMATE -> POLICY (every
- * servo_hz / policy_hz ticks) -> safety state machine -> SERVO (a MIT
+ * servo_hz / policy_hz ticks) -> safety state machine -> SERVO (a neutral joint
  * command for every joint due on this tick per the bus plan) -> WRITE (one
  * batch per bus, enable output, LED) -> latency accounting. Records for the
  * non-RT side (status, state transitions, refused requests) go through an
@@ -29,23 +29,42 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "../drivers/ps_actuator.h"
 #include "../drivers/ps_can.h"
 #include "../drivers/ps_canbus.h"
 #include "../drivers/ps_gpio.h"
 #include "../drivers/ps_imu_msg.h"
 #include "../policy/ps_estimate.h"
 #include "../policy/ps_policy.h"
+#include "../policy/ps_servo.h"
 #include "ps_clock.h"
-#include "ps_config.h"
+#include "ps_limits.h"
 #include "ps_pacer.h"
 #include "ps_perf.h"
 #include "ps_ring.h"
 #include "ps_sm.h"
 #include "ps_trace.h"
-#include "ps_trace.h"
+
+/* Board and robot configuration: rt/ps_config.h (the loader composes them). */
+typedef struct ps_board_cfg ps_board_cfg_t;
+typedef struct ps_robot_cfg ps_robot_cfg_t;
+
+/** The loop's own settings (robot file, `control:`). */
+typedef struct {
+    uint32_t servo_hz;       /**< loop rate, 100..4000 */
+    uint32_t policy_hz;      /**< policy rate; servo_hz must be a multiple */
+    float ramp_s;            /**< blend time from measured pose to targets */
+    float damping_s;         /**< max time in DAMPING before STANDBY */
+    float still_vel_rad_s;   /**< DAMPING ends early when all |qd| below this */
+    float reply_timeout_s;   /**< actuator reply older than this: stale */
+    float imu_timeout_s;     /**< IMU sample older than this: stale */
+    float policy_deadline_s; /**< policy compute longer than this: missed */
+} ps_control_cfg_t;
 
 /** Receive batches per bus per tick at most (of rx_buf's size). */
 #define PS_LOOP_MAX_RX_BATCHES 4u
+/** Frames one bus may be given in one tick: every joint's command frames. */
+#define PS_LOOP_MAX_TX (PS_MAX_JOINTS * PS_ACT_MAX_FRAMES)
 
 typedef enum {
     PS_STAGE_WAKE = 0, /**< wake-up latency: actual wake minus deadline */
@@ -157,14 +176,15 @@ typedef struct {
     bool has_target_invalid;
     bool has_cmd_fault; /**< a command had to be replaced (TARGET_INVALID) */
     uint32_t bus_off_mask;
-    int16_t reply_joint[PS_MAX_BUSES][PS_CAN_SFF_MASK + 1]; /**< reply id -> joint, -1 */
+    uint8_t bus_joint[PS_MAX_BUSES][PS_MAX_JOINTS]; /**< joints on each bus, in order */
+    uint32_t n_bus_joints[PS_MAX_BUSES];
     ps_imu_msg_rx_t imu_rx;
     bool has_imu_seq;
     uint8_t imu_seq; /**< seq of the last IMU sample taken */
     ps_can_frame_t rx_buf[64];
-    ps_can_frame_t tx_buf[PS_MAX_BUSES][PS_MAX_JOINTS + 2];
-    int8_t tx_mode_joint[PS_MAX_BUSES]
-                        [PS_MAX_JOINTS + 2]; /**< per tx frame: ENTER/EXIT joint, -1 */
+    ps_can_frame_t tx_buf[PS_MAX_BUSES][PS_LOOP_MAX_TX];
+    int8_t tx_mode_joint[PS_MAX_BUSES][PS_LOOP_MAX_TX]; /**< per tx frame: enable/disable
+                                                             joint, -1 */
     uint32_t n_tx[PS_MAX_BUSES];
     int64_t t_deadline_ns; /**< deadline of the current tick */
     ps_perf_hist_t perf[PS_STAGE_COUNT];

@@ -21,6 +21,14 @@
 #include <stddef.h>
 #include <stdint.h>
 
+/** Real-time placement of a board's threads (board file, `rt:`). */
+typedef struct {
+    uint32_t priority;  /**< SCHED_FIFO priority of the loop thread, 1..98 */
+    int32_t loop_cpu;   /**< CPU the loop is pinned to, -1: no pinning */
+    int32_t plant_cpu;  /**< CPU of the sim plant thread, -1: no pinning */
+    int32_t worker_cpu; /**< CPU of the non-RT logger thread, -1: no pinning */
+} ps_rt_cfg_t;
+
 typedef enum {
     PS_RT_MISSING_MLOCK = 1u << 0,
     PS_RT_MISSING_FIFO = 1u << 1,

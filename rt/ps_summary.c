@@ -4,6 +4,7 @@
 #include <errno.h>
 #include <string.h>
 
+#include "ps_config.h"
 #include "ps_err.h"
 #include "ps_rtsetup.h"
 

@@ -55,6 +55,7 @@ typedef struct {
 struct ps_can_sim_bus {
     char name[32];
     uint32_t bitrate;
+    ps_canbus_bus_cfg_t timing; /* bitrate, and the FD data rate once set */
     const ps_clock_t *clock;
     int64_t period_ns;
     int64_t epoch_ns;
@@ -67,11 +68,9 @@ struct ps_can_sim_bus {
     end_t device;
 };
 
-static bool is_valid_frame(const ps_can_frame_t *f)
+static bool is_valid_frame(const ps_can_sim_bus_t *b, const ps_can_frame_t *f)
 {
-    if (f->len > PS_CAN_MAX_DLEN)
-        return false;
-    return f->id <= (f->is_ext ? PS_CAN_EFF_MASK : PS_CAN_SFF_MASK);
+    return ps_can_is_valid_frame(f) && (!f->is_fd || b->timing.is_fd);
 }
 
 /* End of the servo tick (grid epoch + k * period) that contains t. */
@@ -107,7 +106,7 @@ static int sim_send_batch(void *ctx, const ps_can_frame_t *frames, size_t n)
     if (frames == NULL)
         return -EINVAL;
     for (size_t i = 0; i < n; i++) {
-        if (!is_valid_frame(&frames[i]))
+        if (!is_valid_frame(b, &frames[i]))
             return -EINVAL; /* nothing queued: all or nothing on bad input */
     }
     if (n > (size_t)INT32_MAX)
@@ -125,8 +124,13 @@ static int sim_send_batch(void *ctx, const ps_can_frame_t *frames, size_t n)
         int64_t ready_ns = now_ns;
         if (e->is_device && f->t_ns > ready_ns)
             ready_ns = f->t_ns;
-        const unsigned bits = ps_canbus_frame_bits_max(f->len, f->is_ext != 0);
-        const int64_t end_ns = reserve_wire(b, ready_ns, ps_canbus_bits_to_ns(bits, b->bitrate));
+        const ps_canbus_frame_shape_t shape = {.len = f->len,
+                                               .is_ext = f->is_ext != 0,
+                                               .is_fd = f->is_fd != 0,
+                                               .is_brs = f->is_brs != 0};
+        const unsigned bits = ps_canbus_frame_nominal_bits_max(&shape, &b->timing);
+        const int64_t end_ns =
+            reserve_wire(b, ready_ns, ps_canbus_frame_ns_max(&shape, &b->timing));
         ps_can_frame_t q = *f;
         q.t_ns = end_ns;
         if (ps_ring_push(&e->tx->ring, &q) != 0)
@@ -221,6 +225,7 @@ int ps_can_sim_create(ps_can_sim_bus_t **out, const char *name, uint32_t bitrate
         return -ENOMEM;
     (void)snprintf(b->name, sizeof b->name, "%s", name != NULL ? name : "sim");
     b->bitrate = bitrate;
+    b->timing.bitrate = bitrate;
     b->clock = clock;
     b->period_ns = period_ns;
     b->queue_len = queue_len;
@@ -244,6 +249,15 @@ int ps_can_sim_create(ps_can_sim_bus_t **out, const char *name, uint32_t bitrate
     b->device.tx = &b->to_host;
     b->device.rx = &b->to_device;
     *out = b;
+    return 0;
+}
+
+int ps_can_sim_set_fd(ps_can_sim_bus_t *b, uint32_t data_bitrate)
+{
+    if (b == NULL || data_bitrate < b->bitrate)
+        return -EINVAL;
+    b->timing.is_fd = true;
+    b->timing.data_bitrate = data_bitrate;
     return 0;
 }
 

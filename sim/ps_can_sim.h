@@ -1,10 +1,12 @@
 /*
- * ps_can_sim: a simulated classical CAN bus that models the wire.
+ * ps_can_sim: a simulated CAN bus (classical, or FD with bit rate switch)
+ * that models the wire.
  *
  * One bus has two ends: the host end (what the loop gets, a ps_can_port_t
  * like a SocketCAN one) and the device end (where the emulated actuators and
  * IMU sit). Both share one wire: every frame occupies it for its worst-case
- * bit time (ps_canbus_frame_bits_max at the bus bitrate) starting when the
+ * time (ps_canbus_frame_ns_max: classical frames at the bitrate, FD frames'
+ * data phase at the data bitrate when BRS is set) starting when the
  * wire is free, and can be received at the other end only once the clock
  * reaches its end-of-frame time. Frames that end after the servo tick they
  * were sent in are counted late. Bits used give the observed bus load.
@@ -27,12 +29,12 @@
  *
  * Ops semantics (ps_can.h): send_batch returns frames queued (fewer than n
  * when the direction's queue is full; the rest count n_tx_dropped) or -EINVAL
- * (frames NULL, len > 8, id beyond its 11/29-bit mask; then nothing is
- * queued). recv_batch returns frames taken (0 if none due) or -EINVAL (out
- * NULL). get_state: mode always ERROR_ACTIVE, TEC/REC 0, n_rx_dropped 0;
- * n_tx_frames/n_rx_frames/n_tx_dropped/n_late count this end only; n_bits
+ * (frames NULL, a length the frame kind cannot carry, an FD frame on a
+ * classical bus, id beyond its 11/29-bit mask; then nothing is queued). recv_batch returns frames
+ * taken (0 if none due) or -EINVAL (out NULL). get_state: mode always ERROR_ACTIVE, TEC/REC 0,
+ * n_rx_dropped 0; n_tx_frames/n_rx_frames/n_tx_dropped/n_late count this end only; n_bits
  * (worst-case bits of every frame queued, both directions, counted at send)
- * and load = n_bits / ((now - epoch) * bitrate) (0 while now <= epoch) are
+ * in nominal bit times) and load = n_bits / ((now - epoch) * bitrate) (0 while now <= epoch) are
  * the bus's. load can exceed the true wire occupancy by frames queued for
  * later. close is a no-op; ps_can_sim_destroy frees the bus.
  *
@@ -53,6 +55,11 @@ typedef struct ps_can_sim_bus ps_can_sim_bus_t;
  *  @post *out owned by caller; epoch = clock now  @return 0 | -EINVAL | -ENOMEM  @rt INIT */
 int ps_can_sim_create(ps_can_sim_bus_t **out, const char *name, uint32_t bitrate,
                       const ps_clock_t *clock, int64_t period_ns, uint32_t queue_len);
+
+/** Make the bus CAN FD: FD frames are accepted, their data phase (with BRS)
+ *  runs at data_bitrate.  @pre no thread uses the bus yet
+ *  @return 0 | -EINVAL (b NULL, data_bitrate below the bitrate)  @rt INIT */
+int ps_can_sim_set_fd(ps_can_sim_bus_t *b, uint32_t data_bitrate);
 
 /** Tick grid origin for late-frame accounting and load (default: create time).
  *  @pre no thread uses the bus yet  @units ns  @rt INIT */

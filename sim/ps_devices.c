@@ -9,14 +9,15 @@
 
 /* ---- actuator -------------------------------------------------------- */
 
-void ps_devices_init_actuator(ps_devices_actuator_t *a, const ps_joint_cfg_t *j,
-                              const ps_sim_devices_cfg_t *sim)
+void ps_devices_init_actuator(ps_devices_actuator_t *a, const ps_act_cfg_t *act,
+                              const ps_act_limits_t *lim, const ps_sim_devices_cfg_t *sim)
 {
     memset(a, 0, sizeof *a);
-    a->joint = *j;
+    a->act = *act;
+    a->lim = *lim;
     a->sim = *sim;
     a->temp_c = sim->ambient_c;
-    a->fault = PS_MIT_FAULT_NONE;
+    a->is_powered = true;
 }
 
 static double clampd(double x, double lo, double hi)
@@ -24,107 +25,98 @@ static double clampd(double x, double lo, double hi)
     return x < lo ? lo : (x > hi ? hi : x);
 }
 
-/* The torque the driver applies for its current command at this joint state.
+/* The torque the drive applies for its current command at this joint state.
  * Both limits apply: the wire t range is what the firmware can represent, the
  * joint's torque_max is the drive's configured current limit. */
 static double pd_torque(const ps_devices_actuator_t *a, double q_rad, double qd_rad_s)
 {
-    if (!a->is_motor_mode || !a->has_cmd)
+    if (!a->is_motor_mode || !a->has_cmd || !a->is_powered)
         return 0.0;
-    const ps_mit_cmd_t *c = &a->cmd;
+    const ps_act_cmd_t *c = &a->cmd;
     const double p = q_rad - a->zero_offset_rad;
-    double tau = (double)c->kp_nm_rad * ((double)c->p_rad - p) +
-                 (double)c->kd_nm_s_rad * ((double)c->v_rad_s - qd_rad_s) + (double)c->t_ff_nm;
-    tau = clampd(tau, (double)a->joint.wire.t_min_nm, (double)a->joint.wire.t_max_nm);
-    tau = clampd(tau, -(double)a->joint.torque_max_nm, (double)a->joint.torque_max_nm);
+    double tau = (double)c->kp_nm_rad * ((double)c->q_rad - p) +
+                 (double)c->kd_nm_s_rad * ((double)c->qd_rad_s - qd_rad_s) + (double)c->tau_ff_nm;
+    ps_act_range_t w;
+    ps_act_joint_range(&a->act, &w);
+    tau = clampd(tau, (double)w.t_min_nm, (double)w.t_max_nm);
+    tau = clampd(tau, -(double)a->lim.torque_max_nm, (double)a->lim.torque_max_nm);
     return tau;
 }
 
-/* One LSB of an n-bit field over [lo, hi]: the slack a correctly clamped host
- * command may show after quantisation (rounding to nearest moves it by half). */
-static float lsb(float lo, float hi, unsigned bits)
+/* One LSB of each field (the protocol's resolution, seen from the joint): the
+ * slack a correctly clamped host command may show after quantisation. */
+static bool is_out_of_limits(const ps_devices_actuator_t *a, const ps_act_cmd_t *c)
 {
-    return (hi - lo) / (float)((1u << bits) - 1u);
+    float d[5];
+    ps_act_joint_lsb(&a->act, d);
+    const ps_act_limits_t *l = &a->lim;
+    return c->q_rad < l->pos_min_rad - d[0] || c->q_rad > l->pos_max_rad + d[0] ||
+           fabsf(c->qd_rad_s) > l->vel_max_rad_s + d[1] || c->kp_nm_rad > l->kp_max_nm_rad + d[2] ||
+           c->kd_nm_s_rad > l->kd_max_nm_s_rad + d[3] ||
+           fabsf(c->tau_ff_nm) > l->torque_max_nm + d[4];
 }
 
-static bool is_out_of_limits(const ps_joint_cfg_t *j, const ps_mit_cmd_t *c)
+static int make_reply(const ps_devices_actuator_t *a, double q_rad, double qd_rad_s,
+                      int64_t arrival_ns, ps_can_frame_t *out)
 {
-    const ps_mit_range_t *w = &j->wire;
-    const float dp = lsb(w->p_min_rad, w->p_max_rad, PS_MIT_P_BITS);
-    const float dv = lsb(w->v_min_rad_s, w->v_max_rad_s, PS_MIT_V_BITS);
-    const float dkp = lsb(0.0f, w->kp_max_nm_rad, PS_MIT_KP_BITS);
-    const float dkd = lsb(0.0f, w->kd_max_nm_s_rad, PS_MIT_KD_BITS);
-    const float dt = lsb(w->t_min_nm, w->t_max_nm, PS_MIT_T_BITS);
-    return c->p_rad < j->pos_min_rad - dp || c->p_rad > j->pos_max_rad + dp ||
-           fabsf(c->v_rad_s) > j->vel_max_rad_s + dv || c->kp_nm_rad > j->kp_max_nm_rad + dkp ||
-           c->kd_nm_s_rad > j->kd_max_nm_s_rad + dkd || fabsf(c->t_ff_nm) > j->torque_max_nm + dt;
-}
-
-static int8_t to_int8_c(double t_c)
-{
-    const double r = nearbyint(t_c);
-    if (r > 127.0)
-        return 127;
-    if (r < -128.0)
-        return -128;
-    return (int8_t)r;
-}
-
-static void make_reply(const ps_devices_actuator_t *a, double q_rad, double qd_rad_s,
-                       int64_t arrival_ns, ps_can_frame_t *out)
-{
-    const double tau = pd_torque(a, q_rad, qd_rad_s);
-    const double kt = a->joint.kt_nm_a > 0.0f ? (double)a->joint.kt_nm_a : 1.0;
-    /* The MOSFETs sit on the same housing: half the winding's rise is a crude
-     * but monotonic coupling, enough for a reply byte the host only logs. */
-    const double mos_c = a->sim.ambient_c + 0.5 * (a->temp_c - a->sim.ambient_c);
-    const ps_mit_reply_t rep = {
-        .motor_id = (uint8_t)(a->joint.can_id & 0xFu),
-        .fault = a->fault,
-        .p_rad = (float)(q_rad - a->zero_offset_rad),
-        .v_rad_s = (float)qd_rad_s,
-        .i_a = (float)(tau / kt),
-        .temp_mos_c = to_int8_c(mos_c),
-        .temp_rotor_c = to_int8_c(a->temp_c),
+    const ps_act_meas_t joint = {
+        .q_rad = (float)(q_rad - a->zero_offset_rad),
+        .qd_rad_s = (float)qd_rad_s,
+        .tau_nm = (float)pd_torque(a, q_rad, qd_rad_s),
+        .temp_c = (float)a->temp_c,
+        .fault_bits = a->fault_bits,
     };
-    memset(out, 0, sizeof *out);
-    out->id = a->joint.reply_id;
-    out->len = PS_MIT_FRAME_LEN;
-    ps_mit_encode_reply(&a->joint.wire, &rep, out->data);
+    ps_act_meas_t motor;
+    ps_act_meas_to_motor(&a->act, &joint, &motor);
+    const int n = ps_act_proto_get(a->act.protocol)->encode_reply(&a->act, &motor, out, 1);
+    if (n != 1)
+        return -PS_ERR_PROTOCOL; /* protocols with multi-frame replies: not emulated yet */
     out->t_ns = arrival_ns + ps_s_to_ns((double)a->sim.reply_latency_s);
+    return 0;
+}
+
+static void handle_request(ps_devices_actuator_t *a, int req, const ps_can_frame_t *f, double q_rad)
+{
+    if (req == PS_ACT_REQ_ENABLE || req == PS_ACT_REQ_CLEAR_FAULT) {
+        const bool is_hot = a->temp_c >= (double)a->act.temp_max_c - PS_DEVICES_TEMP_HYST_C;
+        if (!is_hot) {
+            a->fault_bits = 0u;
+            if (req == PS_ACT_REQ_ENABLE) {
+                a->is_motor_mode = true;
+                a->has_cmd = false;       /* limp until the first set-point */
+                a->last_cmd_ns = f->t_ns; /* the comms timeout runs from here */
+            }
+        }
+    } else if (req == PS_ACT_REQ_DISABLE) {
+        a->is_motor_mode = false;
+        a->has_cmd = false;
+    } else if (req == PS_ACT_REQ_SET_ZERO) {
+        a->zero_offset_rad = q_rad;
+    }
 }
 
 int ps_devices_handle_frame(ps_devices_actuator_t *a, const ps_can_frame_t *f, double q_rad,
                             double qd_rad_s, ps_can_frame_t *out_reply)
 {
-    if (f->id != a->joint.can_id)
+    const ps_act_proto_t *p = ps_act_proto_get(a->act.protocol);
+    if (!p->is_for_drive(&a->act, f))
         return -ENOENT;
-    if (f->is_ext || f->len != PS_MIT_FRAME_LEN) {
+    if (f->len != p->cmd_len || (f->is_fd != 0) != p->is_fd) {
         a->n_bad_frames++;
         return -PS_ERR_PROTOCOL;
     }
-    const int special = ps_mit_classify_special(f->data, f->len);
-    if (special == PS_MIT_SPECIAL_ENTER) {
-        const bool is_hot = a->temp_c >= (double)a->joint.temp_max_c - PS_DEVICES_TEMP_HYST_C;
-        if (!is_hot) {
-            a->is_motor_mode = true;
-            a->has_cmd = false; /* limp until the first set-point */
-            a->fault = PS_MIT_FAULT_NONE;
-            a->last_cmd_ns = f->t_ns; /* the comms timeout runs from here */
-        }
-    } else if (special == PS_MIT_SPECIAL_EXIT) {
-        a->is_motor_mode = false;
-        a->has_cmd = false;
-    } else if (special == PS_MIT_SPECIAL_ZERO) {
-        a->zero_offset_rad = q_rad;
+    const int req = p->classify_request(&a->act, f);
+    if (req >= 0) {
+        handle_request(a, req, f, q_rad);
     } else {
-        ps_mit_cmd_t c;
-        if (ps_mit_decode_cmd(&a->joint.wire, f->data, f->len, &c) != 0) {
-            a->n_bad_frames++; /* unreachable with len 8 and not special; kept for safety */
+        ps_act_cmd_t motor, c;
+        if (p->decode_cmd(&a->act, f, &motor) != 0) {
+            a->n_bad_frames++;
             return -PS_ERR_PROTOCOL;
         }
+        ps_act_cmd_from_motor(&a->act, &motor, &c);
         a->n_cmd_frames++;
-        if (is_out_of_limits(&a->joint, &c))
+        if (is_out_of_limits(a, &c))
             a->n_cmd_out_of_limits++;
         if (a->is_motor_mode) {
             a->cmd = c;
@@ -138,7 +130,8 @@ int ps_devices_handle_frame(ps_devices_actuator_t *a, const ps_can_frame_t *f, d
         a->n_replies_dropped++;
         return 0;
     }
-    make_reply(a, q_rad, qd_rad_s, f->t_ns, out_reply);
+    if (make_reply(a, q_rad, qd_rad_s, f->t_ns, out_reply) < 0)
+        return -PS_ERR_PROTOCOL;
     a->n_replies++;
     return 1;
 }
@@ -149,27 +142,38 @@ double ps_devices_step_actuator(ps_devices_actuator_t *a, double q_rad, double q
     if (a->is_motor_mode && now_ns - a->last_cmd_ns > PS_DEVICES_COMMS_TIMEOUT_NS) {
         a->is_motor_mode = false;
         a->has_cmd = false;
-        a->fault = PS_MIT_FAULT_COMMS_LOST;
+        a->fault_bits |= PS_ACT_FAULT_COMMS_LOST;
     }
     const double tau = pd_torque(a, q_rad, qd_rad_s);
 
     /* Exact discretisation of the first-order model for a power held constant
-     * over the step: stable for any dt, unlike explicit Euler. */
-    const double kt = a->joint.kt_nm_a > 0.0f ? (double)a->joint.kt_nm_a : 1.0;
-    const double i_a = tau / kt;
+     * over the step: stable for any dt, unlike explicit Euler. The current is
+     * the motor's: joint torque / (gear ratio * kt). */
+    const double kt = a->act.kt_nm_a > 0.0f ? (double)a->act.kt_nm_a : 1.0;
+    const double i_a = tau / ((double)a->act.gear_ratio * kt);
     const double p_w = i_a * i_a * (double)a->sim.winding_r_ohm;
     const double t_ss_c = (double)a->sim.ambient_c + p_w * (double)a->sim.thermal_r_c_w;
     const double tau_s = (double)a->sim.thermal_tau_s;
     const double alpha = tau_s > 0.0 ? 1.0 - exp(-dt_s / tau_s) : 1.0;
     a->temp_c += (t_ss_c - a->temp_c) * alpha;
 
-    if (a->temp_c > (double)a->joint.temp_max_c) {
-        a->fault = PS_MIT_FAULT_ROTOR_OVERTEMP;
+    if (a->temp_c > (double)a->act.temp_max_c) {
+        a->fault_bits |= PS_ACT_FAULT_MOTOR_OVERTEMP;
         a->is_motor_mode = false;
         a->has_cmd = false;
     }
     a->tau_nm = tau;
     return tau;
+}
+
+static int8_t to_int8_c(double t_c)
+{
+    const double r = nearbyint(t_c);
+    if (r > 127.0)
+        return 127;
+    if (r < -128.0)
+        return -128;
+    return (int8_t)r;
 }
 
 /* ---- IMU -------------------------------------------------------------- */

@@ -4,22 +4,24 @@
  * and give torques and CAN frames. sim/ps_sim.c moves frames between them and
  * the simulated buses and torques into the MuJoCo plant.
  *
- * Actuator (one per robot joint), emulating an MIT-mode driver:
- *  - consumes frames whose id is its can_id: ENTER / EXIT / ZERO special
- *    frames and 8-byte command frames, decoded with ps_mit_decode_cmd on the
- *    joint's wire range (so the set-points are quantised exactly as a real
- *    driver sees them);
- *  - starts with motor mode OFF, like real drivers: command frames are
- *    answered but not obeyed until an ENTER frame arrives. The runtime must
- *    send ENTER to every joint before it expects torque;
+ * Actuator (one per robot joint), emulating a drive of the joint's protocol
+ * (ps_act_cfg_t.protocol, through the protocol's device-side ops):
+ *  - consumes frames the protocol addresses to it: mode requests (enable,
+ *    disable, set zero, clear fault) and command frames, decoded on the
+ *    drive's wire range (so the set-points are quantised exactly as a real
+ *    drive sees them) and converted to the joint side (gear, direction, zero
+ *    offset: ps_act_cmd_from_motor);
+ *  - starts with motor mode OFF, like real drives: command frames are
+ *    answered but not obeyed until an enable arrives. The runtime must
+ *    enable every joint before it expects torque;
  *  - runs its PD at every physics step: tau = kp (p_des - p) + kd (v_des - v)
  *    + t_ff, saturated to the wire t range and to +-torque_max_nm, 0 when not
- *    in motor mode or no command arrived since ENTER. p is the joint angle
- *    minus the zero offset set by the ZERO frame;
- *  - answers every valid frame with a reply on reply_id (position, velocity,
- *    current = tau / kt, temperatures, fault nibble) stamped
- *    t_ns = arrival + reply_latency_s, which the simulated bus uses as the
- *    earliest start of the reply on the wire;
+ *    in motor mode, no command arrived since enable, or power is off. p is
+ *    the joint angle minus the zero offset set by a set-zero request;
+ *  - answers every valid frame with a reply (position, velocity, torque,
+ *    temperature, fault bits, converted to the motor side and encoded by the
+ *    protocol) stamped t_ns = arrival + reply_latency_s, which the simulated
+ *    bus uses as the earliest start of the reply on the wire;
  *  - first-order winding temperature: P = i^2 R, dT/dt = (P Rth - (T - Ta)) / tau;
  *    above temp_max_c it leaves motor mode with ROTOR_OVERTEMP; ENTER is
  *    refused (answered, not obeyed) until T < temp_max_c - PS_DEVICES_TEMP_HYST_C;
@@ -49,9 +51,22 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "../drivers/ps_actuator.h"
 #include "../drivers/ps_can.h"
-#include "../drivers/ps_mit.h"
-#include "../rt/ps_config.h"
+#include "../drivers/ps_imu_msg.h"
+
+/** Parameters of the emulated devices (board `sim` only). */
+typedef struct {
+    float gyro_noise_rad_s; /**< white noise sigma per sample */
+    float gyro_bias_rad_s;  /**< bias magnitude drawn per axis at start */
+    float accel_noise_m_s2;
+    float accel_bias_m_s2;
+    float reply_latency_s; /**< driver turnaround before its reply */
+    float thermal_r_c_w;   /**< winding thermal resistance, degC per W */
+    float thermal_tau_s;   /**< winding thermal time constant */
+    float winding_r_ohm;   /**< phase resistance for copper loss */
+    float ambient_c;
+} ps_sim_devices_cfg_t;
 
 /** Real drivers go limp after this long without a command in motor mode. */
 #define PS_DEVICES_COMMS_TIMEOUT_NS 100000000LL
@@ -59,15 +74,17 @@
 #define PS_DEVICES_TEMP_HYST_C 5.0
 
 typedef struct {
-    ps_joint_cfg_t joint;          /**< copy of the joint's configuration (read-only) */
+    ps_act_cfg_t act;              /**< copy of the joint's actuator (read-only) */
+    ps_act_limits_t lim;           /**< copy of the joint's configured limits (read-only) */
     ps_sim_devices_cfg_t sim;      /**< copy of the device parameters (read-only) */
     bool is_motor_mode;            /**< read-only */
-    bool has_cmd;                  /**< a command arrived since ENTER (read-only) */
-    ps_mit_cmd_t cmd;              /**< last decoded command (read-only) */
+    bool has_cmd;                  /**< a command arrived since enable (read-only) */
+    bool is_powered;               /**< user may modify: power stage on (enable relay) */
+    ps_act_cmd_t cmd;              /**< last decoded command, joint side (read-only) */
     double zero_offset_rad;        /**< joint angle that reads 0 (ZERO frame) */
     int64_t last_cmd_ns;           /**< arrival of the last command or ENTER */
     double temp_c;                 /**< winding temperature */
-    uint8_t fault;                 /**< ps_mit_fault_t, latched */
+    uint32_t fault_bits;           /**< ps_act_fault_t bits, latched */
     double tau_nm;                 /**< torque of the last step */
     int64_t drop_replies_until_ns; /**< user may modify: fault injection */
     uint64_t n_cmd_frames;         /**< command frames decoded (obeyed or not) */
@@ -88,10 +105,10 @@ typedef struct {
     uint64_t n_samples;
 } ps_devices_imu_t;
 
-/** @pre j and sim checked by ps_config  @post motor mode off, no fault,
- *  temperature at ambient, zero offset 0  @rt INIT */
-void ps_devices_init_actuator(ps_devices_actuator_t *a, const ps_joint_cfg_t *j,
-                              const ps_sim_devices_cfg_t *sim);
+/** @pre act, lim and sim checked by the config loader  @post motor mode off,
+ *  no fault, powered, temperature at ambient, zero offset 0  @rt INIT */
+void ps_devices_init_actuator(ps_devices_actuator_t *a, const ps_act_cfg_t *act,
+                              const ps_act_limits_t *lim, const ps_sim_devices_cfg_t *sim);
 
 /** Consume one frame from the device end of the actuator's bus.
  *  @pre f->t_ns is the frame's arrival (end-of-frame) time; q_rad, qd_rad_s the
@@ -99,8 +116,8 @@ void ps_devices_init_actuator(ps_devices_actuator_t *a, const ps_joint_cfg_t *j,
  *  @post state updated; *out_reply written when 1 is returned
  *  @return 1 reply produced | 0 consumed, reply suppressed (drop knob)
  *          | -ENOENT frame not addressed to this actuator (not counted)
- *          | -PS_ERR_PROTOCOL frame for this id rejected (length, extended id;
- *            counted in n_bad_frames, no reply)
+ *          | -PS_ERR_PROTOCOL frame for this drive rejected (malformed for its
+ *            protocol; counted in n_bad_frames, no reply)
  *  @units rad, rad/s, ns  @rt RT-SAFE O(1), plant thread */
 int ps_devices_handle_frame(ps_devices_actuator_t *a, const ps_can_frame_t *f, double q_rad,
                             double qd_rad_s, ps_can_frame_t *out_reply);

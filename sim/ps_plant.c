@@ -105,7 +105,7 @@ static double foot_min_z(const ps_plant_t *p)
     return min_z;
 }
 
-static int map_joints(ps_plant_t *p, const ps_robot_cfg_t *robot, char *err, size_t err_len)
+static int map_joints(ps_plant_t *p, const ps_plant_cfg_t *robot, char *err, size_t err_len)
 {
     const mjModel *m = p->m;
     if (robot->n_joints > PS_MAX_JOINTS) {
@@ -115,7 +115,7 @@ static int map_joints(ps_plant_t *p, const ps_robot_cfg_t *robot, char *err, siz
     }
     p->n_joints = (int)robot->n_joints;
     for (int i = 0; i < p->n_joints; i++) {
-        const char *name = robot->joints[i].name;
+        const char *name = robot->joint_name[i];
         const int j = mj_name2id(m, mjOBJ_JOINT, name);
         if (j < 0) {
             ps_err_format(err, err_len, "joint '%s' not found in the model", name);
@@ -187,13 +187,13 @@ static int map_bodies(ps_plant_t *p, char *err, size_t err_len)
 }
 
 /* Joints to the stance, root upright at the origin, soles on the floor. */
-static void place_in_stance(ps_plant_t *p, const ps_robot_cfg_t *robot)
+static void place_in_stance(ps_plant_t *p, const ps_plant_cfg_t *robot)
 {
     mjModel *m = p->m;
     mjData *d = p->d;
     mj_resetData(m, d);
     for (int i = 0; i < p->n_joints; i++)
-        d->qpos[p->qpos_adr[i]] = robot->joints[i].stance_rad;
+        d->qpos[p->qpos_adr[i]] = robot->stance_rad[i];
     mjtNum *root = d->qpos + p->root_qpos_adr;
     root[0] = 0.0;
     root[1] = 0.0;
@@ -208,10 +208,11 @@ static void place_in_stance(ps_plant_t *p, const ps_robot_cfg_t *robot)
         p->anchor_quat[k] = root[3 + k];
 }
 
-int ps_plant_create(const char *model_path, const ps_robot_cfg_t *robot, ps_plant_t **out,
-                    char *err, size_t err_len)
+int ps_plant_create(const ps_plant_cfg_t *robot, ps_plant_t **out, char *err, size_t err_len)
 {
-    if (model_path == NULL || robot == NULL || out == NULL) {
+    const char *model_path = robot != NULL ? robot->model_path : NULL;
+    if (model_path == NULL || robot->joint_name == NULL || robot->stance_rad == NULL ||
+        out == NULL) {
         ps_err_format(err, err_len, "ps_plant_create: NULL argument");
         return -EINVAL;
     }

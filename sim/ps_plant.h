@@ -27,9 +27,19 @@
 #include <stdbool.h>
 #include <stddef.h>
 
-#include "../rt/ps_config.h"
+#include <stdint.h>
+
+#include "../rt/ps_limits.h"
 
 typedef struct ps_plant ps_plant_t;
+
+/** What the plant needs of the robot. Nothing is kept after create. */
+typedef struct {
+    const char *model_path;                /**< MJCF file */
+    uint32_t n_joints;                     /**< robot joints, <= PS_MAX_JOINTS */
+    const char (*joint_name)[PS_NAME_LEN]; /**< hinge and motor names, by joint */
+    const float *stance_rad;               /**< initial pose, by joint */
+} ps_plant_cfg_t;
 
 typedef struct {
     double t_s;
@@ -39,7 +49,7 @@ typedef struct {
     bool is_fallen; /**< a body other than the feet touches the floor */
 } ps_plant_truth_t;
 
-/** Load the model and place the robot in its stance (robot->joints[].stance_rad)
+/** Load the model and place the robot in its stance (robot->stance_rad)
  *  with the soles on the floor (lowest foot point at z = 0), upright at the
  *  world origin facing +x, at rest; the harness is engaged.
  *  @pre robot->n_joints <= PS_MAX_JOINTS  @post *out set only on success;
@@ -48,14 +58,13 @@ typedef struct {
  *          | -PS_ERR_CONFIG (a robot joint or actuator is missing in the model,
  *            or the model lacks the free joint, head, feet or IMU; err names it)
  *          | -EINVAL (NULL argument) | -ENOMEM  @rt INIT */
-int ps_plant_create(const char *model_path, const ps_robot_cfg_t *robot, ps_plant_t **out,
-                    char *err, size_t err_len);
+int ps_plant_create(const ps_plant_cfg_t *robot, ps_plant_t **out, char *err, size_t err_len);
 
 /** @return physics time step (the model's option timestep)  @units s */
 double ps_plant_timestep_s(const ps_plant_t *p);
 
 /** Joint torques to apply from now on (clamped to the model's ctrlrange;
- *  a non-finite entry applies 0).  @pre tau_nm has robot n_joints entries */
+ *  a non-finite entry applies 0).  @pre tau_nm has n_joints entries */
 void ps_plant_set_torques(ps_plant_t *p, const double *tau_nm);
 
 /** @post q and qd of every robot joint  @units rad, rad/s */

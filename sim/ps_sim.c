@@ -8,9 +8,6 @@
 #include <time.h>
 
 #include "../rt/ps_err.h"
-#include "../rt/ps_guard.h"
-#include "../rt/ps_rtsetup.h"
-#include "../rt/ps_sm.h"
 #include "ps_can_sim.h"
 #include "ps_gpio_sim.h"
 #include "ps_plant.h"
@@ -22,9 +19,10 @@
 #define RX_BATCH 32u
 
 struct ps_sim {
-    ps_board_cfg_t board;
-    ps_robot_cfg_t robot;
+    ps_sim_board_t board;
+    ps_sim_robot_t robot;
     ps_scenario_cfg_t scenario;
+    ps_sim_hooks_t hooks;
     bool is_lockstep;
     int64_t period_ns;
     int64_t dt_ns; /**< physics timestep */
@@ -97,13 +95,13 @@ static void run_scenario(ps_sim_t *s, int64_t rel_ns)
         const ps_event_cfg_t *ev = &sc->events[e];
         switch (ev->kind) {
         case PS_EVENT_START:
-            atomic_fetch_or(&s->requests, (unsigned)PS_SM_C_REQ_START);
+            atomic_fetch_or(&s->requests, (unsigned)PS_SIM_REQ_START);
             break;
         case PS_EVENT_STOP:
-            atomic_fetch_or(&s->requests, (unsigned)PS_SM_C_REQ_STOP);
+            atomic_fetch_or(&s->requests, (unsigned)PS_SIM_REQ_STOP);
             break;
         case PS_EVENT_RESET:
-            atomic_fetch_or(&s->requests, (unsigned)PS_SM_C_REQ_RESET);
+            atomic_fetch_or(&s->requests, (unsigned)PS_SIM_REQ_RESET);
             break;
         case PS_EVENT_ESTOP_PRESS:
             ps_gpio_sim_set_estop(&s->gpio, true);
@@ -153,7 +151,7 @@ static void route_frames(ps_sim_t *s)
             for (int i = 0; i < n; i++) {
                 bool is_routed = false;
                 for (uint32_t j = 0; j < s->robot.n_joints; j++) {
-                    if (s->robot.joints[j].bus_idx != b)
+                    if (s->robot.act[j].bus_idx != b)
                         continue;
                     const int rc = ps_devices_handle_frame(&s->act[j], &rx[i], s->q_rad[j],
                                                            s->qd_rad_s[j], &tx[n_tx]);
@@ -217,7 +215,7 @@ static void update_truth(ps_sim_t *s)
     t.head_height_m = pt.head_height_m;
     t.is_fallen = pt.is_fallen;
     t.n_steps = s->n_steps;
-    t.max_temp_c = s->robot.sim.ambient_c;
+    t.max_temp_c = s->robot.devices.ambient_c;
     for (uint32_t j = 0; j < s->robot.n_joints; j++) {
         const ps_devices_actuator_t *a = &s->act[j];
         t.n_cmd_frames += a->n_cmd_frames;
@@ -257,7 +255,8 @@ static int sim_sleep_until_ns(void *ctx, int64_t deadline_ns)
     if (s->is_started) {
         /* The plant's work runs on the loop thread here but is not the loop's:
          * keep it out of the allocation and page-fault counts. */
-        ps_guard_pause();
+        if (s->hooks.pause_guard != NULL)
+            s->hooks.pause_guard(s->hooks.ctx);
         bool has_stepped = false;
         while (s->start_ns + s->plant_rel_ns < deadline_ns) {
             const int64_t t = s->start_ns + s->plant_rel_ns;
@@ -267,7 +266,8 @@ static int sim_sleep_until_ns(void *ctx, int64_t deadline_ns)
         }
         if (has_stepped)
             update_truth(s);
-        ps_guard_resume();
+        if (s->hooks.resume_guard != NULL)
+            s->hooks.resume_guard(s->hooks.ctx);
     }
     if (deadline_ns > atomic_load_explicit(&s->now_ns, memory_order_relaxed))
         atomic_store_explicit(&s->now_ns, deadline_ns, memory_order_relaxed);
@@ -287,9 +287,8 @@ static void sleep_abs(int64_t t_ns)
 static void *plant_thread(void *arg)
 {
     ps_sim_t *s = arg;
-    const unsigned prio = s->board.rt.priority > 1u ? s->board.rt.priority - 1u : 0u;
-    (void)ps_rtsetup_thread_best_effort(
-        prio, s->board.rt.plant_cpu); /* best effort, like the sim itself */
+    if (s->hooks.setup_thread != NULL) /* best effort, like the sim itself */
+        s->hooks.setup_thread(s->hooks.ctx, s->board.plant_priority, s->board.plant_cpu);
     const ps_clock_t *mono = ps_clock_monotonic();
     const int64_t n_sub = s->period_ns / s->dt_ns;
     int64_t next_ns = s->start_ns + s->period_ns / 2;
@@ -315,10 +314,10 @@ static void *plant_thread(void *arg)
 
 /* ---- lifecycle --------------------------------------------------------- */
 
-static int find_joint(const ps_robot_cfg_t *r, const char *name)
+static int find_joint(const ps_sim_robot_t *r, const char *name)
 {
     for (uint32_t j = 0; j < r->n_joints; j++) {
-        if (strncmp(r->joints[j].name, name, PS_NAME_LEN) == 0)
+        if (strncmp(r->joint_name[j], name, PS_NAME_LEN) == 0)
             return (int)j;
     }
     return -ENOENT;
@@ -386,6 +385,7 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
     int rc;
     s->board = *cfg->board;
     s->robot = *cfg->robot;
+    s->hooks = cfg->hooks;
     if (cfg->scenario != NULL)
         s->scenario = *cfg->scenario;
     s->is_lockstep = cfg->is_lockstep;
@@ -420,9 +420,9 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
         goto fail;
     }
     for (uint32_t j = 0; j < s->robot.n_joints; j++) {
-        if (s->robot.joints[j].bus_idx >= s->board.n_buses) {
+        if (s->robot.act[j].bus_idx >= s->board.n_buses) {
             ps_err_format(err, err_len, "sim: joint %s: bus %u not on board %s",
-                          s->robot.joints[j].name, s->robot.joints[j].bus_idx, s->board.name);
+                          s->robot.joint_name[j], s->robot.act[j].bus_idx, s->board.name);
             rc = -PS_ERR_CONFIG;
             goto fail;
         }
@@ -434,7 +434,13 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
         goto fail;
     }
 
-    rc = ps_plant_create(cfg->model_path, &s->robot, &s->plant, err, err_len);
+    const ps_plant_cfg_t plant_cfg = {
+        .model_path = cfg->model_path,
+        .n_joints = s->robot.n_joints,
+        .joint_name = s->robot.joint_name,
+        .stance_rad = s->robot.stance_rad,
+    };
+    rc = ps_plant_create(&plant_cfg, &s->plant, err, err_len);
     if (rc < 0)
         goto fail;
     s->dt_s = ps_plant_timestep_s(s->plant);
@@ -459,12 +465,14 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
                           ps_strerror(rc));
             goto fail;
         }
+        if (s->board.buses[b].is_fd)
+            ps_can_sim_set_fd(s->bus[b], s->board.buses[b].data_bitrate);
         s->dev_port[b] = ps_can_sim_device_port(s->bus[b]);
     }
     ps_gpio_sim_init(&s->gpio);
     for (uint32_t j = 0; j < s->robot.n_joints; j++)
-        ps_devices_init_actuator(&s->act[j], &s->robot.joints[j], &s->robot.sim);
-    ps_devices_init_imu(&s->imu, &s->robot.imu, &s->robot.sim, (uint64_t)s->scenario.seed);
+        ps_devices_init_actuator(&s->act[j], &s->robot.act[j], &s->robot.lim[j], &s->robot.devices);
+    ps_devices_init_imu(&s->imu, &s->robot.imu, &s->robot.devices, (uint64_t)s->scenario.seed);
     update_truth(s);
     *out_sim = s;
     return 0;

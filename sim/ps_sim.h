@@ -4,8 +4,9 @@
  * A MuJoCo plant (sim/ps_plant.c, the model named in the robot file) plus
  * emulated devices that sit on simulated CAN buses (sim/ps_can_sim.c) and a
  * simulated GPIO port, exactly where real hardware would sit: each actuator
- * consumes MIT command frames and answers with MIT reply frames (quantised,
- * on-driver PD, torque limit, temperature model); the IMU sends its two
+ * consumes the command frames of its joint's protocol and answers with
+ * that protocol's replies (quantised, on-drive PD, torque limit, temperature
+ * model); the IMU sends its two
  * frames per sample with noise and bias. The loop sees only ps_can_port_t,
  * ps_gpio_port_t and ps_clock_t, and does not know it runs on a simulation.
  *
@@ -19,10 +20,15 @@
  * The scenario drives pushes, the harness, e-stop presses and injected
  * faults at simulated times (relative to ps_sim_start's start_ns).
  *
- * Emulated drivers start in motor mode OFF, like real MIT drivers: commands
- * are answered but not obeyed until the loop sends ENTER to the joint
+ * Emulated drives start in motor mode OFF, like real drives: commands are
+ * answered but not obeyed until the loop enables the joint
  * (sim/ps_devices.h). They go limp with COMMS_LOST after 100 ms without a
  * command in motor mode.
+ *
+ * Layering: sim/ includes the base and drivers/ only. What it needs from the
+ * application (thread setup, the allocation guard's pause) it gets through
+ * ps_sim_hooks_t; operator requests from the scenario leave as PS_SIM_REQ_*
+ * bits that the application maps to its state machine.
  *
  * Timing: each servo period runs the model's physics steps (the model's
  * timestep must divide the period). At each physics step the devices take the
@@ -43,22 +49,65 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "../drivers/ps_actuator.h"
 #include "../drivers/ps_can.h"
+#include "../drivers/ps_canbus.h"
 #include "../drivers/ps_gpio.h"
+#include "../drivers/ps_imu_msg.h"
 #include "../rt/ps_clock.h"
-#include "../rt/ps_config.h"
+#include "../rt/ps_limits.h"
 #include "ps_devices.h"
+#include "ps_scenario.h"
 
 typedef struct ps_sim ps_sim_t;
 
+/** The robot as the simulation needs it (the composition root fills it). */
 typedef struct {
-    const ps_board_cfg_t *board;
-    const ps_robot_cfg_t *robot;
+    char name[PS_NAME_LEN]; /**< for messages */
+    uint32_t n_joints;
+    char joint_name[PS_MAX_JOINTS][PS_NAME_LEN]; /**< hinge and motor names in the model */
+    ps_act_cfg_t act[PS_MAX_JOINTS];             /**< protocol, ids, bus, gear of each drive */
+    ps_act_limits_t lim[PS_MAX_JOINTS];          /**< for counting commands out of limits */
+    float stance_rad[PS_MAX_JOINTS];             /**< initial pose */
+    ps_imu_cfg_t imu;
+    ps_sim_devices_cfg_t devices;
+} ps_sim_robot_t;
+
+/** The board as the simulation needs it. */
+typedef struct {
+    char name[PS_NAME_LEN];
+    uint32_t n_buses;
+    ps_canbus_bus_cfg_t buses[PS_MAX_BUSES];
+    uint32_t plant_priority; /**< SCHED_FIFO priority of the plant thread, 0: none */
+    int32_t plant_cpu;       /**< CPU of the plant thread, -1: any */
+} ps_sim_board_t;
+
+/** What the simulation needs from the application; every member may be NULL. */
+typedef struct {
+    void *ctx;
+    /** Real time: called first on the plant thread (priority, CPU; best effort). */
+    void (*setup_thread)(void *ctx, unsigned priority, int cpu);
+    /** Lockstep: around the plant's work on the loop thread, so that an
+     *  allocation guard on that thread does not count it. */
+    void (*pause_guard)(void *ctx);
+    void (*resume_guard)(void *ctx);
+} ps_sim_hooks_t;
+
+/** Operator requests a scenario makes (ps_sim_take_requests). */
+typedef enum {
+    PS_SIM_REQ_START = 1u << 0,
+    PS_SIM_REQ_STOP = 1u << 1,
+    PS_SIM_REQ_RESET = 1u << 2,
+} ps_sim_request_t;
+
+typedef struct {
+    const ps_sim_board_t *board;
+    const ps_sim_robot_t *robot;
     const ps_scenario_cfg_t *scenario;
     const char *model_path; /**< resolved MJCF path */
     bool is_lockstep;
-    int64_t period_ns;          /**< servo period; plant paced at this */
-    const uint8_t *joint_phase; /**< from the bus plan (unused by devices; informative) */
+    int64_t period_ns; /**< servo period; plant paced at this */
+    ps_sim_hooks_t hooks;
 } ps_sim_cfg_t;
 
 /** Ground truth from the plant, for tests and the summary. */
@@ -112,10 +161,10 @@ ps_gpio_port_t ps_sim_gpio_port(ps_sim_t *s);
 const ps_clock_t *ps_sim_clock(ps_sim_t *s);
 
 /** Real-time mode: start the plant thread, which runs period k at
- *  start_ns + period_ns/2 + k period_ns (SCHED_FIFO at board rt.priority - 1
- *  on rt.plant_cpu when permitted, else as it can). Lockstep: set simulated
+ *  start_ns + period_ns/2 + k period_ns. Lockstep: set simulated
  *  time to start_ns. Scenario times count from start_ns. Also sets every
- *  bus's tick epoch to start_ns.
+ *  bus's tick epoch to start_ns. The plant thread's priority and CPU come
+ *  from the board (plant_priority, plant_cpu) through hooks.setup_thread.
  *  @return 0 | -EBUSY already started | -errno (pthread_create)  @rt INIT */
 int ps_sim_start(ps_sim_t *s, int64_t start_ns);
 
@@ -126,7 +175,7 @@ void ps_sim_stop(ps_sim_t *s);
 void ps_sim_get_truth(ps_sim_t *s, ps_sim_truth_t *out);
 
 /** Pending operator requests from the scenario (START, STOP, RESET) that fell
- *  due since the last call, as ps_sm condition bits. @rt RT-SAFE, loop thread */
+ *  due since the last call, as PS_SIM_REQ_* bits. @rt RT-SAFE, loop thread */
 uint32_t ps_sim_take_requests(ps_sim_t *s);
 
 /** Copy of one emulated driver's state (motor mode, fault, temperature,

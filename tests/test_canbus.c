@@ -67,13 +67,111 @@ static void test_bits_to_ns_fraction_rounds_up(void **state)
     assert_int_equal(ps_canbus_bits_to_ns(1, 0), 0);
 }
 
+/* ---- CAN FD timing (values computed by hand from ISO 11898-1:2015) ------- */
+
+static void test_fd_frame_bits_hand_computed(void **state)
+{
+    (void)state;
+    unsigned nom = 0, dat = 0;
+    /* 11-bit, 64 bytes, BRS: arbitration 17 + its 5 stuff bits + end 13 = 35;
+     * data phase ESI+DLC+512 = 517, 128 more dynamic stuff bits
+     * ((17 + 517 - 1) / 4 = 133, minus the arbitration's 5), stuff count 4 +
+     * CRC 21 + 7 fixed stuff bits = 32: 677. */
+    ps_canbus_fd_frame_bits_max(64, false, true, &nom, &dat);
+    assert_int_equal(nom, 35);
+    assert_int_equal(dat, 677);
+    /* 8 bytes: 69 + 16 + (4 + 17 + 6) = 112 */
+    ps_canbus_fd_frame_bits_max(8, false, true, &nom, &dat);
+    assert_int_equal(nom, 35);
+    assert_int_equal(dat, 112);
+    /* without BRS everything runs at the nominal rate */
+    ps_canbus_fd_frame_bits_max(8, false, false, &nom, &dat);
+    assert_int_equal(nom, 147);
+    assert_int_equal(dat, 0);
+    /* 29-bit: arbitration 36 + 9 stuff + 13 = 58; data 69 + 17 + 27 = 113 */
+    ps_canbus_fd_frame_bits_max(8, true, true, &nom, &dat);
+    assert_int_equal(nom, 58);
+    assert_int_equal(dat, 113);
+    /* 9 bytes is no FD length: counted as the next one, 12 */
+    unsigned nom12 = 0, dat12 = 0;
+    ps_canbus_fd_frame_bits_max(9, false, true, &nom, &dat);
+    ps_canbus_fd_frame_bits_max(12, false, true, &nom12, &dat12);
+    assert_int_equal(nom, nom12);
+    assert_int_equal(dat, dat12);
+}
+
+static void test_fd_frame_ns_data_phase_at_data_bitrate(void **state)
+{
+    (void)state;
+    const ps_canbus_bus_cfg_t fd = {.bitrate = 1000000, .is_fd = true, .data_bitrate = 5000000};
+    const ps_canbus_frame_shape_t f64 = {.len = 64, .is_fd = true, .is_brs = true};
+    /* 35 bits at 1 Mbit/s + 677 bits at 5 Mbit/s (135.4 us, rounded up) */
+    assert_int_equal(ps_canbus_frame_ns_max(&f64, &fd), 35000 + 135400);
+    /* in nominal bit times: 35 + ceil(677 / 5) */
+    assert_int_equal(ps_canbus_frame_nominal_bits_max(&f64, &fd), 35 + 136);
+    /* a classical frame on the same bus: 135 bits at the nominal rate */
+    const ps_canbus_frame_shape_t c8 = {.len = 8};
+    assert_int_equal(ps_canbus_frame_ns_max(&c8, &fd), 135000);
+    assert_int_equal(ps_canbus_frame_nominal_bits_max(&c8, &fd), 135);
+}
+
 /* ---- planner ------------------------------------------------------------ */
 
+/* A board and a robot in the shape the planner's caller (rt/ps_app.c) turns
+ * into buses and sources: each joint an MIT-sized source (command and reply,
+ * two classical 8-byte 11-bit frames), the IMU two 8-byte frames. */
 typedef struct {
-    ps_board_cfg_t board;
-    ps_robot_cfg_t robot;
+    char name[PS_NAME_LEN];
+    uint32_t bus_idx, rate_div;
+} test_joint_t;
+
+typedef struct {
+    struct {
+        char name[PS_NAME_LEN];
+        uint32_t n_buses;
+        ps_canbus_bus_cfg_t buses[PS_MAX_BUSES];
+        float bus_budget;
+    } board;
+    struct {
+        char name[PS_NAME_LEN];
+        struct {
+            uint32_t servo_hz;
+        } control;
+        struct {
+            uint32_t bus_idx, base_id, rate_div;
+        } imu;
+        uint32_t n_joints;
+        test_joint_t joints[PS_MAX_JOINTS];
+    } robot;
     char err[PS_ERR_MSG_LEN];
 } fixture_t;
+
+static int plan(fixture_t *f, ps_canbus_plan_t *out, char *err, size_t err_len)
+{
+    static char names[PS_CANBUS_MAX_SOURCES][PS_NAME_LEN + 16]; /* outlive the call's messages */
+    ps_canbus_source_t src[PS_CANBUS_MAX_SOURCES];
+    memset(src, 0, sizeof src);
+    const ps_canbus_frame_shape_t classic8 = {.len = 8};
+    uint32_t n = 0;
+    for (; n < f->robot.n_joints; n++) {
+        snprintf(names[n], sizeof names[n], "joint %u (%s)", n, f->robot.joints[n].name);
+        src[n] = (ps_canbus_source_t){.bus_idx = f->robot.joints[n].bus_idx,
+                                      .rate_div = f->robot.joints[n].rate_div,
+                                      .n_frames = 2,
+                                      .frames = {classic8, classic8},
+                                      .name = names[n]};
+    }
+    src[n++] = (ps_canbus_source_t){.bus_idx = f->robot.imu.bus_idx,
+                                    .rate_div = f->robot.imu.rate_div,
+                                    .n_frames = 2,
+                                    .frames = {classic8, classic8},
+                                    .name = "imu"};
+    const ps_canbus_cfg_t cfg = {.n_buses = f->board.n_buses,
+                                 .buses = f->board.buses,
+                                 .bus_budget = f->board.bus_budget,
+                                 .servo_hz = f->robot.control.servo_hz};
+    return ps_canbus_plan(&cfg, src, n, out, err, err_len);
+}
 
 /* Two 1 Mbit/s buses, 1 kHz loop: 1000 bits per tick per bus. No joints; the
  * IMU every tick on bus 0. Tests add joints. */
@@ -106,12 +204,10 @@ static int teardown(void **state)
 
 static void add_joint(fixture_t *f, const char *name, uint32_t bus_idx, uint32_t rate_div)
 {
-    ps_joint_cfg_t *j = &f->robot.joints[f->robot.n_joints++];
+    test_joint_t *j = &f->robot.joints[f->robot.n_joints++];
     snprintf(j->name, sizeof j->name, "%s", name);
     j->bus_idx = bus_idx;
     j->rate_div = rate_div;
-    j->can_id = f->robot.n_joints;
-    j->reply_id = 0x10 + f->robot.n_joints;
 }
 
 static void test_plan_two_joints_div2_spread_peak_half(void **state)
@@ -120,11 +216,11 @@ static void test_plan_two_joints_div2_spread_peak_half(void **state)
     add_joint(f, "a", 1, 2);
     add_joint(f, "b", 1, 2);
     ps_canbus_plan_t p;
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err), 0);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), 0);
     assert_string_equal(f->err, "");
     assert_int_equal(p.n_buses, 2);
     assert_int_equal(p.n_sources[1], 2);
-    assert_int_not_equal(p.joint_phase[0], p.joint_phase[1]);
+    assert_int_not_equal(p.phase[0], p.phase[1]);
     /* Both on one tick would be 540 bits; spread, each tick carries one joint. */
     assert_int_equal(p.tick_bits_max[1], 270);
     assert_int_equal(p.tick_capacity_bits[1], 1000);
@@ -145,14 +241,14 @@ static void test_plan_phases_follow_is_due_convention(void **state)
     for (unsigned k = 0; k < 4; k++)
         add_joint(f, "j", 0, 4);
     ps_canbus_plan_t p;
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err), 0);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), 0);
     assert_int_equal(p.tick_bits_max[0], 540);
     for (uint64_t t = 0; t < 8; t++) {
         unsigned n_due = 0;
         for (unsigned k = 0; k < 4; k++)
-            n_due += ps_canbus_is_due(t, 4, p.joint_phase[k]);
+            n_due += ps_canbus_is_due(t, 4, p.phase[k]);
         assert_int_equal(n_due, 1);
-        assert_true(ps_canbus_is_due(t, 1, p.imu_phase));
+        assert_true(ps_canbus_is_due(t, 1, p.phase[f->robot.n_joints]));
     }
     assert_float_equal(p.load_avg[0], (4 * 270 * 250 + 270 * 1000) / 1e6, 1e-12);
 }
@@ -167,9 +263,9 @@ static void test_plan_mixed_divisors_greedy_optimal(void **state)
     add_joint(f, "m1", 1, 2);
     add_joint(f, "m2", 1, 2);
     ps_canbus_plan_t p;
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err), 0);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), 0);
     assert_int_equal(p.tick_bits_max[1], 540);
-    assert_int_not_equal(p.joint_phase[1], p.joint_phase[2]);
+    assert_int_not_equal(p.phase[1], p.phase[2]);
 }
 
 static void test_plan_over_budget_refused_naming_bus(void **state)
@@ -181,8 +277,7 @@ static void test_plan_over_budget_refused_naming_bus(void **state)
     add_joint(f, "ankle", 1, 1);
     ps_canbus_plan_t p;
     memset(&p, 0, sizeof p);
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err),
-                     -PS_ERR_BUS_BUDGET);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), -PS_ERR_BUS_BUDGET);
     assert_non_null(strstr(f->err, "bus 1 (can1)"));
     assert_non_null(strstr(f->err, "81.0%"));
     assert_non_null(strstr(f->err, "810 of 1000 bits at 1000 Hz"));
@@ -195,7 +290,7 @@ static void test_plan_over_budget_refused_naming_bus(void **state)
     /* The same joints at div 2 fit: phases put at most 2 on a tick. */
     for (unsigned j = 0; j < 3; j++)
         f->robot.joints[j].rate_div = 2;
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err), 0);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), 0);
     assert_int_equal(p.tick_bits_max[1], 540);
 }
 
@@ -206,14 +301,38 @@ static void test_plan_slow_bus_over_budget_refused(void **state)
      * one joint more (every other tick) makes 540 = 108%. */
     f->board.buses[0].bitrate = 500000;
     ps_canbus_plan_t p;
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err), 0);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), 0);
     assert_float_equal(p.load_peak[0], 0.54, 1e-12);
     add_joint(f, "x", 0, 2);
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err),
-                     -PS_ERR_BUS_BUDGET);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), -PS_ERR_BUS_BUDGET);
     assert_non_null(strstr(f->err, "bus 0 (can0)"));
     assert_non_null(strstr(f->err, "108.0%"));
     assert_non_null(strstr(f->err, "540 of 500 bits"));
+}
+
+static void test_plan_fd_source_on_classical_bus_config_error(void **state)
+{
+    fixture_t *f = *state;
+    ps_canbus_source_t src = {.bus_idx = 1,
+                              .rate_div = 1,
+                              .n_frames = 1,
+                              .frames = {{.len = 64, .is_fd = true, .is_brs = true}},
+                              .name = "joint fd"};
+    const ps_canbus_cfg_t cfg = {
+        .n_buses = 2, .buses = f->board.buses, .bus_budget = 0.8f, .servo_hz = 1000};
+    ps_canbus_plan_t p;
+    assert_int_equal(ps_canbus_plan(&cfg, &src, 1, &p, f->err, sizeof f->err), -PS_ERR_CONFIG);
+    assert_non_null(strstr(f->err, "joint fd"));
+    assert_non_null(strstr(f->err, "classical"));
+    /* the same bus made FD at 5 Mbit/s takes it: 171 of 1000 bits per tick */
+    f->board.buses[1].is_fd = true;
+    f->board.buses[1].data_bitrate = 5000000;
+    assert_int_equal(ps_canbus_plan(&cfg, &src, 1, &p, f->err, sizeof f->err), 0);
+    assert_int_equal(p.tick_bits_max[1], 171);
+    /* an FD bus whose data rate is below its nominal rate is refused */
+    f->board.buses[1].data_bitrate = 500000;
+    assert_int_equal(ps_canbus_plan(&cfg, &src, 1, &p, f->err, sizeof f->err), -PS_ERR_CONFIG);
+    assert_non_null(strstr(f->err, "data_bitrate"));
 }
 
 static void test_plan_joint_bad_bus_config_error(void **state)
@@ -222,10 +341,9 @@ static void test_plan_joint_bad_bus_config_error(void **state)
     add_joint(f, "l_knee", 2, 1);
     ps_canbus_plan_t p;
     memset(&p, 0x5A, sizeof p);
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err),
-                     -PS_ERR_CONFIG);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), -PS_ERR_CONFIG);
     assert_non_null(strstr(f->err, "joint 0 (l_knee)"));
-    assert_non_null(strstr(f->err, "bus_idx 2"));
+    assert_non_null(strstr(f->err, "bus 2 but"));
     assert_int_equal(p.n_buses, 0x5A5A5A5A); /* untouched */
 }
 
@@ -234,10 +352,9 @@ static void test_plan_imu_bad_bus_config_error(void **state)
     fixture_t *f = *state;
     f->robot.imu.bus_idx = 5;
     ps_canbus_plan_t p;
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err),
-                     -PS_ERR_CONFIG);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), -PS_ERR_CONFIG);
     assert_non_null(strstr(f->err, "imu"));
-    assert_non_null(strstr(f->err, "bus_idx 5"));
+    assert_non_null(strstr(f->err, "bus 5 but"));
 }
 
 static void test_plan_bad_rate_div_config_error(void **state)
@@ -245,15 +362,13 @@ static void test_plan_bad_rate_div_config_error(void **state)
     fixture_t *f = *state;
     ps_canbus_plan_t p;
     add_joint(f, "zero", 1, 0);
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err),
-                     -PS_ERR_CONFIG);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), -PS_ERR_CONFIG);
     assert_non_null(strstr(f->err, "rate_div 0"));
     f->robot.joints[0].rate_div = 65;
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err),
-                     -PS_ERR_CONFIG);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), -PS_ERR_CONFIG);
     f->robot.joints[0].rate_div = 1;
     f->robot.imu.rate_div = 0;
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, NULL, 0), -PS_ERR_CONFIG);
+    assert_int_equal(plan(f, &p, NULL, 0), -PS_ERR_CONFIG);
 }
 
 static void test_plan_hyperperiod_too_long_config_error(void **state)
@@ -263,12 +378,11 @@ static void test_plan_hyperperiod_too_long_config_error(void **state)
     /* lcm(3, 5) = 15 is accepted; lcm(7, 11) = 77 > 64 is not. */
     add_joint(f, "a", 1, 3);
     add_joint(f, "b", 1, 5);
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err), 0);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), 0);
     assert_int_equal(p.tick_bits_max[1], 540); /* ticks where both are due exist */
     f->robot.joints[0].rate_div = 7;
     f->robot.joints[1].rate_div = 11;
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err),
-                     -PS_ERR_CONFIG);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), -PS_ERR_CONFIG);
     assert_non_null(strstr(f->err, "bus 1 (can1)"));
 }
 
@@ -277,29 +391,23 @@ static void test_plan_bad_board_or_control_config_error(void **state)
     fixture_t *f = *state;
     ps_canbus_plan_t p;
     f->robot.control.servo_hz = 0;
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err),
-                     -PS_ERR_CONFIG);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), -PS_ERR_CONFIG);
     f->robot.control.servo_hz = 1000;
     f->board.bus_budget = 0.0f;
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err),
-                     -PS_ERR_CONFIG);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), -PS_ERR_CONFIG);
     f->board.bus_budget = 1.5f;
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err),
-                     -PS_ERR_CONFIG);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), -PS_ERR_CONFIG);
     f->board.bus_budget = 0.8f;
     f->board.n_buses = 0;
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err),
-                     -PS_ERR_CONFIG);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), -PS_ERR_CONFIG);
     f->board.n_buses = PS_MAX_BUSES + 1;
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err),
-                     -PS_ERR_CONFIG);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), -PS_ERR_CONFIG);
     f->board.n_buses = 2;
     f->board.buses[1].bitrate = 999; /* < 1 bit per tick at 1 kHz */
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err),
-                     -PS_ERR_CONFIG);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), -PS_ERR_CONFIG);
     assert_non_null(strstr(f->err, "bus 1 (can1)"));
     f->board.buses[1].bitrate = 1000000;
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err), 0);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), 0);
 }
 
 static void test_plan_humanoid_12_joints_4_buses_fits(void **state)
@@ -316,7 +424,7 @@ static void test_plan_humanoid_12_joints_4_buses_fits(void **state)
     for (unsigned j = 0; j < 12; j++)
         add_joint(f, "j", j / 3, 2);
     ps_canbus_plan_t p;
-    assert_int_equal(ps_canbus_plan(&f->board, &f->robot, &p, f->err, sizeof f->err), 0);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), 0);
     assert_int_equal(p.tick_bits_max[0], 540);
     assert_float_equal(p.load_avg[0], 4 * 270 * 500 / 1e6, 1e-12);
     for (unsigned b = 1; b < 4; b++) {
@@ -333,6 +441,8 @@ int main(void)
         cmocka_unit_test(test_frame_bits_len_above_8_counts_as_8),
         cmocka_unit_test(test_bits_to_ns_common_rates),
         cmocka_unit_test(test_bits_to_ns_fraction_rounds_up),
+        cmocka_unit_test(test_fd_frame_bits_hand_computed),
+        cmocka_unit_test(test_fd_frame_ns_data_phase_at_data_bitrate),
         cmocka_unit_test_setup_teardown(test_plan_two_joints_div2_spread_peak_half, setup,
                                         teardown),
         cmocka_unit_test_setup_teardown(test_plan_phases_follow_is_due_convention, setup, teardown),
@@ -340,6 +450,8 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_plan_over_budget_refused_naming_bus, setup, teardown),
         cmocka_unit_test_setup_teardown(test_plan_slow_bus_over_budget_refused, setup, teardown),
         cmocka_unit_test_setup_teardown(test_plan_joint_bad_bus_config_error, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_plan_fd_source_on_classical_bus_config_error, setup,
+                                        teardown),
         cmocka_unit_test_setup_teardown(test_plan_imu_bad_bus_config_error, setup, teardown),
         cmocka_unit_test_setup_teardown(test_plan_bad_rate_div_config_error, setup, teardown),
         cmocka_unit_test_setup_teardown(test_plan_hyperperiod_too_long_config_error, setup,

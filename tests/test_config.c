@@ -280,29 +280,36 @@ static void test_load_robot_fixture_exact_values(void **state)
     assert_true(r->sim.ambient_c == 25.0f);
 
     assert_int_equal(r->n_joints, 3);
-    const ps_joint_cfg_t *j0 = &r->joints[0];
-    assert_string_equal(j0->name, "l_hip_yaw");
-    assert_int_equal(j0->bus_idx, 0);
-    assert_int_equal(j0->can_id, 0x01);
-    assert_int_equal(j0->reply_id, 0x101);
-    assert_int_equal(j0->protocol, PS_PROTO_MIT);
-    assert_true(j0->pos_min_rad == -0.6f);
-    assert_true(j0->kd_nm_s_rad == 1.5f);
-    assert_true(j0->kt_nm_a == 0.6f);
-    assert_int_equal(j0->rate_div, 2);
-    /* ak80-9 ranges copied into the joint */
-    assert_true(j0->wire.p_min_rad == -12.5f);
-    assert_true(j0->wire.v_max_rad_s == 50.0f);
-    assert_true(j0->wire.kd_max_nm_s_rad == 5.0f);
-    assert_true(j0->wire.t_max_nm == 18.0f);
-    assert_true(j0->wire.i_min_a == -30.0f);
+    const ps_act_cfg_t *a0 = &r->act[0];
+    const ps_servo_joint_cfg_t *s0 = &r->servo[0];
+    assert_string_equal(r->joint_name[0], "l_hip_yaw");
+    assert_int_equal(a0->bus_idx, 0);
+    assert_int_equal(a0->can_id, 0x01);
+    assert_int_equal(a0->reply_id, 0x101);
+    assert_int_equal(a0->protocol, PS_ACT_PROTO_MIT);
+    assert_true(s0->lim.pos_min_rad == -0.6f);
+    assert_true(s0->kd_nm_s_rad == 1.5f);
+    assert_true(a0->kt_nm_a == 0.6f);
+    assert_int_equal(a0->rate_div, 2);
+    /* no gear, direction or zero offset written: identity */
+    assert_true(a0->gear_ratio == 1.0f);
+    assert_true(a0->direction == 1.0f);
+    assert_true(a0->zero_offset_rad == 0.0f);
+    /* ak80-9 ranges copied into the actuator, and seen unchanged by the servo */
+    assert_true(a0->wire.p_min_rad == -12.5f);
+    assert_true(a0->wire.v_max_rad_s == 50.0f);
+    assert_true(a0->wire.kd_max_nm_s_rad == 5.0f);
+    assert_true(a0->wire.t_max_nm == 18.0f);
+    assert_true(a0->wire.i_min_a == -30.0f);
+    assert_true(s0->wire.p_min_rad == -12.5f);
+    assert_true(s0->wire.t_max_nm == 18.0f);
     /* ak70-10 ranges for the knees */
     for (uint32_t i = 1; i < 3; i++) {
-        assert_true(r->joints[i].wire.v_min_rad_s == -30.0f);
-        assert_true(r->joints[i].wire.t_min_nm == -25.0f);
-        assert_true(r->joints[i].wire.i_max_a == 40.0f);
+        assert_true(r->act[i].wire.v_min_rad_s == -30.0f);
+        assert_true(r->act[i].wire.t_min_nm == -25.0f);
+        assert_true(r->act[i].wire.i_max_a == 40.0f);
     }
-    assert_int_equal(r->joints[2].bus_idx, 1);
+    assert_int_equal(r->act[2].bus_idx, 1);
 }
 
 static void test_load_robot_ps1_when_present_ok(void **state)
@@ -586,12 +593,57 @@ static void test_load_robot_reply_id_on_imu_rejected(void **state)
     expect_robot_error(f);
 }
 
+/* The file takes 29-bit identifiers; an 11-bit protocol refuses one above 0x7ff. */
 static void test_load_robot_can_id_high_rejected(void **state)
 {
     fx_t *f = *state;
     edit(f, ROBOT_OK, "can_id: 0x01", "can_id: 0x800");
-    want(f, "%s:%d: joints[0].can_id: value 0x800 outside [0x1, 0x7ff]", f->path,
-         line_of(f, "0x800"));
+    want(f, "%s:%d: joints[0].can_id: value 0x800 above protocol mit's 11-bit maximum 0x7ff",
+         f->path, line_of(f, "0x800"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_can_id_beyond_29_bits_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "can_id: 0x01", "can_id: 0x20000000");
+    want(f, "%s:%d: joints[0].can_id: value 0x20000000 outside [0x1, 0x1fffffff]", f->path,
+         line_of(f, "0x20000000"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_gear_direction_zero_applied(void **state)
+{
+    fx_t *f = *state;
+    /* joint 0 of the test robot: ak80-9 wire p +-12.5 rad, t +-18 Nm */
+    edit(f, ROBOT_OK, "can_id: 0x01",
+         "can_id: 0x01, gear_ratio: 2.0, direction: -1, zero_offset_rad: 0.25");
+    assert_int_equal(ps_config_load_robot(f->path, &f->robot, f->err, sizeof(f->err)), 0);
+    const ps_act_cfg_t *a = &f->robot.act[0];
+    assert_true(a->gear_ratio == 2.0f && a->direction == -1.0f && a->zero_offset_rad == 0.25f);
+    /* the servo sees the wire from the joint: p = 0.25 -+ 12.5 / 2, t = +-36 Nm */
+    const ps_act_range_t *w = &f->robot.servo[0].wire;
+    assert_float_equal(w->p_min_rad, 0.25f - 6.25f, 1e-6f);
+    assert_float_equal(w->p_max_rad, 0.25f + 6.25f, 1e-6f);
+    assert_float_equal(w->t_min_nm, -36.0f, 1e-6f);
+    assert_float_equal(w->t_max_nm, 36.0f, 1e-6f);
+}
+
+static void test_load_robot_direction_not_unit_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "can_id: 0x01", "can_id: 0x01, direction: 0.5");
+    want(f, "%s:%d: joints[0].direction: value 0.5 is not 1 or -1", f->path,
+         line_of(f, "direction: 0.5"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_gear_ratio_zero_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "can_id: 0x01", "can_id: 0x01, gear_ratio: 0");
+    want(f, "%s:%d: joints[0].gear_ratio: value 0 outside (0, 1000]", f->path,
+         line_of(f, "gear_ratio: 0"));
     expect_robot_error(f);
 }
 
@@ -814,7 +866,7 @@ static void test_check_pair_joint_bus_missing_rejected(void **state)
 {
     fx_t *f = *state;
     load_pair(f);
-    f->robot.joints[2].bus_idx = 2; /* board_ok has buses 0 and 1 */
+    f->robot.act[2].bus_idx = 2; /* board_ok has buses 0 and 1 */
     assert_int_equal(ps_config_check_pair(&f->board, &f->robot, NULL, f->err, sizeof(f->err)),
                      -PS_ERR_CONFIG);
     assert_string_equal(f->err, "robot tiny: joints[2].bus: bus 2 not on board bench (buses 0..1)");
@@ -825,7 +877,7 @@ static void test_check_pair_imu_bus_missing_rejected(void **state)
     fx_t *f = *state;
     load_pair(f);
     f->board.n_buses = 1;
-    f->robot.joints[2].bus_idx = 0;
+    f->robot.act[2].bus_idx = 0;
     assert_int_equal(ps_config_check_pair(&f->board, &f->robot, NULL, f->err, sizeof(f->err)),
                      -PS_ERR_CONFIG);
     assert_string_equal(f->err, "robot tiny: imu.bus: bus 1 not on board bench (buses 0..0)");
@@ -901,6 +953,10 @@ int main(void)
         T(test_load_robot_duplicate_can_id_rejected),
         T(test_load_robot_reply_id_on_imu_rejected),
         T(test_load_robot_can_id_high_rejected),
+        T(test_load_robot_can_id_beyond_29_bits_rejected),
+        T(test_load_robot_gear_direction_zero_applied),
+        T(test_load_robot_direction_not_unit_rejected),
+        T(test_load_robot_gear_ratio_zero_rejected),
         T(test_load_robot_unknown_driver_rejected),
         T(test_load_robot_zero_ramp_rejected),
         T(test_load_robot_servo_not_multiple_rejected),

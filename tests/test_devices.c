@@ -15,15 +15,17 @@
 #include "../rt/ps_err.h"
 #include "../sim/ps_devices.h"
 
-/* AK-style wire ranges; joint limits tighter than the wire, as in a robot file. */
-static ps_joint_cfg_t joint_cfg(void)
+/* AK-style wire ranges; joint limits tighter than the wire, as in a robot file.
+ * Gear 1, direction +1, no zero offset: motor and joint units coincide, so
+ * the MIT frames below are hand-checkable in joint units. */
+static ps_act_cfg_t joint_cfg(void)
 {
-    ps_joint_cfg_t j;
+    ps_act_cfg_t j;
     memset(&j, 0, sizeof j);
-    strcpy(j.name, "knee");
+    j.protocol = PS_ACT_PROTO_MIT;
     j.can_id = 0x13;
     j.reply_id = 0x113;
-    j.wire = (ps_mit_range_t){
+    j.wire = (ps_act_range_t){
         .p_min_rad = -12.5f,
         .p_max_rad = 12.5f,
         .v_min_rad_s = -45.0f,
@@ -35,18 +37,24 @@ static ps_joint_cfg_t joint_cfg(void)
         .i_min_a = -40.0f,
         .i_max_a = 40.0f,
     };
-    j.pos_min_rad = -1.0f;
-    j.pos_max_rad = 2.0f;
-    j.vel_max_rad_s = 20.0f;
-    j.torque_max_nm = 12.0f;
-    j.kp_nm_rad = 60.0f;
-    j.kd_nm_s_rad = 2.0f;
-    j.kp_max_nm_rad = 200.0f;
-    j.kd_max_nm_s_rad = 4.0f;
+    j.gear_ratio = 1.0f;
+    j.direction = 1.0f;
     j.kt_nm_a = 0.5f;
     j.temp_max_c = 80.0f;
     j.rate_div = 1;
     return j;
+}
+
+static ps_act_limits_t joint_limits(void)
+{
+    return (ps_act_limits_t){
+        .pos_min_rad = -1.0f,
+        .pos_max_rad = 2.0f,
+        .vel_max_rad_s = 20.0f,
+        .torque_max_nm = 12.0f,
+        .kp_max_nm_rad = 200.0f,
+        .kd_max_nm_s_rad = 4.0f,
+    };
 }
 
 static ps_sim_devices_cfg_t sim_cfg(void)
@@ -65,7 +73,8 @@ static ps_sim_devices_cfg_t sim_cfg(void)
 }
 
 typedef struct {
-    ps_joint_cfg_t j;
+    ps_act_cfg_t j;
+    ps_act_limits_t lim;
     ps_sim_devices_cfg_t sim;
     ps_devices_actuator_t a;
 } fixture_t;
@@ -74,8 +83,9 @@ static int setup(void **state)
 {
     static fixture_t fx;
     fx.j = joint_cfg();
+    fx.lim = joint_limits();
     fx.sim = sim_cfg();
-    ps_devices_init_actuator(&fx.a, &fx.j, &fx.sim);
+    ps_devices_init_actuator(&fx.a, &fx.j, &fx.lim, &fx.sim);
     *state = &fx;
     return 0;
 }
@@ -91,7 +101,7 @@ static ps_can_frame_t special_frame(uint32_t id, ps_mit_special_t which, int64_t
     return f;
 }
 
-static ps_can_frame_t cmd_frame(const ps_joint_cfg_t *j, const ps_mit_cmd_t *c, int64_t t_ns)
+static ps_can_frame_t cmd_frame(const ps_act_cfg_t *j, const ps_mit_cmd_t *c, int64_t t_ns)
 {
     ps_can_frame_t f;
     memset(&f, 0, sizeof f);
@@ -197,8 +207,8 @@ static void test_step_actuator_large_error_saturates_at_torque_max(void **state)
 static void test_step_actuator_joint_above_wire_saturates_at_wire_t(void **state)
 {
     fixture_t *fx = *state;
-    fx->j.torque_max_nm = 30.0f; /* beyond the wire's +-18 */
-    ps_devices_init_actuator(&fx->a, &fx->j, &fx->sim);
+    fx->lim.torque_max_nm = 30.0f; /* beyond the wire's +-18 */
+    ps_devices_init_actuator(&fx->a, &fx->j, &fx->lim, &fx->sim);
     enter(fx, 0);
     const ps_mit_cmd_t c = {.p_rad = 1.5f, .kp_nm_rad = 200.0f};
     ps_can_frame_t rep;
@@ -230,8 +240,8 @@ static void test_handle_frame_reply_content_ids_and_latency(void **state)
     assert_true(fabs(r.p_rad - q) <= p_lsb);
     assert_true(fabs(r.v_rad_s - qd) <= v_lsb);
     /* Current = the torque the driver applies for its (decoded) command / kt. */
-    const double tau = (double)fx->a.cmd.kp_nm_rad * ((double)fx->a.cmd.p_rad - q) +
-                       (double)fx->a.cmd.kd_nm_s_rad * (0.0 - qd) + (double)fx->a.cmd.t_ff_nm;
+    const double tau = (double)fx->a.cmd.kp_nm_rad * ((double)fx->a.cmd.q_rad - q) +
+                       (double)fx->a.cmd.kd_nm_s_rad * (0.0 - qd) + (double)fx->a.cmd.tau_ff_nm;
     assert_true(fabs(tau) > 1.0);
     assert_true(fabs(r.i_a - tau / 0.5) <= i_lsb);
     assert_int_equal(r.temp_rotor_c, 25);
@@ -257,8 +267,8 @@ static void test_handle_frame_zero_offsets_position(void **state)
     assert_true(fabs(r.p_rad - 0.1) <= 25.0 / 65535.0);
     const double tau = ps_devices_step_actuator(&fx->a, 0.4, 0.0, 3000, 1e-3);
     /* p_des and t_ff 0 decode to half an LSB above 0 (0x8000 / 0x800). */
-    const double want = (double)fx->a.cmd.kp_nm_rad * ((double)fx->a.cmd.p_rad - (0.4 - 0.3)) +
-                        (double)fx->a.cmd.t_ff_nm;
+    const double want = (double)fx->a.cmd.kp_nm_rad * ((double)fx->a.cmd.q_rad - (0.4 - 0.3)) +
+                        (double)fx->a.cmd.tau_ff_nm;
     assert_true(fabs(tau - want) < 1e-9);
     assert_true(fabs(tau - (-2.0)) < 0.01);
 }
@@ -286,15 +296,20 @@ static void test_handle_frame_other_id_enoent_not_counted(void **state)
     assert_int_equal(fx->a.n_bad_frames, 0);
 }
 
-static void test_handle_frame_bad_len_or_ext_protocol_counted(void **state)
+/* A short frame or an FD frame on the drive's id is malformed for MIT mode; a
+ * 29-bit frame with the same number is another identifier, not for it. */
+static void test_handle_frame_bad_len_or_fd_protocol_counted(void **state)
 {
     fixture_t *fx = *state;
     ps_can_frame_t f = special_frame(fx->j.can_id, PS_MIT_SPECIAL_ENTER, 0), rep;
     f.len = 7;
     assert_int_equal(ps_devices_handle_frame(&fx->a, &f, 0.0, 0.0, &rep), -PS_ERR_PROTOCOL);
     f.len = 8;
-    f.is_ext = 1;
+    f.is_fd = 1;
     assert_int_equal(ps_devices_handle_frame(&fx->a, &f, 0.0, 0.0, &rep), -PS_ERR_PROTOCOL);
+    f.is_fd = 0;
+    f.is_ext = 1;
+    assert_int_equal(ps_devices_handle_frame(&fx->a, &f, 0.0, 0.0, &rep), -ENOENT);
     assert_int_equal(fx->a.n_bad_frames, 2);
     assert_false(fx->a.is_motor_mode);
     assert_int_equal(fx->a.n_replies, 0);
@@ -324,7 +339,7 @@ static void test_step_actuator_no_cmd_100ms_limp_comms_lost(void **state)
     assert_int_equal(r.fault, PS_MIT_FAULT_COMMS_LOST);
     assert_true(ps_devices_step_actuator(&fx->a, 0.0, 0.0, t2 + 1000, 1e-3) == 0.0);
     enter(fx, t2 + 2000);
-    assert_int_equal(fx->a.fault, PS_MIT_FAULT_NONE);
+    assert_int_equal(fx->a.fault_bits, 0u);
 }
 
 /* ---- limits ---------------------------------------------------------- */
@@ -386,7 +401,7 @@ static void test_step_actuator_above_temp_max_faults_and_refuses_enter(void **st
 {
     fixture_t *fx = *state;
     fx->sim.thermal_tau_s = 1.0f; /* fast, to cross 80 degC in a few seconds */
-    ps_devices_init_actuator(&fx->a, &fx->j, &fx->sim);
+    ps_devices_init_actuator(&fx->a, &fx->j, &fx->lim, &fx->sim);
     enter(fx, 0);
     const ps_mit_cmd_t c = {.t_ff_nm = 6.0f};
     ps_can_frame_t rep;
@@ -395,7 +410,7 @@ static void test_step_actuator_above_temp_max_faults_and_refuses_enter(void **st
     for (int k = 0; k < 10000 && k_fault < 0; k++) {
         send_cmd(fx, &c, 0.0, 0.0, t, &rep);
         (void)ps_devices_step_actuator(&fx->a, 0.0, 0.0, t, 1e-3);
-        if (fx->a.fault == PS_MIT_FAULT_ROTOR_OVERTEMP)
+        if ((fx->a.fault_bits & PS_ACT_FAULT_MOTOR_OVERTEMP))
             k_fault = k;
         t += PS_NS_PER_MS;
     }
@@ -536,6 +551,40 @@ static void test_tick_imu_same_seed_identical_other_seed_differs(void **state)
     assert_true(i1.gyro_bias_rad_s[0] != i3.gyro_bias_rad_s[0]);
 }
 
+/* A geared, reversed joint: the host encodes joint units through the actuator
+ * port, the emulated drive decodes motor units and acts in joint units, and
+ * its reply reads back as the joint's position and torque. */
+static void test_handle_frame_geared_reversed_joint_obeys_joint_units(void **state)
+{
+    fixture_t *fx = *state;
+    fx->j.gear_ratio = 2.0f;
+    fx->j.direction = -1.0f;
+    fx->j.zero_offset_rad = 0.1f;
+    ps_devices_init_actuator(&fx->a, &fx->j, &fx->lim, &fx->sim);
+    enter(fx, 0);
+    const ps_act_cmd_t joint_cmd = {.q_rad = 0.5f, .kp_nm_rad = 40.0f};
+    ps_can_frame_t f[PS_ACT_MAX_FRAMES], rep;
+    assert_int_equal(ps_act_encode_command(&fx->j, &joint_cmd, f, PS_ACT_MAX_FRAMES), 1);
+    f[0].t_ns = 1000;
+    assert_int_equal(ps_devices_handle_frame(&fx->a, &f[0], 0.4, 0.0, &rep), 1);
+    /* decoded back to joint units within one quantisation step */
+    assert_float_equal(fx->a.cmd.q_rad, 0.5f, 25.0f / 65535.0f);
+    assert_float_equal(fx->a.cmd.kp_nm_rad, 40.0f, 4.0f * 500.0f / 4095.0f);
+    const double tau = ps_devices_step_actuator(&fx->a, 0.4, 0.0, 2000, 1e-3);
+    /* tau_ff is the mid code of +-18 Nm motor side: 0.0044 Nm, -0.0088 at the joint */
+    assert_float_equal(fx->a.cmd.tau_ff_nm, -2.0f * 18.0f / 4095.0f, 1e-5f);
+    assert_float_equal(tau,
+                       (double)fx->a.cmd.kp_nm_rad * ((double)fx->a.cmd.q_rad - 0.4) +
+                           (double)fx->a.cmd.tau_ff_nm,
+                       1e-4);
+    assert_true(tau > 3.8 && tau < 4.2); /* 40 Nm/rad x 0.1 rad, joint side */
+    /* the reply, decoded by the host's port, gives the joint's angle and torque */
+    ps_act_meas_t m = {0};
+    assert_int_equal(ps_act_decode_reply(&fx->j, &rep, &m), 0);
+    assert_float_equal(m.q_rad, 0.4f, 2.0f * 25.0f / 65535.0f);
+    assert_float_equal(m.tau_nm, (float)tau, 2.0f * 80.0f / 4095.0f * 0.5f * 2.0f);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -548,11 +597,12 @@ int main(void)
         cmocka_unit_test_setup(test_handle_frame_zero_offsets_position, setup),
         cmocka_unit_test_setup(test_handle_frame_drop_knob_suppresses_reply_obeys_cmd, setup),
         cmocka_unit_test_setup(test_handle_frame_other_id_enoent_not_counted, setup),
-        cmocka_unit_test_setup(test_handle_frame_bad_len_or_ext_protocol_counted, setup),
+        cmocka_unit_test_setup(test_handle_frame_bad_len_or_fd_protocol_counted, setup),
         cmocka_unit_test_setup(test_step_actuator_no_cmd_100ms_limp_comms_lost, setup),
         cmocka_unit_test_setup(test_handle_frame_out_of_limit_fields_counted, setup),
         cmocka_unit_test_setup(test_step_actuator_temp_follows_first_order_model, setup),
         cmocka_unit_test_setup(test_step_actuator_above_temp_max_faults_and_refuses_enter, setup),
+        cmocka_unit_test_setup(test_handle_frame_geared_reversed_joint_obeys_joint_units, setup),
         cmocka_unit_test(test_tick_imu_rate_div_frames_ids_and_seq),
         cmocka_unit_test(test_tick_imu_noise_statistics_match_sigma_and_bias),
         cmocka_unit_test(test_tick_imu_same_seed_identical_other_seed_differs),

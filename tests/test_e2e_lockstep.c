@@ -48,7 +48,8 @@ static bool is_within(float v, float lo, float hi, float min, float max, unsigne
 static void check_command(checking_port_t *c, const ps_can_frame_t *f)
 {
     for (uint32_t j = 0; j < c->robot->n_joints; j++) {
-        const ps_joint_cfg_t *jc = &c->robot->joints[j];
+        const ps_act_cfg_t *jc = &c->robot->act[j];
+        const ps_servo_joint_cfg_t *jc_s = &c->robot->servo[j];
         if (jc->bus_idx != c->bus_idx || jc->can_id != f->id)
             continue;
         if (ps_mit_classify_special(f->data, f->len) != 0) {
@@ -56,24 +57,24 @@ static void check_command(checking_port_t *c, const ps_can_frame_t *f)
             return;
         }
         ps_mit_cmd_t cmd;
-        const ps_mit_range_t *w = &jc->wire;
-        bool ok =
-            ps_mit_decode_cmd(w, f->data, f->len, &cmd) == 0 &&
-            is_within(cmd.p_rad, jc->pos_min_rad, jc->pos_max_rad, w->p_min_rad, w->p_max_rad,
-                      PS_MIT_P_BITS) &&
-            is_within(cmd.v_rad_s, -jc->vel_max_rad_s, jc->vel_max_rad_s, w->v_min_rad_s,
-                      w->v_max_rad_s, PS_MIT_V_BITS) &&
-            is_within(cmd.kp_nm_rad, 0, jc->kp_max_nm_rad, 0, w->kp_max_nm_rad, PS_MIT_KP_BITS) &&
-            is_within(cmd.kd_nm_s_rad, 0, jc->kd_max_nm_s_rad, 0, w->kd_max_nm_s_rad,
-                      PS_MIT_KD_BITS) &&
-            is_within(cmd.t_ff_nm, -jc->torque_max_nm, jc->torque_max_nm, w->t_min_nm, w->t_max_nm,
-                      PS_MIT_T_BITS);
+        const ps_act_range_t *w = &jc->wire;
+        bool ok = ps_mit_decode_cmd(w, f->data, f->len, &cmd) == 0 &&
+                  is_within(cmd.p_rad, jc_s->lim.pos_min_rad, jc_s->lim.pos_max_rad, w->p_min_rad,
+                            w->p_max_rad, PS_MIT_P_BITS) &&
+                  is_within(cmd.v_rad_s, -jc_s->lim.vel_max_rad_s, jc_s->lim.vel_max_rad_s,
+                            w->v_min_rad_s, w->v_max_rad_s, PS_MIT_V_BITS) &&
+                  is_within(cmd.kp_nm_rad, 0, jc_s->lim.kp_max_nm_rad, 0, w->kp_max_nm_rad,
+                            PS_MIT_KP_BITS) &&
+                  is_within(cmd.kd_nm_s_rad, 0, jc_s->lim.kd_max_nm_s_rad, 0, w->kd_max_nm_s_rad,
+                            PS_MIT_KD_BITS) &&
+                  is_within(cmd.t_ff_nm, -jc_s->lim.torque_max_nm, jc_s->lim.torque_max_nm,
+                            w->t_min_nm, w->t_max_nm, PS_MIT_T_BITS);
         c->n_commands++;
         if (!ok && c->n_violations++ == 0)
             snprintf(c->first_violation, sizeof(c->first_violation),
-                     "%s: p %.3f v %.3f kp %.2f kd %.3f t %.3f", jc->name, (double)cmd.p_rad,
-                     (double)cmd.v_rad_s, (double)cmd.kp_nm_rad, (double)cmd.kd_nm_s_rad,
-                     (double)cmd.t_ff_nm);
+                     "%s: p %.3f v %.3f kp %.2f kd %.3f t %.3f", c->robot->joint_name[j],
+                     (double)cmd.p_rad, (double)cmd.v_rad_s, (double)cmd.kp_nm_rad,
+                     (double)cmd.kd_nm_s_rad, (double)cmd.t_ff_nm);
         return;
     }
     c->n_unknown++;

@@ -43,19 +43,33 @@ static const ps_kinematics_cfg_t KIN = {
     .fall_com_height_m = 0.5f,
 };
 
+/* What the estimator is given: joint names and the kinematics. */
 typedef struct {
-    ps_robot_cfg_t robot;
+    char name[PS_NAME_LEN];
+    uint32_t n_joints;
+    char joint_name[PS_MAX_JOINTS][PS_NAME_LEN];
+    ps_kinematics_cfg_t kin;
+} test_robot_t;
+
+static int init_est(ps_estimator_t *e, const test_robot_t *r, float dt_s)
+{
+    return ps_estimate_init(e, r ? &r->kin : NULL, r ? r->joint_name : NULL, r ? r->n_joints : 0,
+                            dt_s);
+}
+
+typedef struct {
+    test_robot_t robot;
     ps_estimator_t est;
     ps_meas_t meas;
 } fixture_t;
 
-static void fill_robot(ps_robot_cfg_t *r)
+static void fill_robot(test_robot_t *r)
 {
     memset(r, 0, sizeof(*r));
     strcpy(r->name, "test");
     r->n_joints = 12;
     for (unsigned i = 0; i < 12; i++)
-        strcpy(r->joints[i].name, NAMES[i]);
+        strcpy(r->joint_name[i], NAMES[i]);
     r->kin = KIN;
 }
 
@@ -64,7 +78,7 @@ static int setup(void **state)
     static fixture_t f;
     memset(&f, 0, sizeof(f));
     fill_robot(&f.robot);
-    assert_int_equal(ps_estimate_init(&f.est, &f.robot, DT_S), 0);
+    assert_int_equal(init_est(&f.est, &f.robot, DT_S), 0);
     f.meas.n_joints = 12;
     for (unsigned i = 0; i < 12; i++)
         f.meas.joints[i].t_ns = 1;
@@ -72,10 +86,10 @@ static int setup(void **state)
     return 0;
 }
 
-static int find(const ps_robot_cfg_t *r, const char *name)
+static int find(const test_robot_t *r, const char *name)
 {
     for (unsigned i = 0; i < r->n_joints; i++)
-        if (strcmp(r->joints[i].name, name) == 0)
+        if (strcmp(r->joint_name[i], name) == 0)
             return (int)i;
     fail_msg("no joint %s", name);
     return -1;
@@ -128,38 +142,38 @@ static void test_estimate_init_null_returns_einval(void **state)
 {
     fixture_t *f = *state;
     ps_estimator_t e;
-    assert_int_equal(ps_estimate_init(NULL, &f->robot, DT_S), -EINVAL);
-    assert_int_equal(ps_estimate_init(&e, NULL, DT_S), -EINVAL);
+    assert_int_equal(init_est(NULL, &f->robot, DT_S), -EINVAL);
+    assert_int_equal(init_est(&e, NULL, DT_S), -EINVAL);
 }
 
 static void test_estimate_init_bad_dt_or_mass_returns_einval(void **state)
 {
     fixture_t *f = *state;
     ps_estimator_t e;
-    assert_int_equal(ps_estimate_init(&e, &f->robot, 0.0f), -EINVAL);
-    assert_int_equal(ps_estimate_init(&e, &f->robot, NAN), -EINVAL);
+    assert_int_equal(init_est(&e, &f->robot, 0.0f), -EINVAL);
+    assert_int_equal(init_est(&e, &f->robot, NAN), -EINVAL);
     f->robot.kin.mass_kg = 0.0f;
-    assert_int_equal(ps_estimate_init(&e, &f->robot, DT_S), -EINVAL);
+    assert_int_equal(init_est(&e, &f->robot, DT_S), -EINVAL);
 }
 
 static void test_estimate_init_missing_joint_returns_enoent(void **state)
 {
     fixture_t *f = *state;
     ps_estimator_t e;
-    strcpy(f->robot.joints[9].name, "r_knee_typo");
-    assert_int_equal(ps_estimate_init(&e, &f->robot, DT_S), -ENOENT);
+    strcpy(f->robot.joint_name[9], "r_knee_typo");
+    assert_int_equal(init_est(&e, &f->robot, DT_S), -ENOENT);
 }
 
 static void test_estimate_init_any_order_finds_joints_by_name(void **state)
 {
     fixture_t *f = *state;
     /* Reverse the joint table and add an unrelated joint in front. */
-    ps_robot_cfg_t *r = &f->robot;
+    test_robot_t *r = &f->robot;
     r->n_joints = 13;
-    strcpy(r->joints[0].name, "waist");
+    strcpy(r->joint_name[0], "waist");
     for (unsigned i = 0; i < 12; i++)
-        strcpy(r->joints[1 + i].name, NAMES[11 - i]);
-    assert_int_equal(ps_estimate_init(&f->est, r, DT_S), 0);
+        strcpy(r->joint_name[1 + i], NAMES[11 - i]);
+    assert_int_equal(init_est(&f->est, r, DT_S), 0);
     assert_int_equal(f->est.leg_idx[0][PS_LEG_HIP_YAW], 12);
     assert_int_equal(f->est.leg_idx[0][PS_LEG_KNEE], 9);
     assert_int_equal(f->est.leg_idx[1][PS_LEG_ANKLE_ROLL], 1);
@@ -553,11 +567,11 @@ static void test_estimate_update_tilt_past_threshold_fallen(void **state)
     set_imu(f, 0.0f, 0.59f, NULL, DT_NS); /* threshold 0.6 rad */
     ps_estimate_update(&f->est, &f->meas);
     assert_false(f->est.est.is_fallen);
-    assert_int_equal(ps_estimate_init(&f->est, &f->robot, DT_S), 0);
+    assert_int_equal(init_est(&f->est, &f->robot, DT_S), 0);
     set_imu(f, 0.0f, -0.61f, NULL, DT_NS);
     ps_estimate_update(&f->est, &f->meas);
     assert_true(f->est.est.is_fallen);
-    assert_int_equal(ps_estimate_init(&f->est, &f->robot, DT_S), 0);
+    assert_int_equal(init_est(&f->est, &f->robot, DT_S), 0);
     set_imu(f, 0.61f, 0.0f, NULL, DT_NS);
     ps_estimate_update(&f->est, &f->meas);
     assert_true(f->est.est.is_fallen);
@@ -578,7 +592,7 @@ static void test_estimate_update_low_com_fallen_only_with_tilt(void **state)
     ps_estimate_update(&f->est, &f->meas);
     assert_true(f->est.est.is_fallen);
     /* Same pose before any IMU sample: no tilt estimate, no verdict. */
-    assert_int_equal(ps_estimate_init(&f->est, &f->robot, DT_S), 0);
+    assert_int_equal(init_est(&f->est, &f->robot, DT_S), 0);
     f->meas.imu.t_ns = 0;
     ps_estimate_update(&f->est, &f->meas);
     assert_near(f->est.est.com_m[2], 0.49f, 1e-5f);

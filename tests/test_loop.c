@@ -16,6 +16,8 @@
 #include "../drivers/ps_imu_msg.h"
 #include "../drivers/ps_mit.h"
 #include "../rt/ps_err.h"
+#include "../rt/ps_app.h"
+#include "../rt/ps_config.h"
 #include "../rt/ps_loop.h"
 #include "fakes/ps_clock_fake.h"
 
@@ -69,19 +71,20 @@ static fixture_t *fx;
 static int joint_of(const fixture_t *f, uint32_t bus, uint32_t can_id)
 {
     for (uint32_t j = 0; j < f->robot.n_joints; j++)
-        if (f->robot.joints[j].bus_idx == bus && f->robot.joints[j].can_id == can_id)
+        if (f->robot.act[j].bus_idx == bus && f->robot.act[j].can_id == can_id)
             return (int)j;
     return -1;
 }
 
 static void answer(fake_bus_t *b, int j)
 {
-    const ps_joint_cfg_t *jc = &fx->robot.joints[j];
+    const ps_act_cfg_t *jc = &fx->robot.act[j];
+    const ps_servo_joint_cfg_t *jc_s = &fx->robot.servo[j];
     if (fx->is_mute[j] || b->n_pending >= MAX_SENT)
         return;
     ps_mit_reply_t rep = {.motor_id = (uint8_t)(jc->can_id & 0xf),
                           .fault = fx->fault[j],
-                          .p_rad = jc->stance_rad,
+                          .p_rad = jc_s->stance_rad,
                           .temp_mos_c = 30,
                           .temp_rotor_c = 30};
     if (fx->is_reply_late && b->n_late >= MAX_SENT)
@@ -186,7 +189,7 @@ static int fake_policy_step(void *ctx, const ps_meas_t *m, const ps_estimate_t *
     (void)e;
     out->n_joints = fx->robot.n_joints;
     for (uint32_t j = 0; j < fx->robot.n_joints; j++) {
-        out->q_rad[j] = isnan(fx->policy_value) ? NAN : fx->robot.joints[j].stance_rad;
+        out->q_rad[j] = isnan(fx->policy_value) ? NAN : fx->robot.servo[j].stance_rad;
         out->qd_rad_s[j] = 0;
         out->tau_ff_nm[j] = 0;
     }
@@ -213,7 +216,7 @@ static int setup(void **state)
     assert_non_null(fx);
     if (ps_config_load_board("boards/sim.yaml", &fx->board, err, sizeof(err)) != 0 ||
         ps_config_load_robot("robots/ps1.yaml", &fx->robot, err, sizeof(err)) != 0 ||
-        ps_canbus_plan(&fx->board, &fx->robot, &fx->plan, err, sizeof(err)) != 0)
+        ps_app_plan_buses(&fx->board, &fx->robot, &fx->plan, err, sizeof(err)) != 0)
         fail_msg("config: %s", err);
     ps_clock_fake_init(&fx->clock, START_NS);
     assert_int_equal(ps_ring_init(&fx->ring, fx->ring_storage, 256, sizeof(ps_loop_rec_t)), 0);
@@ -287,7 +290,7 @@ static void go_active(void)
 /* Decode the last command for joint j among this tick's frames. */
 static bool last_command(uint32_t j, ps_mit_cmd_t *out)
 {
-    const ps_joint_cfg_t *jc = &fx->robot.joints[j];
+    const ps_act_cfg_t *jc = &fx->robot.act[j];
     const fake_bus_t *b = &fx->buses[jc->bus_idx];
     for (uint32_t i = 0; i < b->n_sent; i++)
         if (b->sent[i].id == jc->can_id &&
@@ -346,10 +349,11 @@ static void test_loop_start_then_ramp_reaches_active_with_gains(void **state)
         ps_mit_cmd_t cmd;
         if (!last_command(j, &cmd))
             continue;
-        const ps_joint_cfg_t *jc = &fx->robot.joints[j];
+        const ps_act_cfg_t *jc = &fx->robot.act[j];
+        const ps_servo_joint_cfg_t *jc_s = &fx->robot.servo[j];
         float kp_step = jc->wire.kp_max_nm_rad / 4095.0f;
-        assert_float_equal(cmd.kp_nm_rad, jc->kp_nm_rad, kp_step);
-        assert_float_equal(cmd.p_rad, jc->stance_rad, 0.01);
+        assert_float_equal(cmd.kp_nm_rad, jc_s->kp_nm_rad, kp_step);
+        assert_float_equal(cmd.p_rad, jc_s->stance_rad, 0.01);
     }
     assert_true(fx->is_enabled);
 }
@@ -374,7 +378,7 @@ static void test_loop_stale_reply_in_active_damps(void **state)
     (void)state;
     go_active();
     fx->is_mute[3] = true;
-    const ps_joint_cfg_t *jc = &fx->robot.joints[3];
+    const ps_act_cfg_t *jc = &fx->robot.act[3];
     unsigned timeout_ticks = (unsigned)(jc->rate_div + fx->robot.control.reply_timeout_s * 1000);
     steps(timeout_ticks - 1);
     assert_int_equal(fx->loop.state, PS_SM_ACTIVE);
@@ -382,13 +386,13 @@ static void test_loop_stale_reply_in_active_damps(void **state)
     assert_int_equal(fx->loop.state, PS_SM_DAMPING);
     ps_mit_cmd_t cmd;
     bool has_cmd = false;
-    for (uint32_t t = 0; t < fx->robot.joints[0].rate_div && !has_cmd; t++) {
+    for (uint32_t t = 0; t < fx->robot.act[0].rate_div && !has_cmd; t++) {
         steps(1);
         has_cmd = last_command(0, &cmd);
     }
     assert_true(has_cmd);
     assert_float_equal(cmd.kp_nm_rad, 0.0f, 1e-6);
-    assert_float_equal(cmd.kd_nm_s_rad, fx->robot.control.damping_kd_nm_s_rad, 0.01);
+    assert_float_equal(cmd.kd_nm_s_rad, fx->robot.servo_common.damping_kd_nm_s_rad, 0.01);
 }
 
 static void test_loop_stale_imu_in_active_damps(void **state)
@@ -488,7 +492,7 @@ static void test_loop_drive_fault_estops(void **state)
     (void)state;
     go_active();
     fx->fault[5] = PS_MIT_FAULT_OVERCURRENT;
-    steps(fx->robot.joints[5].rate_div + 2);
+    steps(fx->robot.act[5].rate_div + 2);
     assert_int_equal(fx->loop.state, PS_SM_ESTOP);
 }
 
@@ -560,7 +564,7 @@ static void test_loop_commands_each_joint_at_its_rate(void **state)
         }
     }
     for (uint32_t j = 0; j < fx->robot.n_joints; j++)
-        assert_int_equal(n_cmd[j], 200 / fx->robot.joints[j].rate_div);
+        assert_int_equal(n_cmd[j], 200 / fx->robot.act[j].rate_div);
 }
 
 /* ---- findings of the review: each a regression test ------------------------ */
@@ -588,7 +592,7 @@ static void test_loop_refused_enter_is_sent_again(void **state)
     }
     uint32_t n_on_bus0 = 0;
     for (uint32_t j = 0; j < fx->robot.n_joints; j++)
-        n_on_bus0 += fx->robot.joints[j].bus_idx == 0;
+        n_on_bus0 += fx->robot.act[j].bus_idx == 0;
     /* every joint's ENTER got through once, those of the refused batch included */
     assert_int_equal(n_enter, fx->robot.n_joints);
     assert_true(n_on_bus0 > 0);
@@ -653,7 +657,7 @@ static void test_loop_init_rejects_unsafe_tables(void **state)
     board.n_buses = 3; /* joints on bus 3 now name a bus the board lacks */
     assert_int_equal(ps_loop_init(&other, &lc), -EINVAL);
     board = fx->board;
-    robot.joints[2].rate_div = 0;
+    robot.act[2].rate_div = 0;
     assert_int_equal(ps_loop_init(&other, &lc), -EINVAL);
     robot = fx->robot;
     robot.control.ramp_s = 0.0f;
@@ -698,7 +702,7 @@ static void test_loop_drive_fault_reset_then_back_to_estop_if_persists(void **st
     (void)state;
     go_active();
     fx->fault[5] = PS_MIT_FAULT_ROTOR_OVERTEMP;
-    steps(fx->robot.joints[5].rate_div + 2);
+    steps(fx->robot.act[5].rate_div + 2);
     assert_int_equal(fx->loop.state, PS_SM_ESTOP);
     ps_loop_request(&fx->loop, PS_SM_C_REQ_RESET);
     steps(1);
@@ -728,7 +732,7 @@ static void test_loop_latched_fault_cleared_by_enter_no_estop(void **state)
     go_active();
     fx->is_fault_cleared_by_enter = false;
     fx->fault[5] = PS_MIT_FAULT_ROTOR_OVERTEMP;
-    steps(fx->robot.joints[5].rate_div + 2);
+    steps(fx->robot.act[5].rate_div + 2);
     assert_int_equal(fx->loop.state, PS_SM_ESTOP);
     steps(20);                            /* ESTOP keeps polling: replies carry the fault */
     fx->is_fault_cleared_by_enter = true; /* cooled down: ENTER clears it */

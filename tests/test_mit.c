@@ -13,7 +13,7 @@
 
 /* AK-style ranges: p +-12.5 rad, v +-45 rad/s, kp 0..500, kd 0..5, t +-18 Nm,
  * i +-40 A. One LSB: p 25/65535 rad, v 90/4095 rad/s, t 36/4095 Nm. */
-static const ps_mit_range_t RANGE = {
+static const ps_act_range_t RANGE = {
     .p_min_rad = -12.5f,
     .p_max_rad = 12.5f,
     .v_min_rad_s = -45.0f,
@@ -380,7 +380,7 @@ static void test_check_range_valid_ok(void **state)
 static void test_check_range_bad_tables_einval(void **state)
 {
     (void)state;
-    ps_mit_range_t r;
+    ps_act_range_t r;
     assert_int_equal(ps_mit_check_range(NULL), -EINVAL);
     r = RANGE, r.p_min_rad = 12.5f, assert_int_equal(ps_mit_check_range(&r), -EINVAL);
     r = RANGE, r.p_max_rad = -13.0f, assert_int_equal(ps_mit_check_range(&r), -EINVAL);

@@ -30,16 +30,16 @@
 typedef struct {
     const char *name;
     uint32_t bus, can_id;
-    const ps_mit_range_t *wire;
+    const ps_act_range_t *wire;
     float pos_min, pos_max, torque_max, kp, kd, kp_max, kd_max, stance, kt;
     uint32_t rate_div;
 } joint_row_t;
 
-static const ps_mit_range_t AK80_9 = {-12.5f, 12.5f,  -50.0f, 50.0f,  500.0f,
+static const ps_act_range_t AK80_9 = {-12.5f, 12.5f,  -50.0f, 50.0f,  500.0f,
                                       5.0f,   -18.0f, 18.0f,  -30.0f, 30.0f};
-static const ps_mit_range_t AK70_10 = {-12.5f, 12.5f,  -50.0f, 50.0f,  500.0f,
+static const ps_act_range_t AK70_10 = {-12.5f, 12.5f,  -50.0f, 50.0f,  500.0f,
                                        5.0f,   -25.0f, 25.0f,  -30.0f, 30.0f};
-static const ps_mit_range_t AK60_6 = {-12.5f, 12.5f,  -45.0f, 45.0f,  500.0f,
+static const ps_act_range_t AK60_6 = {-12.5f, 12.5f,  -45.0f, 45.0f,  500.0f,
                                       5.0f,   -15.0f, 15.0f,  -25.0f, 25.0f};
 
 /* name bus id driver  pos_min pos_max tau_max  kp kd kp_max kd_max stance kt div */
@@ -97,7 +97,8 @@ static void build_robot(ps_robot_cfg_t *r)
     memset(r, 0, sizeof(*r));
     (void)snprintf(r->name, sizeof(r->name), "ps1");
     (void)snprintf(r->model, sizeof(r->model), "../sim/models/ps1.xml");
-    r->control = (ps_control_cfg_t){1000, 50, 1.0f, 2.0f, 2.0f, 0.05f, 0.01f, 0.01f, 0.002f};
+    r->control = (ps_control_cfg_t){1000, 50, 1.0f, 2.0f, 0.05f, 0.01f, 0.01f, 0.002f};
+    r->servo_common.damping_kd_nm_s_rad = 2.0f;
     r->imu = (ps_imu_cfg_t){3, 0x080, 1};
     r->kin = KIN;
     r->sim =
@@ -105,26 +106,48 @@ static void build_robot(ps_robot_cfg_t *r)
     r->n_joints = (uint32_t)N_JOINTS;
     for (int i = 0; i < N_JOINTS; i++) {
         const joint_row_t *row = &JOINTS[i];
-        ps_joint_cfg_t *j = &r->joints[i];
-        (void)snprintf(j->name, sizeof(j->name), "%s", row->name);
+        ps_act_cfg_t *j = &r->act[i];
+        ps_servo_joint_cfg_t *j_s = &r->servo[i];
+        (void)snprintf(r->joint_name[i], sizeof(r->joint_name[i]), "%s", row->name);
         j->bus_idx = row->bus;
         j->can_id = row->can_id;
         j->reply_id = 0x100u + row->can_id;
-        j->protocol = PS_PROTO_MIT;
+        j->protocol = PS_ACT_PROTO_MIT;
         j->wire = *row->wire;
-        j->pos_min_rad = row->pos_min;
-        j->pos_max_rad = row->pos_max;
-        j->vel_max_rad_s = 25.0f;
-        j->torque_max_nm = row->torque_max;
-        j->kp_nm_rad = row->kp;
-        j->kd_nm_s_rad = row->kd;
-        j->kp_max_nm_rad = row->kp_max;
-        j->kd_max_nm_s_rad = row->kd_max;
-        j->stance_rad = row->stance;
+        j->gear_ratio = 1.0f;
+        j->direction = 1.0f;
+        j_s->lim.pos_min_rad = row->pos_min;
+        j_s->lim.pos_max_rad = row->pos_max;
+        j_s->lim.vel_max_rad_s = 25.0f;
+        j_s->lim.torque_max_nm = row->torque_max;
+        j_s->kp_nm_rad = row->kp;
+        j_s->kd_nm_s_rad = row->kd;
+        j_s->lim.kp_max_nm_rad = row->kp_max;
+        j_s->lim.kd_max_nm_s_rad = row->kd_max;
+        j_s->stance_rad = row->stance;
+        j_s->wire = *row->wire;
         j->kt_nm_a = row->kt;
         j->temp_max_c = 90.0f;
         j->rate_div = row->rate_div;
     }
+}
+
+/* The plant's view of a robot config; the stance array lives in *buf. */
+static int plant_create(const char *model, const ps_robot_cfg_t *r, ps_plant_t **out, char *err,
+                        size_t err_len)
+{
+    static float stance[PS_MAX_JOINTS];
+    if (r == NULL)
+        return ps_plant_create(NULL, out, err, err_len);
+    for (uint32_t i = 0; i < r->n_joints && i < PS_MAX_JOINTS; i++)
+        stance[i] = r->servo[i].stance_rad;
+    const ps_plant_cfg_t cfg = {
+        .model_path = model,
+        .n_joints = r->n_joints,
+        .joint_name = r->joint_name,
+        .stance_rad = stance,
+    };
+    return ps_plant_create(&cfg, out, err, err_len);
 }
 
 /* ---- fixture ----------------------------------------------------------- */
@@ -140,7 +163,7 @@ static int setup(void **st)
     static state_t s;
     memset(&s, 0, sizeof(s));
     build_robot(&s.robot);
-    const int rc = ps_plant_create(MODEL_PATH, &s.robot, &s.plant, s.err, sizeof(s.err));
+    const int rc = plant_create(MODEL_PATH, &s.robot, &s.plant, s.err, sizeof(s.err));
     if (rc != 0) {
         fprintf(stderr, "create: %d %s\n", rc, s.err);
         return -1;
@@ -163,9 +186,9 @@ static void pd_stance(const state_t *s, double *tau)
     double q[PS_MAX_JOINTS], qd[PS_MAX_JOINTS];
     ps_plant_get_joints(s->plant, q, qd);
     for (int i = 0; i < N_JOINTS; i++) {
-        const ps_joint_cfg_t *j = &s->robot.joints[i];
-        double t = j->kp_nm_rad * (j->stance_rad - q[i]) - j->kd_nm_s_rad * qd[i];
-        const double lim = j->torque_max_nm;
+        const ps_servo_joint_cfg_t *j_s = &s->robot.servo[i];
+        double t = j_s->kp_nm_rad * (j_s->stance_rad - q[i]) - j_s->kd_nm_s_rad * qd[i];
+        const double lim = j_s->lim.torque_max_nm;
         tau[i] = t > lim ? lim : (t < -lim ? -lim : t);
     }
 }
@@ -209,7 +232,7 @@ static void test_ps_plant_create_model_maps_all_joints(void **st)
     ps_plant_get_joints(s->plant, q, qd);
     /* every joint reads back its own stance angle: the map is by name */
     for (int i = 0; i < N_JOINTS; i++) {
-        assert_float_equal(q[i], s->robot.joints[i].stance_rad, 1e-9);
+        assert_float_equal(q[i], s->robot.servo[i].stance_rad, 1e-9);
         assert_float_equal(qd[i], 0.0, 1e-12);
     }
     assert_float_equal(ps_plant_timestep_s(s->plant), 0.0005, 1e-12);
@@ -225,10 +248,10 @@ static void test_ps_plant_create_missing_joint_config_error(void **st)
     (void)st;
     ps_robot_cfg_t r;
     build_robot(&r);
-    (void)snprintf(r.joints[5].name, sizeof(r.joints[5].name), "l_tail");
+    (void)snprintf(r.joint_name[5], sizeof(r.joint_name[5]), "l_tail");
     ps_plant_t *p = NULL;
     char err[PS_ERR_MSG_LEN] = "";
-    assert_int_equal(ps_plant_create(MODEL_PATH, &r, &p, err, sizeof(err)), -PS_ERR_CONFIG);
+    assert_int_equal(plant_create(MODEL_PATH, &r, &p, err, sizeof(err)), -PS_ERR_CONFIG);
     assert_null(p);
     assert_non_null(strstr(err, "l_tail"));
 }
@@ -252,10 +275,10 @@ static void test_ps_plant_create_missing_actuator_config_error(void **st)
     ps_robot_cfg_t r;
     build_robot(&r);
     r.n_joints = 1;
-    (void)snprintf(r.joints[0].name, sizeof(r.joints[0].name), "j");
+    (void)snprintf(r.joint_name[0], sizeof(r.joint_name[0]), "j");
     ps_plant_t *p = NULL;
     char err[PS_ERR_MSG_LEN] = "";
-    assert_int_equal(ps_plant_create(path, &r, &p, err, sizeof(err)), -PS_ERR_CONFIG);
+    assert_int_equal(plant_create(path, &r, &p, err, sizeof(err)), -PS_ERR_CONFIG);
     assert_null(p);
     assert_non_null(strstr(err, "actuator 'j'"));
     (void)unlink(path);
@@ -268,8 +291,7 @@ static void test_ps_plant_create_bad_path_plant_error(void **st)
     build_robot(&r);
     ps_plant_t *p = NULL;
     char err[PS_ERR_MSG_LEN] = "";
-    assert_int_equal(ps_plant_create("sim/models/nope.xml", &r, &p, err, sizeof(err)),
-                     -PS_ERR_PLANT);
+    assert_int_equal(plant_create("sim/models/nope.xml", &r, &p, err, sizeof(err)), -PS_ERR_PLANT);
     assert_null(p);
     assert_non_null(strstr(err, "nope.xml"));
     assert_true(strlen(err) > strlen("sim/models/nope.xml: "));
@@ -282,9 +304,9 @@ static void test_ps_plant_create_null_argument_einval(void **st)
     build_robot(&r);
     ps_plant_t *p = NULL;
     char err[PS_ERR_MSG_LEN] = "";
-    assert_int_equal(ps_plant_create(NULL, &r, &p, err, sizeof(err)), -EINVAL);
-    assert_int_equal(ps_plant_create(MODEL_PATH, NULL, &p, err, sizeof(err)), -EINVAL);
-    assert_int_equal(ps_plant_create(MODEL_PATH, &r, NULL, err, sizeof(err)), -EINVAL);
+    assert_int_equal(plant_create(NULL, &r, &p, err, sizeof(err)), -EINVAL);
+    assert_int_equal(plant_create(MODEL_PATH, NULL, &p, err, sizeof(err)), -EINVAL);
+    assert_int_equal(plant_create(MODEL_PATH, &r, NULL, err, sizeof(err)), -EINVAL);
     assert_null(p);
     ps_plant_destroy(NULL); /* safe on NULL */
 }
@@ -376,12 +398,12 @@ static void test_ps_plant_set_torques_clamps_and_zeroes_nan(void **st)
 {
     state_t *s = *st;
     ps_plant_t *ref = NULL;
-    assert_int_equal(ps_plant_create(MODEL_PATH, &s->robot, &ref, s->err, sizeof(s->err)), 0);
+    assert_int_equal(plant_create(MODEL_PATH, &s->robot, &ref, s->err, sizeof(s->err)), 0);
     const int w = joint_idx("waist_yaw");
     double big[PS_MAX_JOINTS] = {0}, lim[PS_MAX_JOINTS] = {0};
-    big[w] = 1e6;                              /* far beyond ctrlrange */
-    lim[w] = s->robot.joints[w].torque_max_nm; /* exactly the ctrlrange */
-    big[0] = NAN;                              /* must act as 0 */
+    big[w] = 1e6;                                 /* far beyond ctrlrange */
+    lim[w] = s->robot.servo[w].lim.torque_max_nm; /* exactly the ctrlrange */
+    big[0] = NAN;                                 /* must act as 0 */
     for (int k = 0; k < 200; k++) {
         ps_plant_set_torques(s->plant, big);
         ps_plant_set_torques(ref, lim);
@@ -391,7 +413,7 @@ static void test_ps_plant_set_torques_clamps_and_zeroes_nan(void **st)
     double q1[PS_MAX_JOINTS], q2[PS_MAX_JOINTS];
     ps_plant_get_joints(s->plant, q1, NULL);
     ps_plant_get_joints(ref, q2, NULL);
-    assert_true(fabs(q1[w] - s->robot.joints[w].stance_rad) > 0.01); /* it did turn */
+    assert_true(fabs(q1[w] - s->robot.servo[w].stance_rad) > 0.01); /* it did turn */
     for (int i = 0; i < N_JOINTS; i++)
         assert_float_equal(q1[i], q2[i], 1e-12);
     ps_plant_destroy(ref);
@@ -440,7 +462,7 @@ static void test_ps_plant_set_external_force_short_push_moves_pelvis(void **st)
 {
     state_t *s = *st;
     ps_plant_t *ref = NULL;
-    assert_int_equal(ps_plant_create(MODEL_PATH, &s->robot, &ref, s->err, sizeof(s->err)), 0);
+    assert_int_equal(plant_create(MODEL_PATH, &s->robot, &ref, s->err, sizeof(s->err)), 0);
     state_t r = *s;
     r.plant = ref;
     ps_plant_set_harness(s->plant, false);
@@ -588,45 +610,61 @@ static void test_model_kinematics_match_convention(void **st)
 
 /* ---- the robot file -------------------------------------------------------- */
 
+/* The robot file against the MJCF it names, read with MuJoCo itself: every
+ * joint is a limited hinge whose range is the file's [pos_min, pos_max], its
+ * motor's ctrlrange is +-torque_max (gear 1), and the stance lies inside. */
 static void test_ps_config_load_robot_ps1_matches_model(void **st)
 {
     (void)st;
-    ps_robot_cfg_t loaded, ref;
+    ps_robot_cfg_t loaded;
     char err[PS_ERR_MSG_LEN] = "";
     const int rc = ps_config_load_robot(ROBOT_PATH, &loaded, err, sizeof(err));
     if (rc != 0)
         fprintf(stderr, "load: %s\n", err);
     assert_int_equal(rc, 0);
-    build_robot(&ref);
-    assert_int_equal(loaded.n_joints, ref.n_joints);
-    assert_float_equal(loaded.kin.mass_kg, ref.kin.mass_kg, 1e-4);
-    assert_float_equal(loaded.kin.com_offset_z_m, ref.kin.com_offset_z_m, 1e-4);
-    assert_float_equal(loaded.kin.fall_com_height_m, ref.kin.fall_com_height_m, 1e-4);
-    for (uint32_t i = 0; i < ref.n_joints; i++) {
-        const int li = ps_config_find_joint(&loaded, ref.joints[i].name);
-        assert_true(li >= 0);
-        const ps_joint_cfg_t *a = &loaded.joints[li], *b = &ref.joints[i];
-        assert_int_equal(a->bus_idx, b->bus_idx);
-        assert_int_equal(a->can_id, b->can_id);
-        assert_int_equal(a->reply_id, b->reply_id);
-        assert_int_equal(a->rate_div, b->rate_div);
-        assert_float_equal(a->pos_min_rad, b->pos_min_rad, 1e-5);
-        assert_float_equal(a->pos_max_rad, b->pos_max_rad, 1e-5);
-        assert_float_equal(a->torque_max_nm, b->torque_max_nm, 1e-5);
-        assert_float_equal(a->kp_nm_rad, b->kp_nm_rad, 1e-5);
-        assert_float_equal(a->kd_nm_s_rad, b->kd_nm_s_rad, 1e-5);
-        assert_float_equal(a->stance_rad, b->stance_rad, 1e-5);
-        assert_float_equal(a->wire.t_max_nm, b->wire.t_max_nm, 1e-5);
-    }
-    /* and the model it names loads with it */
     char model[2 * PS_PATH_LEN];
     if (loaded.model[0] == '/' || access(loaded.model, R_OK) == 0)
         (void)snprintf(model, sizeof(model), "%s", loaded.model);
     else
         (void)snprintf(model, sizeof(model), "robots/%s", loaded.model);
+    char mj_err[1000] = "";
+    mjModel *m = mj_loadXML(model, NULL, mj_err, sizeof(mj_err));
+    if (m == NULL)
+        fail_msg("%s: %s", model, mj_err);
+    int n_hinges = 0;
+    for (int k = 0; k < m->njnt; k++)
+        n_hinges += m->jnt_type[k] == mjJNT_HINGE;
+    assert_int_equal((int)loaded.n_joints, n_hinges); /* every hinge is a robot joint */
+    for (uint32_t i = 0; i < loaded.n_joints; i++) {
+        const char *name = loaded.joint_name[i];
+        const ps_servo_joint_cfg_t *sj = &loaded.servo[i];
+        const int jid = mj_name2id(m, mjOBJ_JOINT, name);
+        const int aid = mj_name2id(m, mjOBJ_ACTUATOR, name);
+        if (jid < 0 || aid < 0)
+            fail_msg("joint %s: no hinge or motor of that name in %s", name, model);
+        assert_int_equal(m->jnt_type[jid], mjJNT_HINGE);
+        assert_true(m->jnt_limited[jid]);
+        if (fabs(m->jnt_range[2 * jid] - sj->lim.pos_min_rad) > 1e-6 ||
+            fabs(m->jnt_range[2 * jid + 1] - sj->lim.pos_max_rad) > 1e-6)
+            fail_msg("joint %s: model range [%g, %g], robot file [%g, %g]", name,
+                     m->jnt_range[2 * jid], m->jnt_range[2 * jid + 1], (double)sj->lim.pos_min_rad,
+                     (double)sj->lim.pos_max_rad);
+        assert_int_equal(m->actuator_trnid[2 * aid], jid);
+        assert_float_equal(m->actuator_gear[6 * aid], 1.0, 0.0);
+        assert_true(m->actuator_ctrllimited[aid]);
+        if (fabs(m->actuator_ctrlrange[2 * aid] + sj->lim.torque_max_nm) > 1e-6 ||
+            fabs(m->actuator_ctrlrange[2 * aid + 1] - sj->lim.torque_max_nm) > 1e-6)
+            fail_msg("joint %s: motor ctrlrange [%g, %g], robot file torque_max %g", name,
+                     m->actuator_ctrlrange[2 * aid], m->actuator_ctrlrange[2 * aid + 1],
+                     (double)sj->lim.torque_max_nm);
+        assert_true(sj->stance_rad >= sj->lim.pos_min_rad && sj->stance_rad <= sj->lim.pos_max_rad);
+    }
+    /* the kinematics block's mass is the model's floating subtree's */
     ps_plant_t *p = NULL;
-    assert_int_equal(ps_plant_create(model, &loaded, &p, err, sizeof(err)), 0);
+    assert_int_equal(plant_create(model, &loaded, &p, err, sizeof(err)), 0);
+    assert_float_equal(ps_plant_total_mass_kg(p), loaded.kin.mass_kg, 0.05);
     ps_plant_destroy(p);
+    mj_deleteModel(m);
 }
 
 int main(void)

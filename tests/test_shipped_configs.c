@@ -14,6 +14,7 @@
 #include <cmocka.h>
 
 #include "../drivers/ps_canbus.h"
+#include "../rt/ps_app.h"
 #include "../rt/ps_config.h"
 
 static void load_or_fail(const char *what, int rc, const char *err)
@@ -49,7 +50,7 @@ static void test_shipped_boards_and_robots_fit_the_bus_budget(void **state)
                          ps_config_check_pair(&board, &robot, NULL, err, sizeof(err)), err);
             ps_canbus_plan_t plan;
             load_or_fail(boards.gl_pathv[b],
-                         ps_canbus_plan(&board, &robot, &plan, err, sizeof(err)), err);
+                         ps_app_plan_buses(&board, &robot, &plan, err, sizeof(err)), err);
             for (uint32_t i = 0; i < plan.n_buses; i++)
                 assert_true(plan.load_peak[i] <= board.bus_budget);
         }

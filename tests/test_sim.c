@@ -20,6 +20,7 @@
 
 #include "../drivers/ps_imu_msg.h"
 #include "../drivers/ps_mit.h"
+#include "../rt/ps_app.h"
 #include "../rt/ps_clock.h"
 #include "../rt/ps_config.h"
 #include "../rt/ps_err.h"
@@ -34,6 +35,8 @@
 typedef struct {
     ps_board_cfg_t board;
     ps_robot_cfg_t robot;
+    ps_sim_board_t sim_board; /* the two as the composition root hands them to the sim */
+    ps_sim_robot_t sim_robot;
     ps_scenario_cfg_t sc;
     char model[2 * PS_PATH_LEN];
 } fixture_t;
@@ -68,8 +71,10 @@ static void add_event(ps_scenario_cfg_t *sc, float t_s, ps_event_kind_t kind)
 
 static ps_sim_cfg_t sim_cfg(fixture_t *fx, bool is_lockstep)
 {
-    return (ps_sim_cfg_t){.board = &fx->board,
-                          .robot = &fx->robot,
+    ps_app_sim_board(&fx->board, &fx->sim_board);
+    ps_app_sim_robot(&fx->robot, &fx->sim_robot);
+    return (ps_sim_cfg_t){.board = &fx->sim_board,
+                          .robot = &fx->sim_robot,
                           .scenario = &fx->sc,
                           .model_path = fx->model,
                           .is_lockstep = is_lockstep,
@@ -138,7 +143,7 @@ static void ctl_read(ctl_t *c)
                 }
                 bool is_known = false;
                 for (uint32_t j = 0; j < c->robot->n_joints; j++) {
-                    const ps_joint_cfg_t *jc = &c->robot->joints[j];
+                    const ps_act_cfg_t *jc = &c->robot->act[j];
                     if (jc->bus_idx != b || jc->reply_id != f[i].id)
                         continue;
                     ps_mit_reply_t rep;
@@ -173,7 +178,8 @@ static void ctl_write(ctl_t *c)
     ps_can_frame_t out[PS_MAX_BUSES][PS_MAX_JOINTS];
     size_t n_out[PS_MAX_BUSES] = {0};
     for (uint32_t j = 0; j < c->robot->n_joints; j++) {
-        const ps_joint_cfg_t *jc = &c->robot->joints[j];
+        const ps_act_cfg_t *jc = &c->robot->act[j];
+        const ps_servo_joint_cfg_t *jc_s = &c->robot->servo[j];
         if (c->tick != 0 && c->tick % jc->rate_div != 0)
             continue;
         ps_can_frame_t *f = &out[jc->bus_idx][n_out[jc->bus_idx]++];
@@ -185,13 +191,14 @@ static void ctl_write(ctl_t *c)
             continue;
         }
         float t_ff = 0.0f;
-        if (strstr(jc->name, "ankle_pitch") != NULL)
-            t_ff = clampf(-2.0f * c->gyro_y_rad_s, -jc->torque_max_nm, jc->torque_max_nm);
+        if (strstr(c->robot->joint_name[j], "ankle_pitch") != NULL)
+            t_ff =
+                clampf(-2.0f * c->gyro_y_rad_s, -jc_s->lim.torque_max_nm, jc_s->lim.torque_max_nm);
         const ps_mit_cmd_t cmd = {
-            .p_rad = clampf(jc->stance_rad, jc->pos_min_rad, jc->pos_max_rad),
+            .p_rad = clampf(jc_s->stance_rad, jc_s->lim.pos_min_rad, jc_s->lim.pos_max_rad),
             .v_rad_s = 0.0f,
-            .kp_nm_rad = fminf(jc->kp_nm_rad, jc->kp_max_nm_rad),
-            .kd_nm_s_rad = fminf(jc->kd_nm_s_rad, jc->kd_max_nm_s_rad),
+            .kp_nm_rad = fminf(jc_s->kp_nm_rad, jc_s->lim.kp_max_nm_rad),
+            .kd_nm_s_rad = fminf(jc_s->kd_nm_s_rad, jc_s->lim.kd_max_nm_s_rad),
             .t_ff_nm = t_ff,
         };
         assert_int_equal(ps_mit_encode_cmd(&jc->wire, &cmd, f->data), 0);
@@ -290,12 +297,12 @@ static void test_create_bad_model_path_plant_error(void **state)
 static void test_create_joint_bus_missing_config_error(void **state)
 {
     fixture_t *fx = *state;
-    fx->robot.joints[0].bus_idx = fx->board.n_buses;
+    fx->robot.act[0].bus_idx = fx->board.n_buses;
     const ps_sim_cfg_t cfg = sim_cfg(fx, true);
     ps_sim_t *sim = NULL;
     char err[PS_ERR_MSG_LEN] = "";
     assert_int_equal(ps_sim_create(&cfg, &sim, err, sizeof err), -PS_ERR_CONFIG);
-    assert_non_null(strstr(err, fx->robot.joints[0].name));
+    assert_non_null(strstr(err, fx->robot.joint_name[0]));
 }
 
 static void test_create_null_cfg_einval(void **state)
@@ -329,9 +336,9 @@ static void test_lockstep_replies_and_imu_arrive_with_right_ids(void **state)
     assert_int_equal(ps_clock_now_ns(c.clk), START_NS + 200 * PS_NS_PER_MS);
     for (uint32_t j = 0; j < fx->robot.n_joints; j++) {
         /* ENTER + one command every rate_div ticks, each answered. */
-        const uint64_t want = 1 + (200 - 1) / fx->robot.joints[j].rate_div;
+        const uint64_t want = 1 + (200 - 1) / fx->robot.act[j].rate_div;
         if (c.n_replies[j] + 2 < want || c.n_replies[j] > want)
-            fail_msg("joint %s: %llu replies, want ~%llu", fx->robot.joints[j].name,
+            fail_msg("joint %s: %llu replies, want ~%llu", fx->robot.joint_name[j],
                      (unsigned long long)c.n_replies[j], (unsigned long long)want);
         /* A reply arrives after its command: within the tick it was sent in. */
         assert_true(c.last_reply_t_ns[j] > START_NS);
@@ -339,7 +346,7 @@ static void test_lockstep_replies_and_imu_arrive_with_right_ids(void **state)
         assert_int_equal(ps_sim_get_actuator(sim, j, &a), 0);
         assert_true(a.is_motor_mode);
         /* The reply carries the joint angle: near the stance. */
-        assert_true(fabs(c.q_rad[j] - fx->robot.joints[j].stance_rad) < 0.1);
+        assert_true(fabs(c.q_rad[j] - fx->robot.servo[j].stance_rad) < 0.1);
     }
     assert_int_equal(c.n_bad_motor_id, 0);
     assert_int_equal(c.n_unknown_frames, 0);
@@ -460,7 +467,7 @@ static void test_lockstep_drop_replies_event_silences_one_joint(void **state)
 {
     fixture_t *fx = *state;
     add_event(&fx->sc, 0.1f, PS_EVENT_DROP_REPLIES);
-    strcpy(fx->sc.events[0].joint, fx->robot.joints[0].name);
+    strcpy(fx->sc.events[0].joint, fx->robot.joint_name[0]);
     fx->sc.events[0].duration_s = 0.1f;
     ctl_t c;
     ps_sim_t *sim = make_lockstep(fx, &c);

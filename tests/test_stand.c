@@ -15,6 +15,7 @@
 #include <math.h>
 #include <string.h>
 
+#include "../policy/ps_estimate.h"
 #include "../policy/ps_stand.h"
 #include "../rt/ps_err.h"
 
@@ -29,8 +30,22 @@ enum { L_AP = 4, L_AR = 5, R_AP = 10, R_AR = 11 };
 
 #define TOL 1e-6f
 
+/* What the standing controller is given: names, stance and limits. */
 typedef struct {
-    ps_robot_cfg_t robot;
+    char name[PS_NAME_LEN];
+    uint32_t n_joints;
+    char joint_name[PS_MAX_JOINTS][PS_NAME_LEN];
+    ps_servo_joint_cfg_t servo[PS_MAX_JOINTS];
+    ps_kinematics_cfg_t kin;
+} test_robot_t;
+
+static int stand_init(ps_stand_t *st, const test_robot_t *r)
+{
+    return ps_stand_init(st, r ? r->n_joints : 0, r ? r->joint_name : NULL, r ? r->servo : NULL);
+}
+
+typedef struct {
+    test_robot_t robot;
     ps_stand_t st;
     ps_policy_t pol;
     ps_estimate_t est;
@@ -42,14 +57,14 @@ static int setup(void **state)
 {
     static fixture_t f;
     memset(&f, 0, sizeof(f));
-    ps_robot_cfg_t *r = &f.robot;
+    test_robot_t *r = &f.robot;
     strcpy(r->name, "test");
     r->n_joints = 12;
     for (unsigned i = 0; i < 12; i++) {
-        strcpy(r->joints[i].name, NAMES[i]);
-        r->joints[i].stance_rad = STANCE[i];
-        r->joints[i].pos_min_rad = -2.0f;
-        r->joints[i].pos_max_rad = 2.0f;
+        strcpy(r->joint_name[i], NAMES[i]);
+        r->servo[i].stance_rad = STANCE[i];
+        r->servo[i].lim.pos_min_rad = -2.0f;
+        r->servo[i].lim.pos_max_rad = 2.0f;
     }
     r->kin = (ps_kinematics_cfg_t){.mass_kg = 32.0f,
                                    .hip_offset_y_m = 0.08f,
@@ -61,7 +76,7 @@ static int setup(void **state)
                                    .foot_width_m = 0.1f,
                                    .foot_offset_x_m = 0.03f,
                                    .com_offset_z_m = 0.15f};
-    assert_int_equal(ps_stand_init(&f.st, r), 0);
+    assert_int_equal(stand_init(&f.st, r), 0);
     /* The arithmetic tests below use fixed gains, not the shipped defaults
      * (which are checked separately and tuned in simulation). */
     f.st.k_tilt = 0.5f;
@@ -105,12 +120,12 @@ static void test_stand_init_null_or_no_joints_returns_einval(void **state)
 {
     fixture_t *f = *state;
     ps_stand_t st;
-    assert_int_equal(ps_stand_init(NULL, &f->robot), -EINVAL);
-    assert_int_equal(ps_stand_init(&st, NULL), -EINVAL);
+    assert_int_equal(stand_init(NULL, &f->robot), -EINVAL);
+    assert_int_equal(stand_init(&st, NULL), -EINVAL);
     f->robot.n_joints = 0;
-    assert_int_equal(ps_stand_init(&st, &f->robot), -EINVAL);
+    assert_int_equal(stand_init(&st, &f->robot), -EINVAL);
     f->robot.n_joints = PS_MAX_JOINTS + 1;
-    assert_int_equal(ps_stand_init(&st, &f->robot), -EINVAL);
+    assert_int_equal(stand_init(&st, &f->robot), -EINVAL);
 }
 
 static void test_stand_init_finds_ankles_by_name_and_sets_defaults(void **state)
@@ -121,7 +136,7 @@ static void test_stand_init_finds_ankles_by_name_and_sets_defaults(void **state)
     assert_int_equal(f->st.idx_ankle_pitch[1], R_AP);
     assert_int_equal(f->st.idx_ankle_roll[1], R_AR);
     ps_stand_t st;
-    assert_int_equal(ps_stand_init(&st, &f->robot), 0);
+    assert_int_equal(stand_init(&st, &f->robot), 0);
     assert_true(st.k_tilt == PS_STAND_K_TILT_DEFAULT);
     assert_true(st.k_com == PS_STAND_K_COM_DEFAULT);
     assert_true(st.k_vel == PS_STAND_K_VEL_DEFAULT);
@@ -222,7 +237,7 @@ static void test_stand_step_large_lean_correction_clamped(void **state)
 static void test_stand_step_target_clamped_to_joint_limit(void **state)
 {
     fixture_t *f = *state;
-    f->robot.joints[L_AP].pos_max_rad = STANCE[L_AP] + 0.01f;
+    f->robot.servo[L_AP].lim.pos_max_rad = STANCE[L_AP] + 0.01f;
     f->est.pitch_rad = 0.1f;
     assert_int_equal(step(f), 0);
     assert_true(fabsf(f->out.q_rad[L_AP] - (STANCE[L_AP] + 0.01f)) <= TOL);
@@ -232,9 +247,9 @@ static void test_stand_step_target_clamped_to_joint_limit(void **state)
 static void test_stand_step_missing_ankles_no_correction(void **state)
 {
     fixture_t *f = *state;
-    strcpy(f->robot.joints[L_AP].name, "l_foot_pitch");
-    strcpy(f->robot.joints[R_AR].name, "r_foot_roll");
-    assert_int_equal(ps_stand_init(&f->st, &f->robot), 0);
+    strcpy(f->robot.joint_name[L_AP], "l_foot_pitch");
+    strcpy(f->robot.joint_name[R_AR], "r_foot_roll");
+    assert_int_equal(stand_init(&f->st, &f->robot), 0);
     assert_int_equal(f->st.idx_ankle_pitch[0], -1);
     assert_int_equal(f->st.idx_ankle_roll[1], -1);
     f->est.pitch_rad = 0.05f;
@@ -278,14 +293,14 @@ static void test_stand_step_null_ctx_or_out_returns_einval(void **state)
     fixture_t *f = *state;
     assert_int_equal(f->pol.ops->step(NULL, &f->meas, &f->est, &f->out), -EINVAL);
     assert_int_equal(f->pol.ops->step(f->pol.ctx, &f->meas, &f->est, NULL), -EINVAL);
-    f->robot.n_joints = 0;
+    f->st.n_joints = 0; /* a corrupted controller, not a config: init refuses 0 */
     assert_int_equal(step(f), -EINVAL);
 }
 
 static void test_stand_step_nan_stance_returns_limit_out_untouched(void **state)
 {
     fixture_t *f = *state;
-    f->robot.joints[3].stance_rad = NAN;
+    f->robot.servo[3].stance_rad = NAN;
     memset(&f->out, 0, sizeof(f->out));
     assert_int_equal(step(f), -PS_ERR_LIMIT);
     assert_int_equal(f->out.n_joints, 0);

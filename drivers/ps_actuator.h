@@ -1,0 +1,214 @@
+/*
+ * ps_actuator: the protocol-neutral actuator port.
+ *
+ * The servo layer and the loop speak only in joint units through the neutral
+ * types below: a joint command (position, velocity, kp, kd, feed-forward
+ * torque, for the drive's own PD) and a joint measurement (position,
+ * velocity, torque, temperature, fault bits, time). Each actuator protocol
+ * (MIT mode in drivers/ps_mit.c; RobStride, moteus and ODrive come next) is
+ * an ops table, ps_act_proto_t, that encodes commands and mode requests into
+ * CAN frames and matches and decodes replies, all on the motor side.
+ *
+ * Between the two sides sits one conversion, applied here and nowhere else
+ * (ps_act_cmd_to_motor, ps_act_meas_from_motor): with gear ratio N (motor
+ * turns per joint turn), direction d (+1 or -1) and zero offset z (the joint
+ * angle at which the motor reads 0),
+ *   q_motor = d N (q_joint - z)      qd_motor = d N qd_joint
+ *   tau_motor = d tau_joint / N      kp_motor = kp_joint / N^2 (kd likewise)
+ * so the drive's PD on the motor side applies exactly the joint-side PD.
+ * Replies report the motor's current; torque = d N kt i.
+ *
+ * The device side of each protocol (decode a command, classify a request,
+ * encode a reply) is in the same table, for the emulated drives in sim/: the
+ * whole system runs in simulation with any protocol.
+ *
+ * Threads: pure functions, any thread. Allocation: none.
+ */
+#ifndef PS_ACTUATOR_H
+#define PS_ACTUATOR_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "ps_can.h"
+
+/** Frames a protocol may need for one command cycle or one request. */
+#define PS_ACT_MAX_FRAMES 2u
+
+/** A command for the drive's PD: tau = kp (q - q_meas) + kd (qd - qd_meas) + tau_ff.
+ *  Joint units on the servo side, motor units inside a protocol. */
+typedef struct {
+    float q_rad;
+    float qd_rad_s;
+    float kp_nm_rad;
+    float kd_nm_s_rad;
+    float tau_ff_nm;
+} ps_act_cmd_t;
+
+/** Fault bits a drive can report, whatever its protocol. */
+typedef enum {
+    PS_ACT_FAULT_OVERVOLTAGE = 1u << 0,
+    PS_ACT_FAULT_UNDERVOLTAGE = 1u << 1,
+    PS_ACT_FAULT_OVERCURRENT = 1u << 2,
+    PS_ACT_FAULT_DRIVER_OVERTEMP = 1u << 3, /**< power stage */
+    PS_ACT_FAULT_MOTOR_OVERTEMP = 1u << 4,  /**< winding */
+    PS_ACT_FAULT_COMMS_LOST = 1u << 5,      /**< the drive's own command timeout */
+    PS_ACT_FAULT_OVERLOAD = 1u << 6,
+    PS_ACT_FAULT_ENCODER = 1u << 7,
+    PS_ACT_FAULT_OTHER = 1u << 8, /**< a code the protocol's table does not name */
+} ps_act_fault_t;
+
+/** One joint as its drive last reported it. */
+typedef struct {
+    float q_rad;
+    float qd_rad_s;
+    float tau_nm;        /**< from the reported current or torque */
+    float temp_c;        /**< hottest reported temperature */
+    uint32_t fault_bits; /**< ps_act_fault_t bits, 0: none */
+    int64_t t_ns;        /**< time the reply was taken; 0: never */
+} ps_act_meas_t;
+
+/** Mode requests every protocol can express. */
+typedef enum {
+    PS_ACT_REQ_ENABLE = 0, /**< enter closed-loop (motor) mode; obey commands */
+    PS_ACT_REQ_DISABLE,    /**< leave it: no torque */
+    PS_ACT_REQ_SET_ZERO,   /**< the present position reads 0 from now on */
+    PS_ACT_REQ_CLEAR_FAULT,
+    PS_ACT_REQ_COUNT
+} ps_act_request_t;
+
+/** Wire ranges of a drive's packing, motor side (the firmware's constants):
+ *  every field of a command must lie inside them. kp and kd start at 0. */
+typedef struct {
+    float p_min_rad, p_max_rad;
+    float v_min_rad_s, v_max_rad_s;
+    float kp_max_nm_rad;
+    float kd_max_nm_s_rad;
+    float t_min_nm, t_max_nm;
+    float i_min_a, i_max_a; /**< reply current range */
+} ps_act_range_t;
+
+/** A joint's configured limits, joint side: no command leaves the runtime
+ *  outside them (robot file, per joint). */
+typedef struct {
+    float pos_min_rad, pos_max_rad;
+    float vel_max_rad_s;   /**< |qd| any command may ask for */
+    float torque_max_nm;   /**< |tau| any command may ask for */
+    float kp_max_nm_rad;   /**< no command's kp exceeds this */
+    float kd_max_nm_s_rad; /**< no command's kd exceeds this */
+} ps_act_limits_t;
+
+typedef enum {
+    PS_ACT_PROTO_MIT = 0, /**< MIT mode (CubeMars AK, Damiao): drivers/ps_mit.h */
+    PS_ACT_PROTO_COUNT
+} ps_act_proto_id_t;
+
+/** One joint's actuator: where it sits on the wire and how its units map.
+ *  Consumed by the actuator port, the bus planner's sources and the emulated
+ *  drives. */
+typedef struct {
+    uint32_t bus_idx;           /**< index into the board's buses */
+    uint32_t can_id;            /**< the drive's id (command identifier or id field) */
+    uint32_t reply_id;          /**< identifier its replies arrive on (protocols that use one) */
+    ps_act_proto_id_t protocol; /**< which ops table */
+    ps_act_range_t wire;        /**< the drive's packing ranges, motor side */
+    float gear_ratio;           /**< motor turns per joint turn, > 0 (1: direct) */
+    float direction;            /**< +1 or -1: motor sense relative to the joint */
+    float zero_offset_rad;      /**< joint angle at which the motor reads 0 */
+    float kt_nm_a;              /**< motor torque constant, current -> motor torque */
+    float temp_max_c;           /**< fault above this temperature */
+    uint32_t rate_div;          /**< command every rate_div servo ticks, 1.. */
+} ps_act_cfg_t;
+
+/** A protocol: pure encode/decode on the motor side. Every function is RT-SAFE,
+ *  O(1), and writes its outputs only on success. */
+typedef struct {
+    const char *name;   /**< as written in robot files, e.g. "mit" */
+    uint8_t id_bits;    /**< 11 or 29 */
+    bool is_fd;         /**< needs a CAN FD bus */
+    uint8_t cmd_len;    /**< payload bytes of a command frame */
+    uint8_t reply_len;  /**< payload bytes of a reply frame */
+    uint8_t n_cmd;      /**< frames per command cycle, 1..PS_ACT_MAX_FRAMES */
+    uint8_t n_reply;    /**< reply frames per command cycle */
+    uint32_t id_max;    /**< largest valid drive id (can_id and reply_id) */
+    uint32_t resolution_bits[5]; /**< bits of q, qd, kp, kd, tau_ff in a command */
+
+    /** Host side. @return frames written (1..max) | -PS_ERR_LIMIT a field outside
+     *  the wire range or not finite (refused, never clamped) | -ENOSPC max too small */
+    int (*encode_cmd)(const ps_act_cfg_t *a, const ps_act_cmd_t *motor_cmd, ps_can_frame_t *out,
+                      size_t max);
+    /** @return frames written | -ENOSPC | -ENOTSUP not expressible in this protocol */
+    int (*encode_request)(const ps_act_cfg_t *a, ps_act_request_t req, ps_can_frame_t *out,
+                          size_t max);
+    /** @return true if f is a reply of the drive a (id, width, and any id field) */
+    bool (*match_reply)(const ps_act_cfg_t *a, const ps_can_frame_t *f);
+    /** @post *out motor side, t_ns untouched  @return 0 | -PS_ERR_PROTOCOL malformed */
+    int (*decode_reply)(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_act_meas_t *out);
+
+    /** Device side (emulated drives). @return true if f is addressed to drive a */
+    bool (*is_for_drive)(const ps_act_cfg_t *a, const ps_can_frame_t *f);
+    /** @return the request f carries (0..PS_ACT_REQ_COUNT-1) | -ENOENT f is a
+     *  command, not a request */
+    int (*classify_request)(const ps_act_cfg_t *a, const ps_can_frame_t *f);
+    /** @return 0 | -PS_ERR_PROTOCOL malformed command frame */
+    int (*decode_cmd)(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_act_cmd_t *out_motor);
+    /** Values outside the wire range saturate, as a drive's packing does.
+     *  @return frames written | -ENOSPC */
+    int (*encode_reply)(const ps_act_cfg_t *a, const ps_act_meas_t *motor, ps_can_frame_t *out,
+                        size_t max);
+} ps_act_proto_t;
+
+/** @return the ops table of a protocol, NULL outside the enum  @rt RT-SAFE */
+const ps_act_proto_t *ps_act_proto_get(ps_act_proto_id_t id);
+
+/** @return protocol id for its name ("mit"), -ENOENT unknown  @rt INIT */
+int ps_act_proto_find(const char *name);
+
+/** Check one actuator's configuration against its protocol: wire ranges
+ *  ordered and finite, gear ratio finite and > 0, direction +1 or -1, zero
+ *  offset finite, ids within the protocol's id_max.
+ *  @post err holds "field: problem" on failure  @return 0 | -EINVAL  @rt INIT */
+int ps_act_check_cfg(const ps_act_cfg_t *a, char *err, size_t err_len);
+
+/** The wire ranges seen from the joint: what a joint command may hold so that
+ *  its motor-side image encodes (ordered min < max whatever the direction).
+ *  @pre a checked  @rt RT-SAFE O(1), pure */
+void ps_act_joint_range(const ps_act_cfg_t *a, ps_act_range_t *out_joint);
+
+/** The smallest step of each command field seen from the joint, from the
+ *  protocol's resolution: q, qd, kp, kd, tau_ff. @pre a checked  @rt RT-SAFE */
+void ps_act_joint_lsb(const ps_act_cfg_t *a, float out_lsb[5]);
+
+/** Joint command -> motor command (gear, direction, zero offset).  @rt RT-SAFE, pure */
+void ps_act_cmd_to_motor(const ps_act_cfg_t *a, const ps_act_cmd_t *joint, ps_act_cmd_t *out_motor);
+/** Motor command -> joint command (the emulated drive's view).  @rt RT-SAFE, pure */
+void ps_act_cmd_from_motor(const ps_act_cfg_t *a, const ps_act_cmd_t *motor, ps_act_cmd_t *out_joint);
+/** Motor measurement -> joint measurement; fault bits, temperature and t_ns copied.
+ *  @rt RT-SAFE, pure */
+void ps_act_meas_from_motor(const ps_act_cfg_t *a, const ps_act_meas_t *motor,
+                            ps_act_meas_t *out_joint);
+/** Joint measurement -> motor measurement (the emulated drive's reply).  @rt RT-SAFE */
+void ps_act_meas_to_motor(const ps_act_cfg_t *a, const ps_act_meas_t *joint,
+                          ps_act_meas_t *out_motor);
+
+/** Encode a joint command for the wire: convert, then the protocol's encoder.
+ *  @pre a checked  @return frames written | -PS_ERR_LIMIT | -ENOSPC | -EINVAL
+ *  @rt RT-SAFE O(1) */
+int ps_act_encode_command(const ps_act_cfg_t *a, const ps_act_cmd_t *joint, ps_can_frame_t *out,
+                          size_t max);
+
+/** @return frames written | -ENOSPC | -ENOTSUP | -EINVAL  @rt RT-SAFE O(1) */
+int ps_act_encode_request(const ps_act_cfg_t *a, ps_act_request_t req, ps_can_frame_t *out,
+                          size_t max);
+
+/** Match and decode a reply into a joint measurement (t_ns not written).
+ *  @return 0 | -ENOENT not this drive's reply | -PS_ERR_PROTOCOL malformed
+ *  @rt RT-SAFE O(1) */
+int ps_act_decode_reply(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_act_meas_t *out_joint);
+
+/** @return name of the lowest set fault bit, e.g. "MOTOR_OVERTEMP"; "none" for 0
+ *  @rt RT-SAFE */
+const char *ps_act_fault_name(uint32_t fault_bits);
+
+#endif /* PS_ACTUATOR_H */
