@@ -14,6 +14,7 @@
 
 #include <math.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "../policy/ps_estimate.h"
 #include "../rt/ps_err.h"
@@ -593,6 +594,76 @@ static void test_estimate_update_null_args_no_crash(void **state)
     assert_false(f->est.has_tilt);
 }
 
+/* ---- bounds: CoP without load, angle wrap -------------------------------- */
+
+/* No load to average (mass 0 after init: every foot's share is 0 N): the
+ * CoP is the midpoint of the soles, the ground origin, not 0/0 = NaN. */
+static void test_estimate_update_zero_load_cop_midpoint_not_nan(void **state)
+{
+    fixture_t *f = *state;
+    set_ankle_tau(f, 0, 7.848f, 3.1392f);
+    set_ankle_tau(f, 1, 0.0f, 0.0f);
+    f->robot.kin.mass_kg = 0.0f; /* init checked it; the robot file is shared */
+    ps_estimate_update(&f->est, &f->meas);
+    assert_true(isfinite(f->est.est.cop_m[0]) && isfinite(f->est.est.cop_m[1]));
+    assert_near(f->est.est.cop_m[0], 0.0f, 0.0f);
+    assert_near(f->est.est.cop_m[1], 0.0f, 0.0f);
+    f->robot.kin.mass_kg = NAN;
+    ps_estimate_update(&f->est, &f->meas);
+    assert_near(f->est.est.cop_m[0], 0.0f, 0.0f);
+    assert_near(f->est.est.cop_m[1], 0.0f, 0.0f);
+    /* With the mass back, the load-weighted CoP is back. */
+    f->robot.kin.mass_kg = 32.0f;
+    ps_estimate_update(&f->est, &f->meas);
+    assert_near(f->est.est.cop_m[0], -0.03f + 0.025f, 1e-5f);
+}
+
+static void test_ps_estimate_wrap_pi_non_finite_returns_nan(void **state)
+{
+    (void)state;
+    alarm(5); /* a wrap that loops forever ends the test binary, a failure */
+    assert_true(isnan(ps_estimate_wrap_pi(INFINITY)));
+    assert_true(isnan(ps_estimate_wrap_pi(-INFINITY)));
+    assert_true(isnan(ps_estimate_wrap_pi(NAN)));
+    alarm(0);
+}
+
+static void test_ps_estimate_wrap_pi_finite_wrapped_into_pi_range(void **state)
+{
+    (void)state;
+    const float pi = 3.14159265f;
+    alarm(5);
+    assert_near(ps_estimate_wrap_pi(0.5f), 0.5f, 0.0f);
+    assert_near(ps_estimate_wrap_pi(-3.0f), -3.0f, 0.0f);
+    assert_near(ps_estimate_wrap_pi(0.5f + 2.0f * pi), 0.5f, 1e-5f);
+    assert_near(ps_estimate_wrap_pi(-0.5f - 6.0f * pi), -0.5f, 1e-5f);
+    assert_near(fabsf(ps_estimate_wrap_pi(3.0f * pi)), pi, 1e-5f);
+    /* Far beyond 2 pi / ulp: "-= 2 pi" no longer changes the value. */
+    static const float HUGE_RAD[] = {1e30f, -1e30f, 3.4e38f, -3.4e38f, 1e8f};
+    for (size_t i = 0; i < sizeof(HUGE_RAD) / sizeof(HUGE_RAD[0]); i++) {
+        const float w = ps_estimate_wrap_pi(HUGE_RAD[i]);
+        if (!(w >= -pi && w <= pi))
+            fail_msg("wrap(%g) = %g", (double)HUGE_RAD[i], (double)w);
+    }
+    alarm(0);
+}
+
+/* A finite but absurd gyro rate (a corrupt frame that passed the checks)
+ * must not hang the tick in the wrap: the update returns, roll in range. */
+static void test_estimate_update_huge_gyro_rate_returns_bounded_roll(void **state)
+{
+    fixture_t *f = *state;
+    set_imu(f, 0.0f, 0.0f, NULL, DT_NS);
+    ps_estimate_update(&f->est, &f->meas);
+    const float w[3] = {3e38f, 0.0f, 0.0f};
+    set_imu(f, 0.0f, 0.0f, w, 2 * DT_NS);
+    alarm(5);
+    ps_estimate_update(&f->est, &f->meas);
+    alarm(0);
+    const float r = f->est.est.roll_rad;
+    assert_true(isnan(r) || (r >= -3.1416f && r <= 3.1416f));
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -628,6 +699,10 @@ int main(void)
         cmocka_unit_test_setup(test_estimate_update_tilt_past_threshold_fallen, setup),
         cmocka_unit_test_setup(test_estimate_update_low_com_fallen_only_with_tilt, setup),
         cmocka_unit_test_setup(test_estimate_update_null_args_no_crash, setup),
+        cmocka_unit_test_setup(test_estimate_update_zero_load_cop_midpoint_not_nan, setup),
+        cmocka_unit_test(test_ps_estimate_wrap_pi_non_finite_returns_nan),
+        cmocka_unit_test(test_ps_estimate_wrap_pi_finite_wrapped_into_pi_range),
+        cmocka_unit_test_setup(test_estimate_update_huge_gyro_rate_returns_bounded_roll, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
