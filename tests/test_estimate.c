@@ -369,8 +369,10 @@ static void test_estimate_update_imu_t_zero_ignored(void **state)
     fixture_t *f = *state;
     set_imu(f, 0.3f, 0.3f, NULL, 0); /* never received: zeros would do too */
     ps_estimate_update(&f->est, &f->meas);
-    assert_false(f->est.has_tilt);
     assert_near(f->est.est.pitch_rad, 0.0f, 0.0f);
+    assert_near(f->est.est.roll_rad, 0.0f, 0.0f);
+    /* Nor did it start the filter: the first real sample below sets the
+     * tilt from its accelerometer at once, not a filter step towards it. */
     set_imu(f, 0.0f, 0.1f, NULL, DT_NS);
     ps_estimate_update(&f->est, &f->meas);
     const float w[3] = {5.0f, 5.0f, 5.0f};
@@ -586,12 +588,26 @@ static void test_estimate_update_low_com_fallen_only_with_tilt(void **state)
     assert_false(f->est.est.is_fallen);
 }
 
-static void test_estimate_update_null_args_no_crash(void **state)
+/* NULL arguments are a no-op: an estimate built up by earlier updates (a
+ * tilt, a CoM velocity, a CoP) is left exactly as it was, and the next real
+ * update carries on from it. */
+static void test_estimate_update_null_args_estimate_unchanged(void **state)
 {
     fixture_t *f = *state;
+    set_imu(f, 0.1f, 0.2f, NULL, DT_NS);
+    bend_leg(f, 0, 0.2f);
+    bend_leg(f, 1, 0.2f);
+    set_ankle_tau(f, 1, 5.0f, 1.0f);
+    ps_estimate_update(&f->est, &f->meas);
+    bend_leg(f, 0, 0.25f); /* a CoM velocity from the squat */
+    bend_leg(f, 1, 0.25f);
+    ps_estimate_update(&f->est, &f->meas);
+    static ps_estimator_t before;
+    memcpy(&before, &f->est, sizeof(before));
+    assert_true(before.est.com_vel_m_s[2] != 0.0f);
     ps_estimate_update(NULL, &f->meas);
     ps_estimate_update(&f->est, NULL);
-    assert_false(f->est.has_tilt);
+    assert_memory_equal(&f->est, &before, sizeof(before));
 }
 
 /* ---- bounds: CoP without load, angle wrap -------------------------------- */
@@ -698,7 +714,7 @@ int main(void)
         cmocka_unit_test_setup(test_estimate_update_single_support_cop_on_stance_foot, setup),
         cmocka_unit_test_setup(test_estimate_update_tilt_past_threshold_fallen, setup),
         cmocka_unit_test_setup(test_estimate_update_low_com_fallen_only_with_tilt, setup),
-        cmocka_unit_test_setup(test_estimate_update_null_args_no_crash, setup),
+        cmocka_unit_test_setup(test_estimate_update_null_args_estimate_unchanged, setup),
         cmocka_unit_test_setup(test_estimate_update_zero_load_cop_midpoint_not_nan, setup),
         cmocka_unit_test(test_ps_estimate_wrap_pi_non_finite_returns_nan),
         cmocka_unit_test(test_ps_estimate_wrap_pi_finite_wrapped_into_pi_range),
