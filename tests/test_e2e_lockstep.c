@@ -13,6 +13,7 @@
 #include <stdint.h>
 #include <stdio.h>
 #include <string.h>
+#include <time.h>
 
 #include <cmocka.h>
 
@@ -225,7 +226,9 @@ static void test_lockstep_stand_10s_no_fall_no_alloc_no_fault(void **state)
     assert_int_equal(app.loop.counters.n_cmd_replaced, 0);
     assert_int_equal(app.loop.counters.n_rx_bad, 0);
     assert_int_equal(app.loop.counters.n_rx_unknown, 0);
-    assert_int_equal(app.loop.pacer.n_overruns, 0); /* lockstep cannot overrun */
+    /* In lockstep a tick overruns when it computes for a period of CPU time
+     * (test_lockstep_slow_policy_overruns_counted shows this can fail). */
+    assert_int_equal(app.loop.pacer.n_overruns, 0);
 
     /* Ctrl-C path: through DAMPING to STANDBY, never straight out. */
     ps_loop_request_stop(&app.loop);
@@ -301,6 +304,69 @@ static void test_lockstep_dropped_replies_lead_to_damping(void **state)
     assert_int_equal(app.loop.state, PS_SM_DAMPING);
 }
 
+/* ---- overruns in lockstep ---------------------------------------------- */
+
+#define SLOW_POLICY_CPU_NS (3 * PS_NS_PER_MS / 2) /* 1.5 servo periods */
+
+typedef struct {
+    ps_policy_t inner;
+    bool is_slow;
+    uint64_t n_slow_runs;
+} slow_policy_t;
+
+static int64_t thread_cpu_ns(void)
+{
+    struct timespec ts;
+    (void)clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (int64_t)ts.tv_sec * PS_NS_PER_S + ts.tv_nsec;
+}
+
+static int slow_step(void *ctx, const ps_meas_t *m, const ps_estimate_t *e, ps_targets_t *out)
+{
+    slow_policy_t *sp = ctx;
+    if (sp->is_slow) {
+        const int64_t until = thread_cpu_ns() + SLOW_POLICY_CPU_NS;
+        while (thread_cpu_ns() < until) {
+        }
+        sp->n_slow_runs++;
+    }
+    return sp->inner.ops->step(sp->inner.ctx, m, e, out);
+}
+
+static void slow_reset(void *ctx)
+{
+    slow_policy_t *sp = ctx;
+    sp->inner.ops->reset(sp->inner.ctx);
+}
+
+static const ps_policy_ops_t SLOW_OPS = {.name = "slow", .step = slow_step, .reset = slow_reset};
+
+/* In lockstep the simulated clock waits for the tick, so the pacer alone
+ * can never see an overrun; a policy that computes for longer than a servo
+ * period of CPU time must still show as overruns, one per slow tick. */
+static void test_lockstep_slow_policy_overruns_counted(void **state)
+{
+    (void)state;
+    static slow_policy_t sp;
+    start_app("scenarios/stand.yaml");
+    sp = (slow_policy_t){.inner = app.loop.cfg.policy};
+    app.loop.cfg.policy = (ps_policy_t){.ops = &SLOW_OPS, .ctx = &sp};
+    step_until(1.0);
+    assert_int_equal(app.loop.pacer.n_overruns, 0); /* fast policy: none */
+    sp.is_slow = true;
+    step_until(1.5);
+    sp.is_slow = false;
+    const uint64_t n_slow = sp.n_slow_runs;
+    print_message("%llu slow policy runs, %llu overruns\n", (unsigned long long)n_slow,
+                  (unsigned long long)app.loop.pacer.n_overruns);
+    assert_true(n_slow >= 20); /* 50 Hz policy for 0.5 s */
+    assert_true(app.loop.pacer.n_overruns >= n_slow);
+    assert_int_equal(app.loop.pacer.n_missed, 0); /* no deadline of the sim clock skipped */
+    const uint64_t n_after_slow = app.loop.pacer.n_overruns;
+    step_until(2.0);
+    assert_int_equal(app.loop.pacer.n_overruns, n_after_slow); /* fast again: none more */
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -308,6 +374,7 @@ int main(void)
         cmocka_unit_test_teardown(test_lockstep_same_seed_identical_truth, teardown),
         cmocka_unit_test_teardown(test_lockstep_estop_latches_until_reset, teardown),
         cmocka_unit_test_teardown(test_lockstep_dropped_replies_lead_to_damping, teardown),
+        cmocka_unit_test_teardown(test_lockstep_slow_policy_overruns_counted, teardown),
     };
     return cmocka_run_group_tests_name("e2e_lockstep", tests, NULL, NULL);
 }
