@@ -156,14 +156,17 @@ int ps_estimate_init(ps_estimator_t *e, const ps_kinematics_cfg_t *kin,
 
 /* ---- tilt: complementary filter ----------------------------------------- */
 
-static float wrap_pi(float a)
+float ps_estimate_wrap_pi(float a_rad)
 {
+    if (!isfinite(a_rad))
+        return NAN; /* +-inf has no angle; NaN stays NaN */
     const float pi = 3.14159265f;
-    while (a > pi)
-        a -= 2.0f * pi;
-    while (a < -pi)
-        a += 2.0f * pi;
-    return a;
+    if (a_rad >= -pi && a_rad <= pi)
+        return a_rad; /* the usual case: exact, no rounding */
+    /* One remainder instead of a loop: bounded time for any finite input
+     * (a loop of -= 2 pi never ends once 2 pi is below the float's ulp). */
+    const float r = remainderf(a_rad, 2.0f * pi);
+    return r > pi ? r - 2.0f * pi : (r < -pi ? r + 2.0f * pi : r);
 }
 
 /* Tilt from the gravity direction. Trunk orientation R = Ry(pitch) Rx(roll)
@@ -226,10 +229,10 @@ static void update_tilt(ps_estimator_t *e, const ps_imu_meas_t *imu)
          * low-passed, both with time constant tau. */
         const float tau = e->filter_tau_s > 0.0f ? e->filter_tau_s : PS_ESTIMATE_FILTER_TAU_S;
         const float beta = dt / (tau + dt);
-        r += beta * wrap_pi(acc_roll - r);
+        r += beta * ps_estimate_wrap_pi(acc_roll - r);
         p += beta * (acc_pitch - p);
     }
-    e->est.roll_rad = wrap_pi(r);
+    e->est.roll_rad = ps_estimate_wrap_pi(r);
     e->est.pitch_rad = p;
     e->last_imu_t_ns = imu->t_ns;
 }
@@ -325,7 +328,10 @@ void ps_estimate_update(ps_estimator_t *e, const ps_meas_t *m)
      * (The opposite signs hold for the reaction torque on the shank.) Checked
      * in MuJoCo 2.2.2, see docs/estimation.md. The offset is clamped to
      * the sole rectangle, placed with the foot's orientation, then the feet
-     * are averaged weighted by load. */
+     * are averaged weighted by load. Below PS_ESTIMATE_COP_MIN_FORCE_N of
+     * total load (no contact foot, a zero or non-finite mass) the average
+     * means nothing (0/0): the CoP is then the ground origin, the midpoint
+     * of the two soles. */
     const float f_z = k->mass_kg * PS_ESTIMATE_G_M_S2 / (float)(n_contacts > 0 ? n_contacts : 1);
     const float half_l = 0.5f * k->foot_length_m, half_w = 0.5f * k->foot_width_m;
     float cop_sum[2] = {0.0f, 0.0f}, f_sum = 0.0f;
@@ -343,8 +349,13 @@ void ps_estimate_update(ps_estimator_t *e, const ps_meas_t *m)
         cop_sum[1] += f_z * (cop_h[1] - origin[1]);
         f_sum += f_z;
     }
-    est->cop_m[0] = cop_sum[0] / f_sum;
-    est->cop_m[1] = cop_sum[1] / f_sum;
+    if (f_sum >= PS_ESTIMATE_COP_MIN_FORCE_N) {
+        est->cop_m[0] = cop_sum[0] / f_sum;
+        est->cop_m[1] = cop_sum[1] / f_sum;
+    } else {
+        est->cop_m[0] = 0.0f; /* the midpoint of the soles */
+        est->cop_m[1] = 0.0f;
+    }
 
     /* Fallen: trunk z axis (sp cr, -sr, cp cr) more than fall_tilt_rad from
      * vertical, or CoM too low. Only with a tilt estimate: before the first

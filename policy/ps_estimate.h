@@ -9,7 +9,9 @@
  * pelvis plus com_offset_z_m along the trunk axis, placed above the contact
  * feet. CoP: from the ankle torques of the feet in contact (x = +tau_pitch /
  * F_z, y = -tau_roll / F_z from the ankle per foot, weight shared by contact),
- * each clamped to its sole rectangle, then load-weighted. Fallen: tilt beyond
+ * each clamped to its sole rectangle, then load-weighted; with less than
+ * PS_ESTIMATE_COP_MIN_FORCE_N of load in all (no contact, mass 0) the CoP is
+ * the ground origin, the midpoint of the soles. Fallen: tilt beyond
  * fall_tilt_rad or CoM below fall_com_height_m.
  *
  * Sign conventions, limits of the lumped model and the sources followed are in
@@ -57,6 +59,8 @@ enum {
 #define PS_ESTIMATE_IMU_GAP_S    0.1f  /**< IMU gap longer than this: re-initialise tilt */
 #define PS_ESTIMATE_G_M_S2       9.81f /**< gravity, also the accelerometer gate centre */
 #define PS_ESTIMATE_ACCEL_GATE   0.2f  /**< accel used for tilt only if | |a|/g - 1 | <= this */
+#define PS_ESTIMATE_COP_MIN_FORCE_N                                                                \
+    1.0f /**< total contact load below this (or NaN): CoP = midpoint of the soles */
 
 typedef struct {
     ps_kinematics_cfg_t kin;         /**< copy (read-only) */
@@ -86,6 +90,13 @@ int ps_estimate_init(ps_estimator_t *e, const ps_kinematics_cfg_t *kin,
  *  used one (t_ns == 0 or not newer: tilt kept), feet/contact/CoM/CoP from the
  *  joints. No-op when e or m is NULL.  @rt RT-SAFE O(joints), loop thread */
 void ps_estimate_update(ps_estimator_t *e, const ps_meas_t *m);
+
+/** Wrap an angle into [-pi, pi].
+ *  @return a_rad for a_rad in [-pi, pi]; a_rad - 2 pi k otherwise (one
+ *  remainderf, bounded time for any finite input); NaN for +-inf or NaN
+ *  (no angle: the tilt becomes NaN, which the fall check treats as fallen)
+ *  @units rad  @rt RT-SAFE O(1) */
+float ps_estimate_wrap_pi(float a_rad);
 
 /** Forward kinematics of one leg, exposed for tests: sole centre in the pelvis
  *  frame (convention in docs/estimation.md).

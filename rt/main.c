@@ -340,6 +340,21 @@ static void on_signal(int sig)
     ps_loop_request_stop(&g.app.loop);
 }
 
+/* SIGINT and SIGTERM are blocked from the start of main until the loop is
+ * initialised, with the handler already installed: a signal during start-up
+ * (loading the model takes a while) stays pending instead of killing the
+ * process unbraked or being lost to ps_loop_init's zeroing, and is acted on
+ * (a stop request) the moment it is unblocked. Threads start after that and
+ * inherit the unblocked mask. */
+static int block_stop_signals(int how)
+{
+    sigset_t set;
+    sigemptyset(&set);
+    sigaddset(&set, SIGINT);
+    sigaddset(&set, SIGTERM);
+    return -pthread_sigmask(how, &set, NULL);
+}
+
 static int install_signals(void)
 {
     struct sigaction sa;
@@ -522,6 +537,13 @@ static int finish_profile(const ps_summary_t *sum)
 int main(int argc, char **argv)
 {
     g.cpu_latency_fd = -1;
+    /* Line-buffered even into a pipe: whoever reads the output (tee, a
+     * supervisor, the tests) sees each transition when it happens. */
+    (void)setvbuf(stdout, NULL, _IOLBF, 0); /* before any output: cannot fail */
+    if (block_stop_signals(SIG_BLOCK) < 0 || install_signals() < 0) {
+        fprintf(stderr, "pushstep: cannot install the SIGINT/SIGTERM handler\n");
+        return 1;
+    }
     if (parse_options(argc, argv, &g.opt) < 0)
         return 2;
     find_data_dir(g.data_dir, sizeof(g.data_dir));
@@ -551,7 +573,7 @@ int main(int argc, char **argv)
     }
     rc = setup_process_rt();
     if (rc == 0)
-        rc = install_signals();
+        rc = block_stop_signals(SIG_UNBLOCK); /* the loop exists: pending stops land */
     if (rc == 0 && g.opt.stress != NULL) {
         rc = ps_profile_start_stress(g.opt.stress, g.opt.duration_s, &g.stress_pid, err,
                                      sizeof(err));

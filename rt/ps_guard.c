@@ -1,5 +1,5 @@
 /*
- * ps_guard: malloc interposer and per-thread page-fault accounting.
+ * ps_guard: malloc and lock interposers, per-thread page-fault accounting.
  *
  * The interposers are plain definitions of malloc & co. in the executable;
  * the dynamic linker binds every library's malloc (libc's own internal calls
@@ -10,8 +10,11 @@
  */
 #include "ps_guard.h"
 
+#include <dlfcn.h>
 #include <errno.h>
 #include <malloc.h>
+#include <pthread.h>
+#include <semaphore.h>
 #include <stddef.h>
 #include <stdlib.h>
 #include <sys/resource.h>
@@ -32,6 +35,7 @@ static TLS bool g_is_armed;
 static TLS bool g_is_paused;
 static TLS uint64_t g_n_allocs;
 static TLS uint64_t g_n_frees;
+static TLS uint64_t g_n_locks;
 static TLS uint64_t g_faults_done;    /* faults of completed unpaused spans */
 static TLS uint64_t g_faults_span_at; /* rusage reading at the start of the open span */
 
@@ -130,6 +134,147 @@ void *pvalloc(size_t size)
     return __libc_memalign(page, rounded & ~(page - 1));
 }
 
+/* ---- locks ------------------------------------------------------------ */
+
+static inline void count_lock(void)
+{
+    if (is_counting())
+        g_n_locks++;
+}
+
+/* Each forwards to the next definition (glibc's), looked up once by a
+ * constructor before main. (glibc's __pthread_* aliases are compat symbols
+ * that a new program cannot link against.) A call before the constructor
+ * (another library's constructor) looks the function up itself; dlsym may
+ * allocate, which is INIT. */
+typedef int (*mutex_fn)(pthread_mutex_t *);
+typedef int (*mutex_timed_fn)(pthread_mutex_t *, const struct timespec *);
+typedef int (*rwlock_fn)(pthread_rwlock_t *);
+typedef int (*rwlock_timed_fn)(pthread_rwlock_t *, const struct timespec *);
+typedef int (*sem_fn)(sem_t *);
+typedef int (*sem_timed_fn)(sem_t *, const struct timespec *);
+
+static struct {
+    mutex_fn mutex_lock, mutex_trylock;
+    mutex_timed_fn mutex_timedlock;
+    rwlock_fn rwlock_rdlock, rwlock_wrlock, rwlock_tryrdlock, rwlock_trywrlock;
+    rwlock_timed_fn rwlock_timedrdlock, rwlock_timedwrlock;
+    sem_fn sem_wait, sem_trywait;
+    sem_timed_fn sem_timedwait;
+} g_next;
+
+/* The symbol name of each field. */
+#define SYM_mutex_lock         "pthread_mutex_lock"
+#define SYM_mutex_trylock      "pthread_mutex_trylock"
+#define SYM_mutex_timedlock    "pthread_mutex_timedlock"
+#define SYM_rwlock_rdlock      "pthread_rwlock_rdlock"
+#define SYM_rwlock_wrlock      "pthread_rwlock_wrlock"
+#define SYM_rwlock_tryrdlock   "pthread_rwlock_tryrdlock"
+#define SYM_rwlock_trywrlock   "pthread_rwlock_trywrlock"
+#define SYM_rwlock_timedrdlock "pthread_rwlock_timedrdlock"
+#define SYM_rwlock_timedwrlock "pthread_rwlock_timedwrlock"
+#define SYM_sem_wait           "sem_wait"
+#define SYM_sem_trywait        "sem_trywait"
+#define SYM_sem_timedwait      "sem_timedwait"
+
+#define NEXT(field, type)                                                                          \
+    (g_next.field != NULL ? g_next.field : (g_next.field = (type)dlsym(RTLD_NEXT, SYM_##field)))
+
+__attribute__((constructor)) static void resolve_next(void)
+{
+    (void)NEXT(mutex_lock, mutex_fn);
+    (void)NEXT(mutex_trylock, mutex_fn);
+    (void)NEXT(mutex_timedlock, mutex_timed_fn);
+    (void)NEXT(rwlock_rdlock, rwlock_fn);
+    (void)NEXT(rwlock_wrlock, rwlock_fn);
+    (void)NEXT(rwlock_tryrdlock, rwlock_fn);
+    (void)NEXT(rwlock_trywrlock, rwlock_fn);
+    (void)NEXT(rwlock_timedrdlock, rwlock_timed_fn);
+    (void)NEXT(rwlock_timedwrlock, rwlock_timed_fn);
+    (void)NEXT(sem_wait, sem_fn);
+    (void)NEXT(sem_trywait, sem_fn);
+    (void)NEXT(sem_timedwait, sem_timed_fn);
+}
+
+#define FORWARD_PTHREAD(field, type, ...)                                                          \
+    do {                                                                                           \
+        count_lock();                                                                              \
+        type f = NEXT(field, type);                                                                \
+        return f != NULL ? f(__VA_ARGS__) : ENOSYS;                                                \
+    } while (0)
+
+int pthread_mutex_lock(pthread_mutex_t *m)
+{
+    FORWARD_PTHREAD(mutex_lock, mutex_fn, m);
+}
+
+int pthread_mutex_trylock(pthread_mutex_t *m)
+{
+    FORWARD_PTHREAD(mutex_trylock, mutex_fn, m);
+}
+
+int pthread_mutex_timedlock(pthread_mutex_t *m, const struct timespec *abstime)
+{
+    FORWARD_PTHREAD(mutex_timedlock, mutex_timed_fn, m, abstime);
+}
+
+int pthread_rwlock_rdlock(pthread_rwlock_t *l)
+{
+    FORWARD_PTHREAD(rwlock_rdlock, rwlock_fn, l);
+}
+
+int pthread_rwlock_wrlock(pthread_rwlock_t *l)
+{
+    FORWARD_PTHREAD(rwlock_wrlock, rwlock_fn, l);
+}
+
+int pthread_rwlock_tryrdlock(pthread_rwlock_t *l)
+{
+    FORWARD_PTHREAD(rwlock_tryrdlock, rwlock_fn, l);
+}
+
+int pthread_rwlock_trywrlock(pthread_rwlock_t *l)
+{
+    FORWARD_PTHREAD(rwlock_trywrlock, rwlock_fn, l);
+}
+
+int pthread_rwlock_timedrdlock(pthread_rwlock_t *l, const struct timespec *abstime)
+{
+    FORWARD_PTHREAD(rwlock_timedrdlock, rwlock_timed_fn, l, abstime);
+}
+
+int pthread_rwlock_timedwrlock(pthread_rwlock_t *l, const struct timespec *abstime)
+{
+    FORWARD_PTHREAD(rwlock_timedwrlock, rwlock_timed_fn, l, abstime);
+}
+
+/* sem_*: -1 with errno, like the real ones, if glibc's cannot be found. */
+#define FORWARD_SEM(field, type, ...)                                                              \
+    do {                                                                                           \
+        count_lock();                                                                              \
+        type f = NEXT(field, type);                                                                \
+        if (f == NULL) {                                                                           \
+            errno = ENOSYS;                                                                        \
+            return -1;                                                                             \
+        }                                                                                          \
+        return f(__VA_ARGS__);                                                                     \
+    } while (0)
+
+int sem_wait(sem_t *s)
+{
+    FORWARD_SEM(sem_wait, sem_fn, s);
+}
+
+int sem_trywait(sem_t *s)
+{
+    FORWARD_SEM(sem_trywait, sem_fn, s);
+}
+
+int sem_timedwait(sem_t *s, const struct timespec *abstime)
+{
+    FORWARD_SEM(sem_timedwait, sem_timed_fn, s, abstime);
+}
+
 #endif /* !PS_GUARD_NO_INTERPOSE */
 
 bool ps_guard_counts_allocs(void)
@@ -139,6 +284,11 @@ bool ps_guard_counts_allocs(void)
 #else
     return true;
 #endif
+}
+
+bool ps_guard_counts_locks(void)
+{
+    return ps_guard_counts_allocs(); /* interposed together */
 }
 
 static uint64_t thread_faults(void)
@@ -155,6 +305,7 @@ void ps_guard_arm(void)
     g_is_armed = false; /* nothing counted while the counters are reset */
     g_n_allocs = 0;
     g_n_frees = 0;
+    g_n_locks = 0;
     g_faults_done = 0;
     g_is_paused = false;
     g_faults_span_at = thread_faults();
@@ -185,6 +336,7 @@ void ps_guard_read(ps_guard_counts_t *out)
     out->n_allocs = g_n_allocs;
     out->n_frees = g_n_frees;
     out->n_faults = faults;
+    out->n_locks = g_n_locks;
 }
 
 void ps_guard_disarm(ps_guard_counts_t *out)

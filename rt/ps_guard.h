@@ -12,9 +12,20 @@
  * but runs on its thread (the lockstep plant step) is bracketed by
  * ps_guard_pause()/ps_guard_resume() and excluded from both counts.
  *
+ * Locks: ps_guard.c also interposes pthread_mutex_lock, _trylock and
+ * _timedlock, pthread_rwlock_rdlock, _wrlock, _tryrdlock, _trywrlock,
+ * _timedrdlock and _timedwrlock, sem_wait, sem_trywait and sem_timedwait,
+ * and counts each call from an armed, unpaused thread (a try that fails
+ * counts too: the loop asked for a lock). They forward to glibc's (the
+ * next definition, found by dlsym(RTLD_NEXT) in a constructor before main,
+ * so the hot path does no lookup). Locks glibc takes inside
+ * itself (stdio, the malloc arena) do not go through these symbols and are
+ * not counted; their callers (printf, malloc) are what the rules forbid.
+ *
  * Sanitizers: under AddressSanitizer (or ThreadSanitizer) the sanitizer
  * owns malloc, so ps_guard.c defines no interposers: n_allocs and n_frees
- * then always read 0 (ps_guard_counts_allocs() says so) while n_faults still
+ * then always read 0 (ps_guard_counts_allocs() says so), and no lock
+ * interposers either (n_locks reads 0), while n_faults still
  * works. Tests that check allocation counts must be built without sanitizers.
  *
  * Threads: per-thread state; counters are read by the same thread.
@@ -31,6 +42,8 @@ typedef struct {
                             valloc/pvalloc calls while armed and not paused */
     uint64_t n_frees;  /**< free calls while armed and not paused (free(NULL) included) */
     uint64_t n_faults; /**< minor + major page faults while armed, not paused */
+    uint64_t n_locks;  /**< mutex/rwlock lock and sem_wait calls (try and timed variants
+                            included) while armed and not paused */
 } ps_guard_counts_t;
 
 /** Start counting for the calling thread (zeroes its counts, clears pause).
@@ -58,5 +71,9 @@ bool ps_guard_is_armed(void);
 /** @return true when this build interposes malloc (false under ASan/TSan:
  *  n_allocs and n_frees stay 0)  @rt RT-SAFE */
 bool ps_guard_counts_allocs(void);
+
+/** @return true when this build interposes the lock calls (same condition as
+ *  ps_guard_counts_allocs: false under ASan/TSan, n_locks stays 0)  @rt RT-SAFE */
+bool ps_guard_counts_locks(void);
 
 #endif /* PS_GUARD_H */

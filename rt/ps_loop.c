@@ -680,8 +680,15 @@ int ps_loop_step(ps_loop_t *loop)
     ps_perf_us_record(&loop->wake_us, wake, loop->counters.n_ticks);
     ps_trace_mark(loop->cfg.trace, "tick", "n", (int64_t)loop->counters.n_ticks, "wake_ns", wake);
     handle_stop_requests(loop);
+    /* With a deadline clock of its own (lockstep: the thread's CPU time) the
+     * pacing clock cannot overrun; a tick that computes for a period or more
+     * on the deadline clock counts as an overrun all the same. */
+    const ps_clock_t *dl = loop->cfg.deadline_clock;
+    const int64_t dl0_ns = dl != loop->cfg.clock ? ps_clock_now_ns(dl) : 0;
     ps_loop_tick(loop, loop->pacer.next_ns - loop->period_ns); /* this tick's deadline */
     uint64_t missed = ps_pacer_end_tick(&loop->pacer); /* the pacer counts overruns itself */
+    if (missed == 0 && dl != loop->cfg.clock && ps_clock_now_ns(dl) - dl0_ns >= loop->period_ns)
+        loop->pacer.n_overruns++; /* no deadline was skipped: n_missed stays */
     if (missed != 0)
         ps_trace_mark(loop->cfg.trace, "overrun", "n", (int64_t)loop->counters.n_ticks - 1,
                       "missed", (int64_t)missed);

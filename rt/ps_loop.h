@@ -211,7 +211,9 @@ int ps_loop_run(ps_loop_t *loop, int64_t start_ns, int64_t end_ns);
 int ps_loop_start(ps_loop_t *loop, int64_t start_ns);
 
 /** Wait for the next deadline, then handle stop requests and run the tick;
- *  overruns are counted by the pacer. @return 0 | -errno from the clock
+ *  overruns are counted by the pacer, and with a deadline_clock other than
+ *  clock (lockstep) a tick of a period or more on the deadline clock also
+ *  counts one (pacer.n_overruns; n_missed unchanged). @return 0 | -errno from the clock
  *  @rt RT-SAFE, loop thread */
 int ps_loop_step(ps_loop_t *loop);
 

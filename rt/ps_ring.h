@@ -1,7 +1,12 @@
 /*
  * ps_ring: single-producer / single-consumer lock-free ring of fixed-size
  * records (C11 atomics, acquire/release). The producer (the RT loop) never
- * blocks: when the ring is full the record is dropped and counted.
+ * blocks: when the ring is full the NEW record is dropped (the one being
+ * pushed; the oldest records already in the ring are kept) and counted in
+ * n_dropped. For status records that is the intended trade (a late reader
+ * loses the newest status, not history); a consumer that must see the
+ * latest state should read it elsewhere (ps_loop_get_state) and check
+ * ps_ring_dropped().
  *
  * Threads: exactly one producer thread and one consumer thread.
  * Allocation: none; the caller provides the storage (n_slots * record_size
@@ -29,7 +34,8 @@ typedef struct {
  *  two in [2, 2^31])  @rt INIT, before either thread uses it */
 int ps_ring_init(ps_ring_t *r, void *storage, uint32_t n_slots, size_t record_size);
 
-/** Copy one record in. @return 0 | -EAGAIN full (dropped, counted)
+/** Copy one record in. @return 0 | -EAGAIN full (this, the newest, record
+ *  dropped and counted; the ring is unchanged)
  *  @rt RT-SAFE O(record_size), producer thread only */
 int ps_ring_push(ps_ring_t *r, const void *record);
 

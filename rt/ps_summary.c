@@ -128,6 +128,7 @@ static cJSON *summary_json(const ps_summary_t *s)
     cJSON_AddNumberToObject(after, "mallocs", (double)s->guard.n_allocs);
     cJSON_AddNumberToObject(after, "frees", (double)s->guard.n_frees);
     cJSON_AddNumberToObject(after, "page_faults", (double)s->guard.n_faults);
+    cJSON_AddNumberToObject(after, "locks", (double)s->guard.n_locks);
     cJSON_AddBoolToObject(after, "allocations_counted", s->is_guard_exact);
     char rt[200];
     ps_rtsetup_describe(s->rt_missing, rt, sizeof(rt));
@@ -207,9 +208,12 @@ void ps_summary_print(const ps_summary_t *s, FILE *out)
         fprintf(out, "  %-6s planned peak %5.1f%% avg %5.1f%%, observed %5.1f%%, late %llu\n",
                 s->board->buses[b].ifname, s->plan->load_peak[b] * 100, s->plan->load_avg[b] * 100,
                 s->bus_states[b].load * 100, (unsigned long long)s->bus_states[b].n_late);
-    fprintf(out, " after init on the loop thread: %llu mallocs%s, %llu frees, %llu page faults\n",
+    fprintf(out,
+            " after init on the loop thread: %llu mallocs%s, %llu frees, %llu page faults, "
+            "%llu locks%s\n",
             (unsigned long long)s->guard.n_allocs, s->is_guard_exact ? "" : " (not counted)",
-            (unsigned long long)s->guard.n_frees, (unsigned long long)s->guard.n_faults);
+            (unsigned long long)s->guard.n_frees, (unsigned long long)s->guard.n_faults,
+            (unsigned long long)s->guard.n_locks, s->is_guard_exact ? "" : " (not counted)");
     const ps_loop_counters_t *c = &loop->counters;
     fprintf(out,
             " policy runs %llu (late %llu), transitions %llu, requests refused %llu, "

@@ -6,6 +6,13 @@
  * ($PUSHSTEP_BIN, default build/pushstep) from the repository root.
  */
 #include <cjson/cJSON.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <spawn.h>
+#include <stdbool.h>
+#include <time.h>
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -122,7 +129,9 @@ static void test_cli_lockstep_summary_json_has_the_figures(void **state)
     assert_true(num(obj(lat, "tick"), "n") >= 6000);
     const cJSON *after = obj(j, "after_init");
     assert_int_equal((int)num(after, "mallocs"), 0);
+    assert_int_equal((int)num(after, "frees"), 0);
     assert_int_equal((int)num(after, "page_faults"), 0);
+    assert_int_equal((int)num(after, "locks"), 0);
     assert_true(cJSON_IsFalse(obj(j, "fall_detected")));
     assert_true(cJSON_IsFalse(obj(obj(j, "sim_truth"), "fell_while_active")));
     assert_true(cJSON_GetArraySize(obj(j, "transitions")) == 4);
@@ -189,6 +198,14 @@ static void test_cli_realtime_run_paced_in_real_time(void **state)
     assert_true(ticks >= 2000 && ticks <= 4100);
     assert_true(wall_s >= ticks / 1000.0 - 0.05 && wall_s <= ticks / 1000.0 + 0.5);
     assert_true(num(obj(obj(j, "latency"), "wake"), "n") == ticks);
+    /* The loop thread after init, in real time: nothing allocated, freed,
+     * faulted in or locked. */
+    const cJSON *after = obj(j, "after_init");
+    assert_true(cJSON_IsTrue(obj(after, "allocations_counted")));
+    assert_int_equal((int)num(after, "mallocs"), 0);
+    assert_int_equal((int)num(after, "frees"), 0);
+    assert_int_equal((int)num(after, "page_faults"), 0);
+    assert_int_equal((int)num(after, "locks"), 0);
     cJSON_Delete(j);
     unlink(path);
 }
@@ -331,6 +348,166 @@ static void test_cli_linux_board_says_drivers_missing(void **state)
     assert_non_null(strstr(out, "bus can0:"));
 }
 
+/* ---- SIGINT / SIGTERM in every state, in real time ---------------------- */
+
+extern char **environ;
+
+#define SIG_DURATION_S 30  /* far longer than any run below should last */
+#define SIG_EXIT_S     8.0 /* from the signal: damping (<= 2 s) plus teardown */
+
+static double mono_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+typedef struct {
+    const char *state;    /**< the state the signal is meant to find */
+    const char *scenario; /**< scenario file */
+    const char *trigger;  /**< output line part that says the state began; NULL: at spawn */
+    double delay_s;       /**< after the trigger */
+    const char *final;    /**< final_state expected */
+    const char *must;     /**< a transition line the output must have, or NULL */
+    const char *must_not; /**< one it must not have, or NULL */
+} sig_case_t;
+
+/* Spawn pushstep directly (no shell between: a signal to a `sh -c` wrapper
+ * never reaches the program), read its line-buffered output until the
+ * trigger, send sig, and wait for it to exit. Returns the exit status
+ * (-1: killed by a signal); *out_exit_s is the time from signal to exit. */
+static int run_signalled(const sig_case_t *c, int sig, const char *summary, double *out_exit_s,
+                         bool *out_is_startup_estop)
+{
+    *out_is_startup_estop = false;
+    char dur[16];
+    snprintf(dur, sizeof(dur), "%d", SIG_DURATION_S);
+    char *argv[] = {(char *)bin(), "--duration",    dur, "--scenario", (char *)c->scenario,
+                    "--summary",   (char *)summary, NULL};
+    int fds[2];
+    assert_int_equal(pipe(fds), 0);
+    posix_spawn_file_actions_t fa;
+    assert_int_equal(posix_spawn_file_actions_init(&fa), 0);
+    assert_int_equal(posix_spawn_file_actions_adddup2(&fa, fds[1], 1), 0);
+    assert_int_equal(posix_spawn_file_actions_adddup2(&fa, fds[1], 2), 0);
+    assert_int_equal(posix_spawn_file_actions_addclose(&fa, fds[0]), 0);
+    pid_t pid;
+    assert_int_equal(posix_spawn(&pid, bin(), &fa, NULL, argv, environ), 0);
+    posix_spawn_file_actions_destroy(&fa);
+    close(fds[1]);
+    size_t n = 0;
+    out[0] = '\0';
+    const double t0 = mono_s();
+    double t_sig = -1;
+    bool is_eof = false;
+    if (c->trigger == NULL)
+        t_sig = t0 + c->delay_s;
+    while (!is_eof && mono_s() - t0 < SIG_DURATION_S + 10) {
+        if (t_sig < 0 && strstr(out, c->trigger) != NULL)
+            t_sig = mono_s() + c->delay_s;
+        /* A start-up e-stop (a drive fault seen in real time on a loaded
+         * machine) is not the state under test: signal now, try again. */
+        if (t_sig < 0 && strstr(out, "STANDBY -> ESTOP") != NULL) {
+            *out_is_startup_estop = true;
+            t_sig = mono_s();
+        }
+        if (t_sig > 0 && mono_s() >= t_sig && t_sig < 1e17) {
+            assert_int_equal(kill(pid, sig), 0);
+            t_sig = 1e18; /* sent */
+            *out_exit_s = mono_s();
+        }
+        struct pollfd pfd = {.fd = fds[0], .events = POLLIN};
+        if (poll(&pfd, 1, 5) > 0) {
+            ssize_t k = read(fds[0], out + n, sizeof(out) - 1 - n);
+            if (k <= 0)
+                is_eof = true;
+            else
+                n += (size_t)k;
+            out[n] = '\0';
+        }
+    }
+    close(fds[0]);
+    int status = 0;
+    assert_int_equal(waitpid(pid, &status, 0), pid);
+    if (t_sig < 1e17)
+        fail_msg("%s: the signal was never sent (trigger \"%s\" not seen):\n%s", c->state,
+                 c->trigger, out);
+    *out_exit_s = mono_s() - *out_exit_s;
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+static const sig_case_t SIG_CASES[] = {
+    {"STANDBY (start-up)", "tests/data/scenarios/sig-standby.yaml", NULL, 0.05, "STANDBY", NULL,
+     "-> RAMP"},
+    {"STANDBY", "tests/data/scenarios/sig-standby.yaml", "running in real time", 0.3, "STANDBY",
+     NULL, "-> RAMP"},
+    {"RAMP", "scenarios/stand.yaml", "state STANDBY -> RAMP", 0.1, "STANDBY",
+     "state RAMP -> DAMPING (REQ_STOP)", "-> ACTIVE"},
+    {"ACTIVE", "scenarios/stand.yaml", "state RAMP -> ACTIVE", 0.1, "STANDBY",
+     "state ACTIVE -> DAMPING (REQ_STOP)", NULL},
+    {"DAMPING", "tests/data/scenarios/sig-damping.yaml", "state ACTIVE -> DAMPING", 0.02, "STANDBY",
+     "state DAMPING -> STANDBY", NULL},
+    {"ESTOP", "tests/data/scenarios/sig-estop.yaml", "-> ESTOP", 0.2, "ESTOP", NULL,
+     "ESTOP -> STANDBY"},
+};
+
+#define SIG_REPEATS 3
+
+static void check_signal_in_every_state(int sig, const char *sig_name)
+{
+    int n_again = 0;
+    for (size_t i = 0; i < sizeof(SIG_CASES) / sizeof(SIG_CASES[0]); i++) {
+        const sig_case_t *c = &SIG_CASES[i];
+        for (int r = 0; r < SIG_REPEATS; r++) {
+            char path[32];
+            make_temp_file(path, sizeof(path));
+            double exit_s = 0;
+            bool is_startup_estop = false;
+            int rc = run_signalled(c, sig, path, &exit_s, &is_startup_estop);
+            print_message("      %s in %s, try %d: exit %d after %.2f s%s\n", sig_name, c->state,
+                          r + 1, rc, exit_s,
+                          is_startup_estop ? " (start-up e-stop: not this state, again)" : "");
+            if (is_startup_estop) {
+                if (rc != 0 || exit_s > SIG_EXIT_S)
+                    fail_msg("%s in start-up ESTOP: exit %d after %.1f s:\n%s", sig_name, rc,
+                             exit_s, out);
+                unlink(path);
+                if (++n_again > SIG_REPEATS)
+                    fail_msg("%s: %d start-up e-stops, the state under test not reached", sig_name,
+                             n_again);
+                r--;
+                continue;
+            }
+            if (rc != 0)
+                fail_msg("%s in %s: exit %d, want 0:\n%s", sig_name, c->state, rc, out);
+            if (exit_s > SIG_EXIT_S)
+                fail_msg("%s in %s: exited %.1f s after the signal:\n%s", sig_name, c->state,
+                         exit_s, out);
+            if (c->must != NULL && strstr(out, c->must) == NULL)
+                fail_msg("%s in %s: no \"%s\" in:\n%s", sig_name, c->state, c->must, out);
+            if (c->must_not != NULL && strstr(out, c->must_not) != NULL)
+                fail_msg("%s in %s: \"%s\" in:\n%s", sig_name, c->state, c->must_not, out);
+            cJSON *j = read_json(path);
+            assert_string_equal(cJSON_GetStringValue(obj(j, "final_state")), c->final);
+            assert_true(num(j, "loop_s") < SIG_DURATION_S / 2);
+            cJSON_Delete(j);
+            unlink(path);
+        }
+    }
+}
+
+static void test_cli_sigint_every_state_exits_promptly_status_0(void **state)
+{
+    (void)state;
+    check_signal_in_every_state(SIGINT, "SIGINT");
+}
+
+static void test_cli_sigterm_every_state_exits_promptly_status_0(void **state)
+{
+    (void)state;
+    check_signal_in_every_state(SIGTERM, "SIGTERM");
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -344,6 +521,8 @@ int main(void)
         cmocka_unit_test(test_cli_bad_option_exit_2),
         cmocka_unit_test(test_cli_bad_config_names_file_and_field),
         cmocka_unit_test(test_cli_linux_board_says_drivers_missing),
+        cmocka_unit_test(test_cli_sigint_every_state_exits_promptly_status_0),
+        cmocka_unit_test(test_cli_sigterm_every_state_exits_promptly_status_0),
     };
     return cmocka_run_group_tests_name("e2e_cli", tests, NULL, NULL);
 }

@@ -13,6 +13,7 @@
 #include <stdint.h>
 #include <stdio.h>
 #include <string.h>
+#include <time.h>
 
 #include <cmocka.h>
 
@@ -209,6 +210,7 @@ static void test_lockstep_stand_10s_no_fall_no_alloc_no_fault(void **state)
     assert_int_equal(counts.n_allocs, 0);
     assert_int_equal(counts.n_frees, 0);
     assert_int_equal(counts.n_faults, 0);
+    assert_int_equal(counts.n_locks, 0);
 
     uint64_t n_commands = 0;
     for (uint32_t b = 0; b < app.board.n_buses; b++) {
@@ -226,7 +228,9 @@ static void test_lockstep_stand_10s_no_fall_no_alloc_no_fault(void **state)
     assert_int_equal(app.loop.counters.n_cmd_replaced, 0);
     assert_int_equal(app.loop.counters.n_rx_bad, 0);
     assert_int_equal(app.loop.counters.n_rx_unknown, 0);
-    assert_int_equal(app.loop.pacer.n_overruns, 0); /* lockstep cannot overrun */
+    /* In lockstep a tick overruns when it computes for a period of CPU time
+     * (test_lockstep_slow_policy_overruns_counted shows this can fail). */
+    assert_int_equal(app.loop.pacer.n_overruns, 0);
 
     /* Ctrl-C path: through DAMPING to STANDBY, never straight out. */
     ps_loop_request_stop(&app.loop);
@@ -291,15 +295,226 @@ static void test_lockstep_estop_latches_until_reset(void **state)
     assert_int_equal(app.loop.counters.n_refused, 0);
 }
 
-/* A joint that stops answering is a stale reply: DAMPING, then STANDBY. */
-static void test_lockstep_dropped_replies_lead_to_damping(void **state)
+/* ---- guarded runs through the safety paths ------------------------------ */
+
+#define MAX_RECS 256
+
+static ps_loop_rec_t recs[MAX_RECS]; /* TRANSITION and REFUSED records seen */
+static unsigned n_recs;
+
+/* Collect the ring's transition and refusal records (status ones dropped). */
+static void collect_records(void)
+{
+    ps_loop_rec_t rec;
+    while (ps_ring_pop(&app.ring, &rec) == 0)
+        if (rec.kind != PS_REC_STATUS && n_recs < MAX_RECS)
+            recs[n_recs++] = rec;
+}
+
+/* Step until t_s with the guard armed on this (the loop's) thread; the
+ * test's own record keeping runs paused. */
+static void step_guarded_until(double t_s, ps_guard_counts_t *out)
+{
+    ps_guard_arm();
+    while (loop_time_s() < t_s) {
+        if (ps_loop_step(&app.loop) != 0)
+            break; /* asserted below, after disarm */
+        if (app.loop.counters.n_ticks % 50 == 0) {
+            ps_guard_pause();
+            collect_records();
+            ps_guard_resume();
+        }
+    }
+    ps_guard_disarm(out);
+    collect_records();
+    assert_true(loop_time_s() >= t_s);
+}
+
+static void start_guarded(const char *scenario)
+{
+    start_app(scenario);
+    if (ps_rtsetup_lock_memory() < 0)
+        (void)ps_rtsetup_prefault_maps();
+    ps_rtsetup_prefault_stack(256 * 1024);
+    n_recs = 0;
+    drain_ring();
+}
+
+static void assert_no_alloc_lock_fault(const ps_guard_counts_t *c, const char *what)
+{
+    print_message("%s: %llu mallocs, %llu frees, %llu page faults, %llu locks\n", what,
+                  (unsigned long long)c->n_allocs, (unsigned long long)c->n_frees,
+                  (unsigned long long)c->n_faults, (unsigned long long)c->n_locks);
+    assert_int_equal(c->n_allocs, 0);
+    assert_int_equal(c->n_frees, 0);
+    assert_int_equal(c->n_faults, 0);
+    assert_int_equal(c->n_locks, 0);
+}
+
+/* The transition from -> to that the records show, or NULL. */
+static const ps_loop_rec_t *find_transition(ps_sm_state_t from, ps_sm_state_t to)
+{
+    for (unsigned i = 0; i < n_recs; i++)
+        if (recs[i].kind == PS_REC_TRANSITION && recs[i].from_state == from && recs[i].state == to)
+            return &recs[i];
+    return NULL;
+}
+
+static unsigned count_refused(uint32_t request)
+{
+    unsigned n = 0;
+    for (unsigned i = 0; i < n_recs; i++)
+        n += recs[i].kind == PS_REC_REFUSED && recs[i].cond == request;
+    return n;
+}
+
+/* A joint that stops answering is a stale reply: DAMPING, caused by
+ * REPLY_STALE (the transition record's conditions), then STANDBY; the loop
+ * thread allocates, frees, faults and locks nothing on the way. */
+static void test_lockstep_dropped_replies_damping_cause_reply_stale(void **state)
 {
     (void)state;
-    start_app("scenarios/fault-drop.yaml");
+    start_guarded("scenarios/fault-drop.yaml");
     step_until(3.95);
     assert_int_equal(app.loop.state, PS_SM_ACTIVE);
-    step_until(4.1);
+    ps_guard_counts_t c;
+    step_guarded_until(4.1, &c);
     assert_int_equal(app.loop.state, PS_SM_DAMPING);
+    step_guarded_until(7.0, &c);
+    assert_no_alloc_lock_fault(&c, "fault-drop 4.1..7 s");
+    const ps_loop_rec_t *t = find_transition(PS_SM_ACTIVE, PS_SM_DAMPING);
+    assert_non_null(t);
+    if ((t->cond & PS_SM_C_REPLY_STALE) == 0)
+        fail_msg("ACTIVE -> DAMPING with cond 0x%x, not REPLY_STALE", t->cond);
+    assert_int_equal(t->cond & (PS_SM_C_REQ_STOP | PS_SM_C_FALL), 0);
+    assert_non_null(find_transition(PS_SM_DAMPING, PS_SM_STANDBY));
+    assert_int_equal(app.loop.state, PS_SM_STANDBY);
+}
+
+/* The same fault from its start, guarded throughout: the first time the
+ * stale-reply and damping paths run they take nothing either. */
+static void test_lockstep_dropped_replies_guarded_from_start_no_alloc_no_lock(void **state)
+{
+    (void)state;
+    start_guarded("scenarios/fault-drop.yaml");
+    step_until(0.1);
+    ps_guard_counts_t c;
+    step_guarded_until(7.0, &c);
+    assert_no_alloc_lock_fault(&c, "fault-drop 0.1..7 s");
+    assert_non_null(find_transition(PS_SM_STANDBY, PS_SM_RAMP));
+    assert_non_null(find_transition(PS_SM_ACTIVE, PS_SM_DAMPING));
+    assert_non_null(find_transition(PS_SM_DAMPING, PS_SM_STANDBY));
+}
+
+/* E-stop press, latch, release, reset and restart, guarded throughout. */
+static void test_lockstep_estop_press_latch_reset_guarded_no_alloc_no_lock(void **state)
+{
+    (void)state;
+    start_guarded("scenarios/estop.yaml");
+    step_until(0.1);
+    ps_guard_counts_t c;
+    step_guarded_until(7.0, &c);
+    assert_no_alloc_lock_fault(&c, "estop 0.1..7 s");
+    const ps_loop_rec_t *t = find_transition(PS_SM_ACTIVE, PS_SM_ESTOP);
+    assert_non_null(t);
+    assert_true((t->cond & PS_SM_C_ESTOP_INPUT) != 0);
+    t = find_transition(PS_SM_ESTOP, PS_SM_STANDBY);
+    assert_non_null(t);
+    assert_true((t->cond & PS_SM_C_REQ_RESET) != 0);
+    assert_true(t->t_ns - START_NS >= 6 * PS_NS_PER_S); /* the reset, not the release */
+    unsigned n_ramp = 0;
+    for (unsigned i = 0; i < n_recs; i++)
+        n_ramp += recs[i].kind == PS_REC_TRANSITION && recs[i].state == PS_SM_RAMP;
+    assert_int_equal(n_ramp, 2); /* the start and the restart */
+}
+
+/* START and RESET while the e-stop is pressed are refused (records with
+ * their reasons), the robot stays in ESTOP, and the refusal path takes
+ * nothing on the loop thread; after release, reset and start work. */
+static void test_lockstep_refused_requests_while_estop_pressed_guarded(void **state)
+{
+    (void)state;
+    start_guarded("tests/data/scenarios/estop-refused.yaml");
+    step_until(0.1);
+    ps_guard_counts_t c;
+    step_guarded_until(3.9, &c);
+    assert_int_equal(app.loop.state, PS_SM_ESTOP);
+    step_guarded_until(5.3, &c);
+    assert_no_alloc_lock_fault(&c, "estop-refused 3.9..5.3 s");
+    assert_int_equal(count_refused(PS_SM_C_REQ_START), 1);
+    assert_int_equal(count_refused(PS_SM_C_REQ_RESET), 1);
+    for (unsigned i = 0; i < n_recs; i++)
+        if (recs[i].kind == PS_REC_REFUSED) {
+            assert_non_null(recs[i].reason);
+            assert_int_equal(recs[i].state, PS_SM_ESTOP);
+        }
+    assert_int_equal(app.loop.counters.n_refused, 2);
+    assert_non_null(find_transition(PS_SM_ESTOP, PS_SM_STANDBY));
+    assert_non_null(find_transition(PS_SM_STANDBY, PS_SM_RAMP));
+    assert_true(app.loop.state == PS_SM_RAMP || app.loop.state == PS_SM_DAMPING);
+}
+
+/* ---- overruns in lockstep ---------------------------------------------- */
+
+#define SLOW_POLICY_CPU_NS (3 * PS_NS_PER_MS / 2) /* 1.5 servo periods */
+
+typedef struct {
+    ps_policy_t inner;
+    bool is_slow;
+    uint64_t n_slow_runs;
+} slow_policy_t;
+
+static int64_t thread_cpu_ns(void)
+{
+    struct timespec ts;
+    (void)clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (int64_t)ts.tv_sec * PS_NS_PER_S + ts.tv_nsec;
+}
+
+static int slow_step(void *ctx, const ps_meas_t *m, const ps_estimate_t *e, ps_targets_t *out)
+{
+    slow_policy_t *sp = ctx;
+    if (sp->is_slow) {
+        const int64_t until = thread_cpu_ns() + SLOW_POLICY_CPU_NS;
+        while (thread_cpu_ns() < until) {
+        }
+        sp->n_slow_runs++;
+    }
+    return sp->inner.ops->step(sp->inner.ctx, m, e, out);
+}
+
+static void slow_reset(void *ctx)
+{
+    slow_policy_t *sp = ctx;
+    sp->inner.ops->reset(sp->inner.ctx);
+}
+
+static const ps_policy_ops_t SLOW_OPS = {.name = "slow", .step = slow_step, .reset = slow_reset};
+
+/* In lockstep the simulated clock waits for the tick, so the pacer alone
+ * can never see an overrun; a policy that computes for longer than a servo
+ * period of CPU time must still show as overruns, one per slow tick. */
+static void test_lockstep_slow_policy_overruns_counted(void **state)
+{
+    (void)state;
+    static slow_policy_t sp;
+    start_app("scenarios/stand.yaml");
+    sp = (slow_policy_t){.inner = app.loop.cfg.policy};
+    app.loop.cfg.policy = (ps_policy_t){.ops = &SLOW_OPS, .ctx = &sp};
+    step_until(1.0);
+    assert_int_equal(app.loop.pacer.n_overruns, 0); /* fast policy: none */
+    sp.is_slow = true;
+    step_until(1.5);
+    sp.is_slow = false;
+    const uint64_t n_slow = sp.n_slow_runs;
+    print_message("%llu slow policy runs, %llu overruns\n", (unsigned long long)n_slow,
+                  (unsigned long long)app.loop.pacer.n_overruns);
+    assert_true(n_slow >= 20); /* 50 Hz policy for 0.5 s */
+    assert_true(app.loop.pacer.n_overruns >= n_slow);
+    assert_int_equal(app.loop.pacer.n_missed, 0); /* no deadline of the sim clock skipped */
+    const uint64_t n_after_slow = app.loop.pacer.n_overruns;
+    step_until(2.0);
+    assert_int_equal(app.loop.pacer.n_overruns, n_after_slow); /* fast again: none more */
 }
 
 int main(void)
@@ -308,7 +523,15 @@ int main(void)
         cmocka_unit_test_teardown(test_lockstep_stand_10s_no_fall_no_alloc_no_fault, teardown),
         cmocka_unit_test_teardown(test_lockstep_same_seed_identical_truth, teardown),
         cmocka_unit_test_teardown(test_lockstep_estop_latches_until_reset, teardown),
-        cmocka_unit_test_teardown(test_lockstep_dropped_replies_lead_to_damping, teardown),
+        cmocka_unit_test_teardown(test_lockstep_dropped_replies_damping_cause_reply_stale,
+                                  teardown),
+        cmocka_unit_test_teardown(test_lockstep_dropped_replies_guarded_from_start_no_alloc_no_lock,
+                                  teardown),
+        cmocka_unit_test_teardown(test_lockstep_estop_press_latch_reset_guarded_no_alloc_no_lock,
+                                  teardown),
+        cmocka_unit_test_teardown(test_lockstep_refused_requests_while_estop_pressed_guarded,
+                                  teardown),
+        cmocka_unit_test_teardown(test_lockstep_slow_policy_overruns_counted, teardown),
     };
     return cmocka_run_group_tests_name("e2e_lockstep", tests, NULL, NULL);
 }

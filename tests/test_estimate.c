@@ -14,6 +14,7 @@
 
 #include <math.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "../policy/ps_estimate.h"
 #include "../rt/ps_err.h"
@@ -382,8 +383,10 @@ static void test_estimate_update_imu_t_zero_ignored(void **state)
     fixture_t *f = *state;
     set_imu(f, 0.3f, 0.3f, NULL, 0); /* never received: zeros would do too */
     ps_estimate_update(&f->est, &f->meas);
-    assert_false(f->est.has_tilt);
     assert_near(f->est.est.pitch_rad, 0.0f, 0.0f);
+    assert_near(f->est.est.roll_rad, 0.0f, 0.0f);
+    /* Nor did it start the filter: the first real sample below sets the
+     * tilt from its accelerometer at once, not a filter step towards it. */
     set_imu(f, 0.0f, 0.1f, NULL, DT_NS);
     ps_estimate_update(&f->est, &f->meas);
     const float w[3] = {5.0f, 5.0f, 5.0f};
@@ -599,12 +602,96 @@ static void test_estimate_update_low_com_fallen_only_with_tilt(void **state)
     assert_false(f->est.est.is_fallen);
 }
 
-static void test_estimate_update_null_args_no_crash(void **state)
+/* NULL arguments are a no-op: an estimate built up by earlier updates (a
+ * tilt, a CoM velocity, a CoP) is left exactly as it was, and the next real
+ * update carries on from it. */
+static void test_estimate_update_null_args_estimate_unchanged(void **state)
 {
     fixture_t *f = *state;
+    set_imu(f, 0.1f, 0.2f, NULL, DT_NS);
+    bend_leg(f, 0, 0.2f);
+    bend_leg(f, 1, 0.2f);
+    set_ankle_tau(f, 1, 5.0f, 1.0f);
+    ps_estimate_update(&f->est, &f->meas);
+    bend_leg(f, 0, 0.25f); /* a CoM velocity from the squat */
+    bend_leg(f, 1, 0.25f);
+    ps_estimate_update(&f->est, &f->meas);
+    static ps_estimator_t before;
+    memcpy(&before, &f->est, sizeof(before));
+    assert_true(before.est.com_vel_m_s[2] != 0.0f);
     ps_estimate_update(NULL, &f->meas);
     ps_estimate_update(&f->est, NULL);
-    assert_false(f->est.has_tilt);
+    assert_memory_equal(&f->est, &before, sizeof(before));
+}
+
+/* ---- bounds: CoP without load, angle wrap -------------------------------- */
+
+/* No load to average (mass 0 after init: every foot's share is 0 N): the
+ * CoP is the midpoint of the soles, the ground origin, not 0/0 = NaN. */
+static void test_estimate_update_zero_load_cop_midpoint_not_nan(void **state)
+{
+    fixture_t *f = *state;
+    set_ankle_tau(f, 0, 7.848f, 3.1392f);
+    set_ankle_tau(f, 1, 0.0f, 0.0f);
+    f->est.kin.mass_kg = 0.0f; /* init checked it; poke the estimator's copy */
+    ps_estimate_update(&f->est, &f->meas);
+    assert_true(isfinite(f->est.est.cop_m[0]) && isfinite(f->est.est.cop_m[1]));
+    assert_near(f->est.est.cop_m[0], 0.0f, 0.0f);
+    assert_near(f->est.est.cop_m[1], 0.0f, 0.0f);
+    f->est.kin.mass_kg = NAN;
+    ps_estimate_update(&f->est, &f->meas);
+    assert_near(f->est.est.cop_m[0], 0.0f, 0.0f);
+    assert_near(f->est.est.cop_m[1], 0.0f, 0.0f);
+    /* With the mass back, the load-weighted CoP is back. */
+    f->est.kin.mass_kg = 32.0f;
+    ps_estimate_update(&f->est, &f->meas);
+    assert_near(f->est.est.cop_m[0], -0.03f + 0.025f, 1e-5f);
+}
+
+static void test_ps_estimate_wrap_pi_non_finite_returns_nan(void **state)
+{
+    (void)state;
+    alarm(5); /* a wrap that loops forever ends the test binary, a failure */
+    assert_true(isnan(ps_estimate_wrap_pi(INFINITY)));
+    assert_true(isnan(ps_estimate_wrap_pi(-INFINITY)));
+    assert_true(isnan(ps_estimate_wrap_pi(NAN)));
+    alarm(0);
+}
+
+static void test_ps_estimate_wrap_pi_finite_wrapped_into_pi_range(void **state)
+{
+    (void)state;
+    const float pi = 3.14159265f;
+    alarm(5);
+    assert_near(ps_estimate_wrap_pi(0.5f), 0.5f, 0.0f);
+    assert_near(ps_estimate_wrap_pi(-3.0f), -3.0f, 0.0f);
+    assert_near(ps_estimate_wrap_pi(0.5f + 2.0f * pi), 0.5f, 1e-5f);
+    assert_near(ps_estimate_wrap_pi(-0.5f - 6.0f * pi), -0.5f, 1e-5f);
+    assert_near(fabsf(ps_estimate_wrap_pi(3.0f * pi)), pi, 1e-5f);
+    /* Far beyond 2 pi / ulp: "-= 2 pi" no longer changes the value. */
+    static const float HUGE_RAD[] = {1e30f, -1e30f, 3.4e38f, -3.4e38f, 1e8f};
+    for (size_t i = 0; i < sizeof(HUGE_RAD) / sizeof(HUGE_RAD[0]); i++) {
+        const float w = ps_estimate_wrap_pi(HUGE_RAD[i]);
+        if (!(w >= -pi && w <= pi))
+            fail_msg("wrap(%g) = %g", (double)HUGE_RAD[i], (double)w);
+    }
+    alarm(0);
+}
+
+/* A finite but absurd gyro rate (a corrupt frame that passed the checks)
+ * must not hang the tick in the wrap: the update returns, roll in range. */
+static void test_estimate_update_huge_gyro_rate_returns_bounded_roll(void **state)
+{
+    fixture_t *f = *state;
+    set_imu(f, 0.0f, 0.0f, NULL, DT_NS);
+    ps_estimate_update(&f->est, &f->meas);
+    const float w[3] = {3e38f, 0.0f, 0.0f};
+    set_imu(f, 0.0f, 0.0f, w, 2 * DT_NS);
+    alarm(5);
+    ps_estimate_update(&f->est, &f->meas);
+    alarm(0);
+    const float r = f->est.est.roll_rad;
+    assert_true(isnan(r) || (r >= -3.1416f && r <= 3.1416f));
 }
 
 int main(void)
@@ -641,7 +728,11 @@ int main(void)
         cmocka_unit_test_setup(test_estimate_update_single_support_cop_on_stance_foot, setup),
         cmocka_unit_test_setup(test_estimate_update_tilt_past_threshold_fallen, setup),
         cmocka_unit_test_setup(test_estimate_update_low_com_fallen_only_with_tilt, setup),
-        cmocka_unit_test_setup(test_estimate_update_null_args_no_crash, setup),
+        cmocka_unit_test_setup(test_estimate_update_null_args_estimate_unchanged, setup),
+        cmocka_unit_test_setup(test_estimate_update_zero_load_cop_midpoint_not_nan, setup),
+        cmocka_unit_test(test_ps_estimate_wrap_pi_non_finite_returns_nan),
+        cmocka_unit_test(test_ps_estimate_wrap_pi_finite_wrapped_into_pi_range),
+        cmocka_unit_test_setup(test_estimate_update_huge_gyro_rate_returns_bounded_roll, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

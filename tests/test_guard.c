@@ -19,6 +19,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "../rt/ps_guard.h"
@@ -33,6 +34,18 @@ static void *(*volatile p_memalign)(size_t, size_t) = memalign;
 static void *(*volatile p_valloc)(size_t) = valloc;
 static void *(*volatile p_pvalloc)(size_t) = pvalloc;
 static char *(*volatile p_strdup)(const char *) = strdup;
+
+static int (*volatile p_mutex_lock)(pthread_mutex_t *) = pthread_mutex_lock;
+static int (*volatile p_mutex_trylock)(pthread_mutex_t *) = pthread_mutex_trylock;
+static int (*volatile p_mutex_timedlock)(pthread_mutex_t *,
+                                         const struct timespec *) = pthread_mutex_timedlock;
+static int (*volatile p_rwlock_rdlock)(pthread_rwlock_t *) = pthread_rwlock_rdlock;
+static int (*volatile p_rwlock_wrlock)(pthread_rwlock_t *) = pthread_rwlock_wrlock;
+static int (*volatile p_rwlock_tryrdlock)(pthread_rwlock_t *) = pthread_rwlock_tryrdlock;
+static int (*volatile p_rwlock_trywrlock)(pthread_rwlock_t *) = pthread_rwlock_trywrlock;
+static int (*volatile p_sem_wait)(sem_t *) = sem_wait;
+static int (*volatile p_sem_trywait)(sem_t *) = sem_trywait;
+static int (*volatile p_sem_timedwait)(sem_t *, const struct timespec *) = sem_timedwait;
 
 static size_t page_size(void)
 {
@@ -223,12 +236,14 @@ static void test_ps_guard_arm_other_thread_not_counted(void **state)
     assert_int_equal(c.n_allocs, 0);
     assert_int_equal(c.n_frees, 0);
     assert_int_equal(c.n_faults, 0);
+    assert_int_equal(c.n_locks, 1); /* its own sem_wait, not the worker's */
 
     assert_int_equal(sem_post(&w.go), 0); /* round 2: the worker armed itself */
     assert_int_equal(sem_wait(&w.done), 0);
     assert_int_equal(pthread_join(th, NULL), 0);
     assert_int_equal(w.own.n_allocs, 10);
     assert_int_equal(w.own.n_frees, 10);
+    assert_int_equal(w.own.n_locks, 0); /* armed after its sem_wait */
     assert_true(w.own.n_faults >= w.n_pages);
     assert_int_equal(sem_destroy(&w.go), 0);
     assert_int_equal(sem_destroy(&w.done), 0);
@@ -315,6 +330,124 @@ static void test_ps_guard_arm_pure_arithmetic_zero_counts(void **state)
     assert_int_equal(c.n_faults, 0);
 }
 
+/* ---- locks --------------------------------------------------------------- */
+
+static void test_ps_guard_counts_locks_true_without_sanitizers(void **state)
+{
+    (void)state;
+    assert_true(ps_guard_counts_locks());
+}
+
+/* Every lock entry point on the armed thread counts once per call, whether
+ * it gets the lock or not (a failed try is still a lock the loop asked for);
+ * unlocks and posts do not count. */
+static void test_ps_guard_arm_mutex_rwlock_sem_counted_exactly(void **state)
+{
+    (void)state;
+    static pthread_mutex_t mu = PTHREAD_MUTEX_INITIALIZER;
+    static pthread_rwlock_t rw = PTHREAD_RWLOCK_INITIALIZER;
+    sem_t sem;
+    assert_int_equal(sem_init(&sem, 0, 3), 0);
+    struct timespec soon;
+    assert_int_equal(clock_gettime(CLOCK_REALTIME, &soon), 0);
+    soon.tv_sec += 1;
+    ps_guard_counts_t c;
+    int rc[12];
+    ps_guard_arm();
+    rc[0] = p_mutex_lock(&mu);
+    rc[1] = p_mutex_trylock(&mu); /* held: EBUSY, still counted */
+    rc[2] = pthread_mutex_unlock(&mu);
+    rc[3] = p_mutex_timedlock(&mu, &soon);
+    rc[4] = pthread_mutex_unlock(&mu);
+    rc[5] = p_rwlock_rdlock(&rw);
+    rc[6] = p_rwlock_tryrdlock(&rw);
+    rc[7] = p_rwlock_trywrlock(&rw); /* read-held: EBUSY */
+    (void)pthread_rwlock_unlock(&rw);
+    (void)pthread_rwlock_unlock(&rw);
+    rc[8] = p_rwlock_wrlock(&rw);
+    (void)pthread_rwlock_unlock(&rw);
+    rc[9] = p_sem_wait(&sem);
+    rc[10] = p_sem_trywait(&sem);
+    rc[11] = p_sem_timedwait(&sem, &soon);
+    ps_guard_disarm(&c);
+    assert_int_equal(rc[0], 0);
+    assert_int_equal(rc[1], EBUSY);
+    assert_int_equal(rc[2], 0);
+    assert_int_equal(rc[3], 0);
+    assert_int_equal(rc[4], 0);
+    assert_int_equal(rc[5], 0);
+    assert_int_equal(rc[6], 0);
+    assert_int_equal(rc[7], EBUSY);
+    assert_int_equal(rc[8], 0);
+    assert_int_equal(rc[9], 0);
+    assert_int_equal(rc[10], 0);
+    assert_int_equal(rc[11], 0);
+    assert_int_equal(c.n_locks, 10);
+    assert_int_equal(c.n_allocs, 0);
+    assert_int_equal(sem_destroy(&sem), 0);
+}
+
+static void test_ps_guard_pause_or_disarm_mutex_not_counted(void **state)
+{
+    (void)state;
+    static pthread_mutex_t mu = PTHREAD_MUTEX_INITIALIZER;
+    ps_guard_counts_t c, mid;
+    ps_guard_arm();
+    assert_int_equal(p_mutex_lock(&mu), 0);
+    assert_int_equal(pthread_mutex_unlock(&mu), 0);
+    ps_guard_pause();
+    for (int i = 0; i < 3; i++) {
+        assert_int_equal(p_mutex_lock(&mu), 0);
+        assert_int_equal(pthread_mutex_unlock(&mu), 0);
+    }
+    ps_guard_resume();
+    ps_guard_read(&mid);
+    ps_guard_disarm(&c);
+    assert_int_equal(p_mutex_lock(&mu), 0); /* disarmed */
+    assert_int_equal(pthread_mutex_unlock(&mu), 0);
+    ps_guard_counts_t after;
+    ps_guard_read(&after);
+    assert_int_equal(mid.n_locks, 1);
+    assert_int_equal(c.n_locks, 1);
+    assert_int_equal(after.n_locks, 1); /* frozen at disarm */
+    ps_guard_arm();                     /* re-arm zeroes */
+    ps_guard_disarm(&c);
+    assert_int_equal(c.n_locks, 0);
+}
+
+typedef struct {
+    pthread_mutex_t *mu;
+    int n_ok;
+} locker_t;
+
+static void *locker(void *arg)
+{
+    locker_t *l = arg;
+    for (int i = 0; i < 100; i++)
+        if (p_mutex_lock(l->mu) == 0 && pthread_mutex_unlock(l->mu) == 0)
+            l->n_ok++;
+    return NULL;
+}
+
+/* Another (unarmed) thread's locks are not the armed thread's, even on the
+ * same mutex, and the armed thread's join is no lock either. */
+static void test_ps_guard_arm_mutex_on_other_thread_not_counted(void **state)
+{
+    (void)state;
+    static pthread_mutex_t mu = PTHREAD_MUTEX_INITIALIZER;
+    static locker_t l;
+    l = (locker_t){.mu = &mu};
+    pthread_t th;
+    assert_int_equal(pthread_create(&th, NULL, locker, &l), 0); /* may allocate: before arm */
+    ps_guard_counts_t c;
+    ps_guard_arm();
+    const int rc_join = pthread_join(th, NULL);
+    ps_guard_disarm(&c);
+    assert_int_equal(rc_join, 0);
+    assert_int_equal(l.n_ok, 100);
+    assert_int_equal(c.n_locks, 0);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -329,6 +462,10 @@ int main(void)
         cmocka_unit_test(test_ps_guard_arm_fresh_pages_faults_counted),
         cmocka_unit_test(test_ps_guard_pause_fresh_pages_faults_excluded),
         cmocka_unit_test(test_ps_guard_arm_pure_arithmetic_zero_counts),
+        cmocka_unit_test(test_ps_guard_counts_locks_true_without_sanitizers),
+        cmocka_unit_test(test_ps_guard_arm_mutex_rwlock_sem_counted_exactly),
+        cmocka_unit_test(test_ps_guard_pause_or_disarm_mutex_not_counted),
+        cmocka_unit_test(test_ps_guard_arm_mutex_on_other_thread_not_counted),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -8,6 +8,8 @@
 #include <stdint.h>
 #include <setjmp.h>
 #include <cmocka.h>
+
+#include <stdbool.h>
 #include <fcntl.h>
 
 #include <errno.h>
@@ -224,12 +226,71 @@ static void test_ps_rtsetup_prefault_maps_file_past_eof_skipped(void **state)
     assert_int_equal(unlink(path2), 0);
 }
 
-static void test_ps_rtsetup_prefault_stack_256k_no_crash(void **state)
+#define STACK_MAP_BYTES (1024u * 1024u)
+
+typedef struct {
+    bool is_prefault;
+    unsigned char *map; /**< the thread's stack mapping, fresh (never touched) */
+    size_t n_resident;  /**< of the 64 pages below the thread's frame, after */
+    size_t n_checked;
+} stack_probe_t;
+
+static void *stack_probe(void *arg)
+{
+    stack_probe_t *p = arg;
+    const size_t page = (size_t)sysconf(_SC_PAGESIZE);
+    if (p->is_prefault) {
+        ps_rtsetup_prefault_stack(256 * 1024);
+        ps_rtsetup_prefault_stack(1); /* tiny and zero sizes are fine too */
+        ps_rtsetup_prefault_stack(0);
+    }
+    volatile unsigned char here = 0;
+    /* 48 pages (192 KiB) from 2 pages below this frame: well inside the
+     * 256 KiB (64 pages) touched below the prefault's own frame. */
+    uintptr_t top = ((uintptr_t)&here & ~(uintptr_t)(page - 1)) - 2 * page;
+    uintptr_t lo = top - 47 * page;
+    if (lo < (uintptr_t)p->map)
+        return NULL;
+    unsigned char vec[48];
+    if (mincore((void *)lo, 48 * page, vec) != 0)
+        return NULL;
+    for (size_t i = 0; i < 48; i++)
+        p->n_resident += vec[i] & 1u;
+    p->n_checked = 48;
+    (void)here;
+    return NULL;
+}
+
+static void run_stack_probe(stack_probe_t *p)
+{
+    p->map = mmap(NULL, STACK_MAP_BYTES, PROT_READ | PROT_WRITE,
+                  MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);
+    assert_true(p->map != MAP_FAILED);
+    pthread_attr_t attr;
+    assert_int_equal(pthread_attr_init(&attr), 0);
+    assert_int_equal(pthread_attr_setstack(&attr, p->map, STACK_MAP_BYTES), 0);
+    pthread_t th;
+    assert_int_equal(pthread_create(&th, &attr, stack_probe, p), 0);
+    assert_int_equal(pthread_join(th, NULL), 0);
+    assert_int_equal(pthread_attr_destroy(&attr), 0);
+    assert_int_equal(munmap(p->map, STACK_MAP_BYTES), 0);
+    assert_int_equal(p->n_checked, 48);
+}
+
+/* On a fresh stack mapping the pages below the frame are not resident
+ * until something touches them; after ps_rtsetup_prefault_stack(256 KiB)
+ * all of them are (mincore), without the thread having used them. Skipped
+ * under mlockall(MCL_FUTURE), which would populate the mapping itself. */
+static void test_ps_rtsetup_prefault_stack_pages_below_frame_resident(void **state)
 {
     (void)state;
-    ps_rtsetup_prefault_stack(256 * 1024);
-    ps_rtsetup_prefault_stack(1);
-    ps_rtsetup_prefault_stack(0);
+    stack_probe_t without = {.is_prefault = false}, with = {.is_prefault = true};
+    run_stack_probe(&without);
+    if (without.n_resident == 48)
+        skip(); /* memory locked by this process: nothing to show */
+    run_stack_probe(&with);
+    assert_true(without.n_resident < 8);
+    assert_int_equal(with.n_resident, 48);
 }
 
 static void *stack_thread(void *arg)
@@ -262,7 +323,7 @@ int main(void)
         cmocka_unit_test(test_ps_rtsetup_thread_fifo_affinity_consistent),
         cmocka_unit_test(test_ps_rtsetup_prefault_maps_fresh_mapping_resident),
         cmocka_unit_test(test_ps_rtsetup_prefault_maps_file_past_eof_skipped),
-        cmocka_unit_test(test_ps_rtsetup_prefault_stack_256k_no_crash),
+        cmocka_unit_test(test_ps_rtsetup_prefault_stack_pages_below_frame_resident),
         cmocka_unit_test(test_ps_rtsetup_prefault_stack_other_thread_ok),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
