@@ -38,9 +38,10 @@ struct ps_plant {
     bool is_harness_engaged;
     double anchor_pos_m[3];
     double anchor_quat[4];
-    double *ext_force_n;    /**< nbody x 3, caller's pushes (world) */
-    unsigned char *is_foot; /**< nbody, 1 for bodies named *foot */
-    int n_bad_warnings;     /**< MuJoCo's bad-qpos/qvel/qacc count at last check */
+    double *ext_force_n;     /**< nbody x 3, caller's pushes (world) */
+    unsigned char *is_foot;  /**< nbody, 1 for robot bodies named *foot */
+    unsigned char *is_robot; /**< nbody, 1 for the root body and its descendants */
+    int n_bad_warnings;      /**< MuJoCo's bad-qpos/qvel/qacc count at last check */
 };
 
 /* MuJoCo's parser messages span lines; logs want one line. */
@@ -141,22 +142,50 @@ static int map_joints(ps_plant_t *p, const ps_robot_cfg_t *robot, char *err, siz
     return 0;
 }
 
+/* The robot's floating base is the free joint of body PS_PLANT_ROOT_BODY_NAME,
+ * wherever it sits in the model: other free bodies (crowd, props) may come
+ * before it. */
+static int find_root(ps_plant_t *p, char *err, size_t err_len)
+{
+    const mjModel *m = p->m;
+    const int b = mj_name2id(m, mjOBJ_BODY, PS_PLANT_ROOT_BODY_NAME);
+    if (b < 0) {
+        ps_err_format(err, err_len, "body '%s' (the robot's root) not found in the model",
+                      PS_PLANT_ROOT_BODY_NAME);
+        return -PS_ERR_CONFIG;
+    }
+    for (int k = 0; k < m->body_jntnum[b]; k++) {
+        const int j = m->body_jntadr[b] + k;
+        if (m->jnt_type[j] == mjJNT_FREE) {
+            p->root_body = b;
+            p->root_qpos_adr = m->jnt_qposadr[j];
+            p->root_dof_adr = m->jnt_dofadr[j];
+            return 0;
+        }
+    }
+    ps_err_format(err, err_len, "body '%s' has no free joint (floating base)",
+                  PS_PLANT_ROOT_BODY_NAME);
+    return -PS_ERR_CONFIG;
+}
+
+/* Bodies of the robot: the root and its descendants (parents come first in
+ * MuJoCo's body order, so one pass marks the whole subtree). */
+static void mark_robot_bodies(ps_plant_t *p)
+{
+    const mjModel *m = p->m;
+    for (int b = 0; b < m->nbody; b++)
+        p->is_robot[b] =
+            (b == p->root_body || (b > 0 && p->is_robot[m->body_parentid[b]])) ? 1u : 0u;
+}
+
 static int map_bodies(ps_plant_t *p, char *err, size_t err_len)
 {
     const mjModel *m = p->m;
     p->root_body = -1;
-    for (int j = 0; j < m->njnt; j++) {
-        if (m->jnt_type[j] == mjJNT_FREE) {
-            p->root_body = m->jnt_bodyid[j];
-            p->root_qpos_adr = m->jnt_qposadr[j];
-            p->root_dof_adr = m->jnt_dofadr[j];
-            break;
-        }
-    }
-    if (p->root_body < 0) {
-        ps_err_format(err, err_len, "model has no free joint (floating base)");
-        return -PS_ERR_CONFIG;
-    }
+    const int rc = find_root(p, err, err_len);
+    if (rc < 0)
+        return rc;
+    mark_robot_bodies(p);
     p->head_body = mj_name2id(m, mjOBJ_BODY, HEAD_BODY_NAME);
     if (p->head_body < 0) {
         ps_err_format(err, err_len, "body '%s' not found in the model", HEAD_BODY_NAME);
@@ -165,7 +194,8 @@ static int map_bodies(ps_plant_t *p, char *err, size_t err_len)
     int n_feet = 0;
     for (int b = 0; b < m->nbody; b++) {
         const char *name = mj_id2name(m, mjOBJ_BODY, b);
-        p->is_foot[b] = (name != NULL && ends_with(name, FOOT_NAME_SUFFIX)) ? 1u : 0u;
+        p->is_foot[b] =
+            (p->is_robot[b] && name != NULL && ends_with(name, FOOT_NAME_SUFFIX)) ? 1u : 0u;
         n_feet += p->is_foot[b];
     }
     if (n_feet == 0) {
@@ -234,7 +264,8 @@ int ps_plant_create(const char *model_path, const ps_robot_cfg_t *robot, ps_plan
     p->d = mj_makeData(p->m);
     p->ext_force_n = calloc((size_t)p->m->nbody * 3u, sizeof(double));
     p->is_foot = calloc((size_t)p->m->nbody, 1u);
-    if (p->d == NULL || p->ext_force_n == NULL || p->is_foot == NULL) {
+    p->is_robot = calloc((size_t)p->m->nbody, 1u);
+    if (p->d == NULL || p->ext_force_n == NULL || p->is_foot == NULL || p->is_robot == NULL) {
         ps_err_format(err, err_len, "%s: out of memory", model_path);
         rc = -ENOMEM;
         goto fail;
@@ -374,6 +405,9 @@ int ps_plant_step(ps_plant_t *p)
     return 0;
 }
 
+/* A fall: a contact between the floor (any geom of the world body) and a
+ * geom of one of the robot's own bodies other than the feet. Other bodies on
+ * the floor (crowd, props) are not the robot's fall. */
 static bool touches_floor_off_feet(const ps_plant_t *p)
 {
     const mjModel *m = p->m;
@@ -381,10 +415,9 @@ static bool touches_floor_off_feet(const ps_plant_t *p)
     for (int c = 0; c < d->ncon; c++) {
         const int b1 = m->geom_bodyid[d->contact[c].geom1];
         const int b2 = m->geom_bodyid[d->contact[c].geom2];
-        /* the floor is any geom of the world body */
-        if (b1 == 0 && b2 != 0 && !p->is_foot[b2])
+        if (b1 == 0 && p->is_robot[b2] && !p->is_foot[b2])
             return true;
-        if (b2 == 0 && b1 != 0 && !p->is_foot[b1])
+        if (b2 == 0 && p->is_robot[b1] && !p->is_foot[b1])
             return true;
     }
     return false;
@@ -422,5 +455,6 @@ void ps_plant_destroy(ps_plant_t *p)
         mj_deleteModel(p->m);
     free(p->ext_force_n);
     free(p->is_foot);
+    free(p->is_robot);
     free(p);
 }

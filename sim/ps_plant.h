@@ -7,11 +7,16 @@
  * Units: SI, double (MuJoCo's mjtNum). Joint arrays are indexed like the
  * robot file's joints. World frame: z up, robot initially facing +x.
  *
- * Model requirements (sim/models/ps1.xml meets them): one free joint (the
- * floating base, "pelvis"); per robot joint a hinge and a motor actuator of
- * the same name; a body "head"; foot bodies whose names end in "foot" (every
- * other geom touching a world-body geom counts as a fall); a site "imu" with a
- * gyro sensor "imu_gyro" and an accelerometer "imu_accel" on it.
+ * Model requirements (sim/models/ps1.xml meets them): a body named
+ * PS_PLANT_ROOT_BODY_NAME ("pelvis") with a free joint, the robot's floating
+ * base; the robot is that body and its descendants (its subtree), and the
+ * model may hold other bodies, free ones included, anywhere in worldbody
+ * (crowd, props); per robot joint a hinge and a motor actuator of the same
+ * name; a body "head"; foot bodies in the robot's subtree whose names end in
+ * "foot" (a contact between a world-body geom, the floor, and a geom of any
+ * other body of the robot's subtree counts as a fall; other bodies touching
+ * the floor do not); a site "imu" with a gyro sensor "imu_gyro" and an
+ * accelerometer "imu_accel" on it.
  *
  * Harness: spring 20 kN/m + 1.5 kN s/m and 1.5 kN m/rad + 100 N m s/rad on
  * the pelvis toward its pose at create (holds the limp robot within ~2 cm).
@@ -29,6 +34,9 @@
 
 #include "../rt/ps_config.h"
 
+/** Name of the robot's root body, whose free joint is the floating base. */
+#define PS_PLANT_ROOT_BODY_NAME "pelvis"
+
 typedef struct ps_plant ps_plant_t;
 
 typedef struct {
@@ -36,7 +44,7 @@ typedef struct {
     double com_m[3];      /**< whole-body centre of mass, world */
     double head_height_m; /**< world z of the head body */
     double pelvis_m[3];
-    bool is_fallen; /**< a body other than the feet touches the floor */
+    bool is_fallen; /**< a robot body (root subtree) other than the feet touches the floor */
 } ps_plant_truth_t;
 
 /** Load the model and place the robot in its stance (robot->joints[].stance_rad)
@@ -46,7 +54,8 @@ typedef struct {
  *       err holds a one-line message on failure
  *  @return 0 | -PS_ERR_PLANT (model fails to load; err has MuJoCo's message)
  *          | -PS_ERR_CONFIG (a robot joint or actuator is missing in the model,
- *            or the model lacks the free joint, head, feet or IMU; err names it)
+ *            or the model lacks the root body PS_PLANT_ROOT_BODY_NAME, its free
+ *            joint, head, feet or IMU; err names it)
  *          | -EINVAL (NULL argument) | -ENOMEM  @rt INIT */
 int ps_plant_create(const char *model_path, const ps_robot_cfg_t *robot, ps_plant_t **out,
                     char *err, size_t err_len);
@@ -83,7 +92,7 @@ int ps_plant_step(ps_plant_t *p);
 /** @post *out = current truth */
 void ps_plant_get_truth(const ps_plant_t *p, ps_plant_truth_t *out);
 
-/** Total mass of the floating robot (the free joint's subtree).
+/** Total mass of the floating robot (the root body's subtree).
  *  @pre created  @return mass  @units kg  @rt RT-SAFE O(1) */
 double ps_plant_total_mass_kg(const ps_plant_t *p);
 

@@ -63,12 +63,12 @@ typedef struct {
 
 /** Ground truth from the plant, for tests and the summary. */
 typedef struct {
-    double t_s;            /**< simulated time */
-    double com_m[3];       /**< whole-body CoM, world */
-    double head_height_m;  /**< height of the head/trunk top */
-    bool is_fallen;        /**< any body other than the feet touches the ground, or CoM low */
-    uint64_t n_steps;      /**< physics steps taken */
-    uint64_t n_cmd_frames; /**< command frames the emulated drivers consumed */
+    double t_s;                   /**< simulated time */
+    double com_m[3];              /**< whole-body CoM, world */
+    double head_height_m;         /**< height of the head/trunk top */
+    bool is_fallen;               /**< a robot body other than the feet touches the ground */
+    uint64_t n_steps;             /**< physics steps taken */
+    uint64_t n_cmd_frames;        /**< command frames the emulated drivers consumed */
     uint64_t n_cmd_out_of_limits; /**< commands outside the joint's configured limits */
     uint64_t n_bad_frames;        /**< frames the emulated devices rejected */
     double max_temp_c;
