@@ -489,6 +489,9 @@ static void finish_summary(ps_summary_t *sum)
         sum->truth_first_fall_t_s = t.first_fall_t_s;
         sum->truth_cmd_out_of_limits = t.n_cmd_out_of_limits;
         sum->truth_plant_overruns = t.n_plant_overruns;
+        sum->truth_plant_err = t.plant_err;
+        sum->truth_plant_err_reason = t.plant_err_reason;
+        sum->truth_plant_err_t_s = t.plant_err_t_s;
     }
 }
 
@@ -584,6 +587,15 @@ int main(int argc, char **argv)
         }
         if (g.opt.is_profile)
             rc = finish_profile(&sum) < 0 ? -EIO : rc;
+        if (sum.has_truth && sum.truth_plant_err != 0) {
+            /* the physics stopped: what the run shows after it is not a robot */
+            fprintf(stderr, "pushstep: simulation failed at t=%.4f s: %s\n",
+                    sum.truth_plant_err_t_s,
+                    sum.truth_plant_err_reason ? sum.truth_plant_err_reason
+                                               : ps_strerror(sum.truth_plant_err));
+            if (rc == 0)
+                rc = sum.truth_plant_err;
+        }
     }
     ps_trace_close(&g.trace);
     ps_app_deinit(&g.app);

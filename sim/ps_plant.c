@@ -42,6 +42,8 @@ struct ps_plant {
     unsigned char *is_foot;  /**< nbody, 1 for robot bodies named *foot */
     unsigned char *is_robot; /**< nbody, 1 for the root body and its descendants */
     int n_bad_warnings;      /**< MuJoCo's bad-qpos/qvel/qacc count at last check */
+    int n_full_warnings;     /**< MuJoCo's contact/constraint-full count at last check */
+    const char *err_reason;  /**< why the last failing step failed (static), NULL: none */
 };
 
 /* MuJoCo's parser messages span lines; logs want one line. */
@@ -67,6 +69,25 @@ static int bad_warning_count(const mjData *d)
 {
     return d->warning[mjWARN_BADQPOS].number + d->warning[mjWARN_BADQVEL].number +
            d->warning[mjWARN_BADQACC].number;
+}
+
+/* Contacts beyond nconmax and constraints beyond njmax are dropped by MuJoCo
+ * with only a warning: the physics is then wrong (a body sinks through the
+ * floor), so the plant reports them as errors. */
+static int full_warning_count(const mjData *d)
+{
+    return d->warning[mjWARN_CONTACTFULL].number + d->warning[mjWARN_CNSTRFULL].number;
+}
+
+/* Which warning is new since the contact-full and constraint-full counts
+ * were taken (else a bad-number warning). */
+static const char *warning_reason(const mjData *d, int contact_full, int cnstr_full)
+{
+    if (d->warning[mjWARN_CONTACTFULL].number != contact_full)
+        return "contacts beyond the model's nconmax were dropped (mjWARN_CONTACTFULL)";
+    if (d->warning[mjWARN_CNSTRFULL].number != cnstr_full)
+        return "constraints beyond the model's njmax were dropped (mjWARN_CNSTRFULL)";
+    return "bad qpos/qvel/qacc: MuJoCo reset the state (mjWARN_BADQPOS/QVEL/QACC)";
 }
 
 static bool ends_with(const char *s, const char *suffix)
@@ -278,8 +299,15 @@ int ps_plant_create(const char *model_path, const ps_robot_cfg_t *robot, ps_plan
         goto fail;
 
     place_in_stance(p, robot);
+    if (full_warning_count(p->d) != 0) {
+        ps_err_format(err, err_len, "%s: at the stance: %s", model_path,
+                      warning_reason(p->d, 0, 0));
+        rc = -PS_ERR_PLANT;
+        goto fail;
+    }
     p->is_harness_engaged = true;
     p->n_bad_warnings = bad_warning_count(p->d);
+    p->n_full_warnings = 0;
     *out = p;
     return 0;
 
@@ -387,27 +415,42 @@ int ps_plant_step(ps_plant_t *p)
             x[3 + k] += t[k];
         }
     }
+    const int contact_full = d->warning[mjWARN_CONTACTFULL].number;
+    const int cnstr_full = d->warning[mjWARN_CNSTRFULL].number;
     mj_step(m, d);
 
     /* MuJoCo resets the data itself when qpos/qvel/qacc go bad and only
-     * warns, so the warning counters catch what a NaN scan would miss. */
+     * warns, so the warning counters catch what a NaN scan would miss; it
+     * also only warns when it drops contacts or constraints. */
     const int n_bad = bad_warning_count(d);
-    const bool is_reset = n_bad != p->n_bad_warnings;
+    const int n_full = full_warning_count(d);
+    const bool is_warned = n_bad != p->n_bad_warnings || n_full != p->n_full_warnings;
     p->n_bad_warnings = n_bad;
-    if (is_reset)
+    p->n_full_warnings = n_full;
+    if (is_warned) {
+        p->err_reason = warning_reason(d, contact_full, cnstr_full);
         return -PS_ERR_PLANT;
-    for (int i = 0; i < m->nq; i++)
-        if (!isfinite(d->qpos[i]))
+    }
+    for (int i = 0; i < m->nq; i++) {
+        if (!isfinite(d->qpos[i])) {
+            p->err_reason = "non-finite qpos";
             return -PS_ERR_PLANT;
-    for (int i = 0; i < m->nv; i++)
-        if (!isfinite(d->qacc[i]))
+        }
+    }
+    for (int i = 0; i < m->nv; i++) {
+        if (!isfinite(d->qacc[i])) {
+            p->err_reason = "non-finite qacc";
             return -PS_ERR_PLANT;
+        }
+    }
     return 0;
 }
 
-/* A fall: a contact between the floor (any geom of the world body) and a
- * geom of one of the robot's own bodies other than the feet. Other bodies on
- * the floor (crowd, props) are not the robot's fall. */
+const char *ps_plant_error_reason(const ps_plant_t *p)
+{
+    return p->err_reason;
+}
+
 static bool touches_floor_off_feet(const ps_plant_t *p)
 {
     const mjModel *m = p->m;

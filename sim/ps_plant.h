@@ -24,7 +24,11 @@
  * Threads: one thread at a time (the plant thread, or the loop thread in
  * lockstep). Allocation: at create only (mj_loadXML, mj_makeData). The first
  * create installs a silent MuJoCo warning handler (if none is installed) so
- * the library never prints; instability is reported by ps_plant_step.
+ * the library never prints; what MuJoCo warns about is read from its warning
+ * counters instead and reported as a plant error (ps_plant_step, with a
+ * reason from ps_plant_error_reason): instability (bad qpos/qvel/qacc, which
+ * MuJoCo answers by resetting the state) and contacts or constraints dropped
+ * because the model's <size nconmax/njmax> is too small for them.
  */
 #ifndef PS_PLANT_H
 #define PS_PLANT_H
@@ -52,7 +56,9 @@ typedef struct {
  *  world origin facing +x, at rest; the harness is engaged.
  *  @pre robot->n_joints <= PS_MAX_JOINTS  @post *out set only on success;
  *       err holds a one-line message on failure
- *  @return 0 | -PS_ERR_PLANT (model fails to load; err has MuJoCo's message)
+ *  @return 0 | -PS_ERR_PLANT (model fails to load, err has MuJoCo's message;
+ *            or the stance already needs more contacts or constraints than
+ *            the model's nconmax/njmax, err says which)
  *          | -PS_ERR_CONFIG (a robot joint or actuator is missing in the model,
  *            or the model lacks the root body PS_PLANT_ROOT_BODY_NAME, its free
  *            joint, head, feet or IMU; err names it)
@@ -85,9 +91,18 @@ void ps_plant_set_external_force(ps_plant_t *p, int body_idx, const double force
  *  (like a gantry on a real robot). Engaged at create. */
 void ps_plant_set_harness(ps_plant_t *p, bool is_engaged);
 
-/** Advance physics by one timestep. @return 0 | -PS_ERR_PLANT (NaN/instability;
- *  MuJoCo has then reset the state, so stop stepping) */
+/** Advance physics by one timestep.
+ *  @return 0 | -PS_ERR_PLANT: NaN/instability (MuJoCo has then reset the
+ *          state), or contacts beyond nconmax / constraints beyond njmax were
+ *          dropped (mjWARN_CONTACTFULL / mjWARN_CNSTRFULL); the physics is
+ *          wrong from then on, so stop stepping. ps_plant_error_reason says
+ *          which. */
 int ps_plant_step(ps_plant_t *p);
+
+/** @return why the last failing ps_plant_step failed, a static string
+ *  (valid for the program's life), or NULL when no step has failed
+ *  @rt RT-SAFE O(1) */
+const char *ps_plant_error_reason(const ps_plant_t *p);
 
 /** @post *out = current truth */
 void ps_plant_get_truth(const ps_plant_t *p, ps_plant_truth_t *out);

@@ -64,6 +64,8 @@ struct ps_sim {
     uint64_t n_dev_tx_dropped;
     uint64_t n_overruns;
     int plant_err;
+    const char *plant_err_reason;
+    double plant_err_t_s;
 
     /* real-time plant thread */
     pthread_t thread;
@@ -197,9 +199,12 @@ static void substep(ps_sim_t *s, int64_t t_dev_ns, int64_t rel_ns)
     if (s->plant_err == 0) {
         ps_plant_set_torques(s->plant, s->tau_nm);
         const int rc = ps_plant_step(s->plant);
-        if (rc < 0)
-            s->plant_err = rc; /* NaN or instability: freeze physics, keep the devices */
-        else
+        if (rc < 0) {
+            /* NaN, instability, dropped contacts: freeze physics, keep the devices */
+            s->plant_err = rc;
+            s->plant_err_reason = ps_plant_error_reason(s->plant);
+            s->plant_err_t_s = ps_ns_to_s(rel_ns);
+        } else
             s->n_steps++;
     }
     s->plant_rel_ns += s->dt_ns;
@@ -237,6 +242,8 @@ static void update_truth(ps_sim_t *s)
         s->first_fall_t_s = pt.t_s;
     t.first_fall_t_s = s->first_fall_t_s;
     t.plant_err = s->plant_err;
+    t.plant_err_reason = s->plant_err_reason;
+    t.plant_err_t_s = s->plant_err_t_s;
     /* Held only for the copy, so the plant thread is never delayed for long. */
     pthread_mutex_lock(&s->truth_mu);
     s->truth = t;
@@ -392,6 +399,7 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
     s->period_ns = cfg->period_ns;
     atomic_init(&s->now_ns, 0);
     s->first_fall_t_s = -1.0;
+    s->plant_err_t_s = -1.0;
     atomic_init(&s->requests, 0u);
     atomic_init(&s->is_running, false);
     s->clock = (ps_clock_t){.now_ns = sim_now_ns, .sleep_until_ns = sim_sleep_until_ns, .ctx = s};

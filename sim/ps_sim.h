@@ -73,18 +73,21 @@ typedef struct {
     uint64_t n_bad_frames;        /**< frames the emulated devices rejected */
     double max_temp_c;
     /* Added by sim/ps_sim.c (documented extensions): */
-    double pelvis_m[3];         /**< pelvis origin, world */
-    double first_fall_t_s;      /**< simulated time since start of the first fall, -1: none */
-    uint64_t n_plant_overruns;  /**< real time: plant periods skipped because physics
-                                     fell behind the clock (0 in lockstep) */
-    uint64_t n_cmd_ignored;     /**< command frames received outside motor mode */
-    uint64_t n_reply_frames;    /**< replies the emulated drivers put on the buses */
-    uint64_t n_imu_samples;     /**< IMU samples sent (two frames each) */
-    uint64_t n_dev_tx_dropped;  /**< device frames refused by a full bus queue */
-    uint64_t n_unrouted_frames; /**< frames on a bus that no device's id matches
-                                     (also counted in n_bad_frames) */
-    int plant_err;              /**< 0, or the first ps_plant_step error; physics
-                                     stops advancing after it */
+    double pelvis_m[3];           /**< pelvis origin, world */
+    double first_fall_t_s;        /**< simulated time since start of the first fall, -1: none */
+    uint64_t n_plant_overruns;    /**< real time: plant periods skipped because physics
+                                       fell behind the clock (0 in lockstep) */
+    uint64_t n_cmd_ignored;       /**< command frames received outside motor mode */
+    uint64_t n_reply_frames;      /**< replies the emulated drivers put on the buses */
+    uint64_t n_imu_samples;       /**< IMU samples sent (two frames each) */
+    uint64_t n_dev_tx_dropped;    /**< device frames refused by a full bus queue */
+    uint64_t n_unrouted_frames;   /**< frames on a bus that no device's id matches
+                                       (also counted in n_bad_frames) */
+    int plant_err;                /**< 0, or the first ps_plant_step error; physics
+                                       stops advancing after it */
+    const char *plant_err_reason; /**< why (ps_plant_error_reason, a static
+                                       string), NULL when plant_err is 0 */
+    double plant_err_t_s;         /**< simulated time of plant_err, -1: none */
 } ps_sim_truth_t;
 
 /** Load the model, build devices and buses, apply the scenario's initial

@@ -14,6 +14,7 @@
 
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <time.h>
 #include <unistd.h>
@@ -361,6 +362,40 @@ static void test_lockstep_replies_and_imu_arrive_with_right_ids(void **state)
     ps_sim_destroy(sim);
 }
 
+/* A model too small for the robot's contacts: the plant's error and its
+ * reason reach the truth, and physics stops there. */
+static void test_lockstep_contacts_beyond_nconmax_plant_err_in_truth(void **state)
+{
+    fixture_t *fx = *state;
+    FILE *in = fopen(fx->model, "r");
+    assert_non_null(in);
+    static char text[128 * 1024];
+    const size_t n = fread(text, 1, sizeof text - 1, in);
+    text[n] = '\0';
+    (void)fclose(in);
+    char *sz = strstr(text, "nconmax=\"150\"");
+    assert_non_null(sz);
+    memcpy(sz, "nconmax=\"2\"  ", strlen("nconmax=\"150\"")); /* same length */
+    char path[] = "/tmp/test_sim_nconmax_XXXXXX.xml";
+    const int fd = mkstemps(path, 4);
+    assert_true(fd >= 0);
+    assert_int_equal(write(fd, text, n), (ssize_t)n);
+    assert_int_equal(close(fd), 0);
+    (void)snprintf(fx->model, sizeof fx->model, "%s", path);
+    ctl_t c;
+    ps_sim_t *sim = make_lockstep(fx, &c);
+    ctl_run_until(&c, 50 * PS_NS_PER_MS);
+    (void)unlink(path);
+    ps_sim_truth_t t;
+    ps_sim_get_truth(sim, &t);
+    assert_int_equal(t.plant_err, -PS_ERR_PLANT);
+    assert_non_null(t.plant_err_reason);
+    assert_non_null(strstr(t.plant_err_reason, "nconmax"));
+    assert_true(t.plant_err_t_s >= 0.0 && t.plant_err_t_s < 0.05);
+    assert_true(t.n_steps < 100); /* physics stopped at the error */
+    ps_sim_destroy(sim);
+}
+
 static void test_lockstep_stands_5s_after_harness_release(void **state)
 {
     fixture_t *fx = *state;
@@ -562,6 +597,7 @@ int main(void)
         cmocka_unit_test(test_create_null_cfg_einval),
         cmocka_unit_test_setup(test_get_actuator_bad_index_einval, setup),
         cmocka_unit_test_setup(test_lockstep_replies_and_imu_arrive_with_right_ids, setup),
+        cmocka_unit_test_setup(test_lockstep_contacts_beyond_nconmax_plant_err_in_truth, setup),
         cmocka_unit_test_setup(test_lockstep_stands_5s_after_harness_release, setup),
         cmocka_unit_test_setup(test_lockstep_estop_events_toggle_gpio, setup),
         cmocka_unit_test_setup(test_lockstep_requests_taken_once_at_their_times, setup),
