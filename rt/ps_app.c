@@ -76,6 +76,13 @@ void ps_app_request_start_at(ps_app_t *app, int64_t t_ns)
     atomic_store(&app->op.start_request_ns, t_ns);
 }
 
+/* For the plant's truth: the controller is in charge in RAMP and ACTIVE. */
+static bool is_loop_in_charge(void *ctx)
+{
+    const ps_sm_state_t st = ps_loop_get_state(ctx);
+    return st == PS_SM_RAMP || st == PS_SM_ACTIVE;
+}
+
 static int wire_sim(ps_app_t *app, ps_loop_cfg_t *lc, char *err, size_t len)
 {
     ps_sim_cfg_t sc = {
@@ -86,6 +93,8 @@ static int wire_sim(ps_app_t *app, ps_loop_cfg_t *lc, char *err, size_t len)
         .is_lockstep = app->is_lockstep,
         .period_ns = PS_NS_PER_S / app->robot.control.servo_hz,
         .joint_phase = app->plan.joint_phase,
+        .is_controller_active = is_loop_in_charge,
+        .is_controller_active_ctx = &app->loop,
     };
     int rc = ps_sim_create(&sc, &app->sim, err, len);
     if (rc < 0)

@@ -1,5 +1,6 @@
 #include "ps_sim.h"
 
+#include <math.h>
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdio.h>
@@ -66,6 +67,9 @@ struct ps_sim {
     int plant_err;
     const char *plant_err_reason;
     double plant_err_t_s;
+    bool (*is_controller_active)(void *ctx);
+    void *is_controller_active_ctx;
+    double min_com_active_m; /**< INFINITY until the controller is active */
 
     /* real-time plant thread */
     pthread_t thread;
@@ -238,6 +242,10 @@ static void update_truth(ps_sim_t *s)
     t.n_imu_samples = s->imu.n_samples;
     t.n_dev_tx_dropped = s->n_dev_tx_dropped;
     t.n_plant_overruns = s->n_overruns;
+    if (s->is_started && s->is_controller_active != NULL &&
+        s->is_controller_active(s->is_controller_active_ctx) && pt.com_m[2] < s->min_com_active_m)
+        s->min_com_active_m = pt.com_m[2];
+    t.min_com_height_active_m = isfinite(s->min_com_active_m) ? s->min_com_active_m : -1.0;
     if (pt.is_fallen && s->first_fall_t_s < 0)
         s->first_fall_t_s = pt.t_s;
     t.first_fall_t_s = s->first_fall_t_s;
@@ -400,6 +408,9 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
     atomic_init(&s->now_ns, 0);
     s->first_fall_t_s = -1.0;
     s->plant_err_t_s = -1.0;
+    s->min_com_active_m = INFINITY;
+    s->is_controller_active = cfg->is_controller_active;
+    s->is_controller_active_ctx = cfg->is_controller_active_ctx;
     atomic_init(&s->requests, 0u);
     atomic_init(&s->is_running, false);
     s->clock = (ps_clock_t){.now_ns = sim_now_ns, .sleep_until_ns = sim_sleep_until_ns, .ctx = s};

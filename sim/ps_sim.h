@@ -59,6 +59,13 @@ typedef struct {
     bool is_lockstep;
     int64_t period_ns;          /**< servo period; plant paced at this */
     const uint8_t *joint_phase; /**< from the bus plan (unused by devices; informative) */
+    /** Optional: whether the controller is in charge of the robot now (for the
+     *  runtime: state RAMP or ACTIVE). Called once per servo period on the
+     *  thread that steps the plant (the plant thread, or the loop thread inside
+     *  sleep_until in lockstep), so it must be RT-SAFE and thread-safe (an
+     *  atomic load). NULL: never active. */
+    bool (*is_controller_active)(void *ctx);
+    void *is_controller_active_ctx;
 } ps_sim_cfg_t;
 
 /** Ground truth from the plant, for tests and the summary. */
@@ -73,21 +80,25 @@ typedef struct {
     uint64_t n_bad_frames;        /**< frames the emulated devices rejected */
     double max_temp_c;
     /* Added by sim/ps_sim.c (documented extensions): */
-    double pelvis_m[3];           /**< pelvis origin, world */
-    double first_fall_t_s;        /**< simulated time since start of the first fall, -1: none */
-    uint64_t n_plant_overruns;    /**< real time: plant periods skipped because physics
-                                       fell behind the clock (0 in lockstep) */
-    uint64_t n_cmd_ignored;       /**< command frames received outside motor mode */
-    uint64_t n_reply_frames;      /**< replies the emulated drivers put on the buses */
-    uint64_t n_imu_samples;       /**< IMU samples sent (two frames each) */
-    uint64_t n_dev_tx_dropped;    /**< device frames refused by a full bus queue */
-    uint64_t n_unrouted_frames;   /**< frames on a bus that no device's id matches
-                                       (also counted in n_bad_frames) */
-    int plant_err;                /**< 0, or the first ps_plant_step error; physics
-                                       stops advancing after it */
-    const char *plant_err_reason; /**< why (ps_plant_error_reason, a static
-                                       string), NULL when plant_err is 0 */
-    double plant_err_t_s;         /**< simulated time of plant_err, -1: none */
+    double pelvis_m[3];             /**< pelvis origin, world */
+    double first_fall_t_s;          /**< simulated time since start of the first fall, -1: none */
+    uint64_t n_plant_overruns;      /**< real time: plant periods skipped because physics
+                                         fell behind the clock (0 in lockstep) */
+    uint64_t n_cmd_ignored;         /**< command frames received outside motor mode */
+    uint64_t n_reply_frames;        /**< replies the emulated drivers put on the buses */
+    uint64_t n_imu_samples;         /**< IMU samples sent (two frames each) */
+    uint64_t n_dev_tx_dropped;      /**< device frames refused by a full bus queue */
+    uint64_t n_unrouted_frames;     /**< frames on a bus that no device's id matches
+                                         (also counted in n_bad_frames) */
+    int plant_err;                  /**< 0, or the first ps_plant_step error; physics
+                                         stops advancing after it */
+    const char *plant_err_reason;   /**< why (ps_plant_error_reason, a static
+                                         string), NULL when plant_err is 0 */
+    double plant_err_t_s;           /**< simulated time of plant_err, -1: none */
+    double min_com_height_active_m; /**< lowest CoM z at the end of a servo period
+                                         while cfg.is_controller_active said so,
+                                         on simulated time (deterministic in
+                                         lockstep); -1: never active */
 } ps_sim_truth_t;
 
 /** Load the model, build devices and buses, apply the scenario's initial

@@ -8,6 +8,7 @@
 #include <cjson/cJSON.h>
 #include <setjmp.h>
 #include <stdarg.h>
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -157,6 +158,37 @@ static void test_cli_lockstep_shove_fall_detected_and_in_truth(void **state)
     assert_true(num(truth, "first_fall_t_s") > 5.0);
     cJSON_Delete(j);
     unlink(path);
+}
+
+/* Lockstep is deterministic for a scenario and seed: two runs of the shove
+ * give the same summary, apart from the wall-clock figures (wall_s and the
+ * stage latencies), the lowest CoM while in charge included. */
+static void test_cli_lockstep_same_scenario_twice_identical_summaries(void **state)
+{
+    (void)state;
+    char path[2][32];
+    cJSON *j[2];
+    for (int i = 0; i < 2; i++) {
+        make_temp_file(path[i], sizeof(path[i]));
+        char args[256];
+        snprintf(args, sizeof(args),
+                 "--lockstep --quiet --scenario scenarios/shove.yaml --summary %s", path[i]);
+        const int rc = run(args);
+        if (rc != 0)
+            fail_msg("run %d: exit %d:\n%s", i, rc, out);
+        j[i] = read_json(path[i]);
+        cJSON_DeleteItemFromObjectCaseSensitive(j[i], "wall_s");
+        cJSON_DeleteItemFromObjectCaseSensitive(j[i], "latency");
+        unlink(path[i]);
+    }
+    const double min_com = num(obj(j[0], "sim_truth"), "min_com_height_active_m");
+    assert_true(min_com > 0.1 && min_com < 0.7);
+    if (!cJSON_Compare(j[0], j[1], true)) {
+        char *a = cJSON_Print(j[0]), *b = cJSON_Print(j[1]);
+        fail_msg("summaries differ:\n%s\n---\n%s", a, b);
+    }
+    cJSON_Delete(j[0]);
+    cJSON_Delete(j[1]);
 }
 
 /* Names are looked up in $PUSHSTEP_DATA_DIR when set, and an error names
@@ -337,6 +369,7 @@ int main(void)
         cmocka_unit_test(test_cli_help_documents_every_option),
         cmocka_unit_test(test_cli_lockstep_summary_json_has_the_figures),
         cmocka_unit_test(test_cli_lockstep_shove_fall_detected_and_in_truth),
+        cmocka_unit_test(test_cli_lockstep_same_scenario_twice_identical_summaries),
         cmocka_unit_test(test_cli_data_dir_from_environment),
         cmocka_unit_test(test_cli_realtime_run_paced_in_real_time),
         cmocka_unit_test(test_cli_profile_writes_json_and_cyclictest_histogram),
