@@ -70,6 +70,7 @@ struct ps_sim {
     bool (*is_controller_active)(void *ctx);
     void *is_controller_active_ctx;
     double min_com_active_m; /**< INFINITY until the controller is active */
+    double tau_abs_sum_nm;   /**< sum of |torque| applied at the last physics step */
 
     /* real-time plant thread */
     pthread_t thread;
@@ -197,9 +198,16 @@ static void substep(ps_sim_t *s, int64_t t_dev_ns, int64_t rel_ns)
             send_dev(s, s->robot.imu.bus_idx, f, 2);
     }
 
-    for (uint32_t j = 0; j < s->robot.n_joints; j++)
-        s->tau_nm[j] =
+    /* The drives' power stage is fed through the watchdog relay: without the
+     * loop's heartbeat it gives no torque (the drives' logic keeps running). */
+    const bool is_power_on = ps_gpio_sim_update_relay(&s->gpio, t_dev_ns);
+    s->tau_abs_sum_nm = 0.0;
+    for (uint32_t j = 0; j < s->robot.n_joints; j++) {
+        const double tau =
             ps_devices_step_actuator(&s->act[j], s->q_rad[j], s->qd_rad_s[j], t_dev_ns, s->dt_s);
+        s->tau_nm[j] = is_power_on ? tau : 0.0;
+        s->tau_abs_sum_nm += fabs(s->tau_nm[j]);
+    }
     if (s->plant_err == 0) {
         ps_plant_set_torques(s->plant, s->tau_nm);
         const int rc = ps_plant_step(s->plant);
@@ -250,6 +258,9 @@ static void update_truth(ps_sim_t *s)
         s->first_fall_t_s = pt.t_s;
     t.first_fall_t_s = s->first_fall_t_s;
     t.plant_err = s->plant_err;
+    t.is_drive_power_on = ps_gpio_sim_is_power_on(&s->gpio);
+    t.n_power_cuts = s->gpio.n_power_cuts;
+    t.tau_abs_sum_nm = s->tau_abs_sum_nm;
     t.plant_err_reason = s->plant_err_reason;
     t.plant_err_t_s = s->plant_err_t_s;
     /* Held only for the copy, so the plant thread is never delayed for long. */

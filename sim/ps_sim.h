@@ -24,6 +24,13 @@
  * (sim/ps_devices.h). They go limp with COMMS_LOST after 100 ms without a
  * command in motor mode.
  *
+ * Drive power: the drives' power stage is fed through an emulated watchdog
+ * relay on the GPIO heartbeat (sim/ps_gpio_sim.h, drivers/ps_gpio.h): at each
+ * physics step, unless the heartbeat changed level within the last
+ * PS_GPIO_SIM_RELAY_TIMEOUT_NS (10 ms), every joint gets zero torque, like a
+ * cut power stage (the drives' logic stays powered: they still decode
+ * commands and answer). Power is off until the loop's first heartbeat edge.
+ *
  * Timing: each servo period runs the model's physics steps (the model's
  * timestep must divide the period). At each physics step the devices take the
  * frames whose end-of-frame time has come, reply, and set torques; the IMU
@@ -95,6 +102,10 @@ typedef struct {
     const char *plant_err_reason;   /**< why (ps_plant_error_reason, a static
                                          string), NULL when plant_err is 0 */
     double plant_err_t_s;           /**< simulated time of plant_err, -1: none */
+    bool is_drive_power_on;         /**< the watchdog relay feeds the drives now */
+    uint64_t n_power_cuts;          /**< times the relay dropped the drives' power */
+    double tau_abs_sum_nm;          /**< sum of |torque| applied to the plant at the
+                                         last physics step (0 with power off) */
     double min_com_height_active_m; /**< lowest CoM z at the end of a servo period
                                          while cfg.is_controller_active said so,
                                          on simulated time (deterministic in
