@@ -478,6 +478,7 @@ static void finish_summary(ps_summary_t *sum)
         sum->truth_plant_overruns = t.n_plant_overruns;
         sum->truth_min_com_height_active_m =
             t.min_com_height_active_m >= 0 ? t.min_com_height_active_m : 0.0;
+        sum->truth_plant_max_lag_ms = (double)t.max_plant_lag_ns * 1e-6;
         sum->truth_plant_err = t.plant_err;
         sum->truth_plant_err_reason = t.plant_err_reason;
         sum->truth_plant_err_t_s = t.plant_err_t_s;
@@ -576,6 +577,15 @@ int main(int argc, char **argv)
         }
         if (g.opt.is_profile)
             rc = finish_profile(&sum) < 0 ? -EIO : rc;
+        if (g.opt.is_rt_required && sum.has_truth &&
+            (sum.truth_plant_overruns > 0 || sum.truth_plant_max_lag_ms > 0)) {
+            fprintf(stderr,
+                    "pushstep: --require-rt: the simulation fell behind real time (%llu plant "
+                    "periods skipped, up to %.1f ms behind)\n",
+                    (unsigned long long)sum.truth_plant_overruns, sum.truth_plant_max_lag_ms);
+            if (rc == 0)
+                rc = -PS_ERR_RT_UNAVAILABLE;
+        }
         if (sum.has_truth && sum.truth_plant_err != 0) {
             /* the physics stopped: what the run shows after it is not a robot */
             fprintf(stderr, "pushstep: simulation failed at t=%.4f s: %s\n",

@@ -64,6 +64,8 @@ struct ps_sim {
     uint64_t n_unrouted;
     uint64_t n_dev_tx_dropped;
     uint64_t n_overruns;
+    int64_t max_lag_ns; /**< real time: most simulated time lagged the wall clock */
+    int64_t slow_ns;    /**< test knob PUSHSTEP_SIM_SLOW_NS: extra sleep per period */
     int plant_err;
     const char *plant_err_reason;
     double plant_err_t_s;
@@ -250,6 +252,7 @@ static void update_truth(ps_sim_t *s)
     t.n_imu_samples = s->imu.n_samples;
     t.n_dev_tx_dropped = s->n_dev_tx_dropped;
     t.n_plant_overruns = s->n_overruns;
+    t.max_plant_lag_ns = s->max_lag_ns;
     if (s->is_started && s->is_controller_active != NULL &&
         s->is_controller_active(s->is_controller_active_ctx) && pt.com_m[2] < s->min_com_active_m)
         s->min_com_active_m = pt.com_m[2];
@@ -325,9 +328,16 @@ static void *plant_thread(void *arg)
             break;
         for (int64_t i = 0; i < n_sub; i++)
             substep(s, next_ns + i * s->dt_ns, s->plant_rel_ns);
-        update_truth(s);
+        if (s->slow_ns > 0)
+            sleep_abs(ps_clock_now_ns(mono) + s->slow_ns); /* test knob: a slow plant */
         next_ns += s->period_ns;
         const int64_t now = ps_clock_now_ns(mono);
+        /* Simulated time should reach start + plant_rel_ns by the next slot;
+         * skipped periods leave it behind the wall clock for good. */
+        const int64_t lag = now - (s->start_ns + s->period_ns / 2 + s->plant_rel_ns);
+        if (lag > s->max_lag_ns)
+            s->max_lag_ns = lag;
+        update_truth(s);
         if (now > next_ns) {
             /* Physics slower than real time: skip to the next future slot of
              * the grid, like hardware that misses its tick, and count it. */
@@ -419,6 +429,10 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
     atomic_init(&s->now_ns, 0);
     s->first_fall_t_s = -1.0;
     s->plant_err_t_s = -1.0;
+    const char *slow = getenv("PUSHSTEP_SIM_SLOW_NS");
+    s->slow_ns = slow != NULL ? strtoll(slow, NULL, 10) : 0;
+    if (s->slow_ns < 0 || s->slow_ns > PS_NS_PER_S)
+        s->slow_ns = 0;
     s->min_com_active_m = INFINITY;
     s->is_controller_active = cfg->is_controller_active;
     s->is_controller_active_ctx = cfg->is_controller_active_ctx;

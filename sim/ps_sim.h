@@ -40,6 +40,17 @@
  * thread runs the period at start + period/2 + k period (half a period after
  * the loop's tick) so commands sent early in a tick act in the same period.
  *
+ * Falling behind (real time): when the physics of a period takes longer than
+ * the period, the plant thread skips slots of its grid (n_plant_overruns)
+ * while the devices keep stamping frames with the wall clock, so simulated
+ * time lags the wall clock from then on (max_plant_lag_ns); the run is then
+ * not faithful, and pushstep --require-rt fails it.
+ *
+ * Test knob: the environment variable PUSHSTEP_SIM_SLOW_NS (read at create,
+ * real time only, 0 to 1e9) makes the plant thread sleep that many ns after
+ * each period's physics, to emulate a plant too slow for real time. Unset
+ * in normal use.
+ *
  * Threads: create/destroy on the main thread; ports used by the loop thread;
  * the plant thread is internal. Allocation: all at create.
  */
@@ -91,6 +102,9 @@ typedef struct {
     double first_fall_t_s;          /**< simulated time since start of the first fall, -1: none */
     uint64_t n_plant_overruns;      /**< real time: plant periods skipped because physics
                                          fell behind the clock (0 in lockstep) */
+    int64_t max_plant_lag_ns;       /**< real time: most that simulated time lagged
+                                         the wall clock at the end of a period (0
+                                         when never behind; 0 in lockstep) */
     uint64_t n_cmd_ignored;         /**< command frames received outside motor mode */
     uint64_t n_reply_frames;        /**< replies the emulated drivers put on the buses */
     uint64_t n_imu_samples;         /**< IMU samples sent (two frames each) */

@@ -225,6 +225,38 @@ static void test_cli_realtime_run_paced_in_real_time(void **state)
     unlink(path);
 }
 
+/* A plant too slow for real time (test knob PUSHSTEP_SIM_SLOW_NS: 1.5 ms
+ * of sleep per 1 ms period): the summary counts the skipped periods and the
+ * lag and warns; with --require-rt the run fails with a message. */
+static void test_cli_realtime_slow_plant_require_rt_fatal(void **state)
+{
+    (void)state;
+    char path[32];
+    make_temp_file(path, sizeof(path));
+    char args[256];
+    assert_int_equal(setenv("PUSHSTEP_SIM_SLOW_NS", "1500000", 1), 0);
+    snprintf(args, sizeof(args), "--duration 1 --quiet --summary %s", path);
+    int rc = run(args);
+    if (rc != 0) {
+        assert_int_equal(unsetenv("PUSHSTEP_SIM_SLOW_NS"), 0);
+        fail_msg("exit %d:\n%s", rc, out);
+    }
+    assert_non_null(strstr(out, "WARNING: the simulation fell behind real time"));
+    cJSON *j = read_json(path);
+    const cJSON *truth = obj(j, "sim_truth");
+    assert_true(num(truth, "plant_overruns") > 0);
+    assert_true(num(truth, "plant_max_lag_ms") > 1.0);
+    assert_true(cJSON_IsTrue(obj(truth, "fell_behind_real_time")));
+    cJSON_Delete(j);
+    unlink(path);
+    rc = run("--duration 1 --quiet --require-rt");
+    assert_int_equal(unsetenv("PUSHSTEP_SIM_SLOW_NS"), 0);
+    if (rc == 1 && strstr(out, "fell behind") == NULL && strstr(out, "--require-rt") != NULL)
+        skip(); /* no real-time privileges here: refused before the run */
+    assert_int_equal(rc, 1);
+    assert_non_null(strstr(out, "--require-rt: the simulation fell behind real time"));
+}
+
 /* `pushstep profile`: profile.json with the conditions, and wakeup.hist in
  * cyclictest's format whose counts add up to the ticks measured. */
 static void test_cli_profile_writes_json_and_cyclictest_histogram(void **state)
@@ -372,6 +404,7 @@ int main(void)
         cmocka_unit_test(test_cli_lockstep_same_scenario_twice_identical_summaries),
         cmocka_unit_test(test_cli_data_dir_from_environment),
         cmocka_unit_test(test_cli_realtime_run_paced_in_real_time),
+        cmocka_unit_test(test_cli_realtime_slow_plant_require_rt_fatal),
         cmocka_unit_test(test_cli_profile_writes_json_and_cyclictest_histogram),
         cmocka_unit_test(test_cli_profile_without_rt_privileges_says_so),
         cmocka_unit_test(test_cli_bad_option_exit_2),
