@@ -62,8 +62,9 @@ int ps_act_check_cfg(const ps_act_cfg_t *a, char *err, size_t err_len)
         return -EINVAL;
     }
     if (a->can_id == 0u || a->can_id > p->id_max || a->reply_id > p->id_max) {
-        ps_err_format(err, err_len, "can_id/reply_id: 0x%x/0x%x outside [0x1, 0x%x] for protocol %s",
-                      a->can_id, a->reply_id, p->id_max, p->name);
+        ps_err_format(err, err_len,
+                      "can_id/reply_id: 0x%x/0x%x outside [0x1, 0x%x] for protocol %s", a->can_id,
+                      a->reply_id, p->id_max, p->name);
         return -EINVAL;
     }
     return 0;
@@ -181,8 +182,8 @@ int ps_act_decode_reply(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_act_m
 const char *ps_act_fault_name(uint32_t bits)
 {
     static const char *const NAMES[] = {
-        "OVERVOLTAGE",   "UNDERVOLTAGE", "OVERCURRENT", "DRIVER_OVERTEMP", "MOTOR_OVERTEMP",
-        "COMMS_LOST",    "OVERLOAD",     "ENCODER",     "OTHER",
+        "OVERVOLTAGE", "UNDERVOLTAGE", "OVERCURRENT", "DRIVER_OVERTEMP", "MOTOR_OVERTEMP",
+        "COMMS_LOST",  "OVERLOAD",     "ENCODER",     "OTHER",
     };
     if (bits == 0u)
         return "none";

@@ -124,14 +124,14 @@ typedef struct {
 /** A protocol: pure encode/decode on the motor side. Every function is RT-SAFE,
  *  O(1), and writes its outputs only on success. */
 typedef struct {
-    const char *name;   /**< as written in robot files, e.g. "mit" */
-    uint8_t id_bits;    /**< 11 or 29 */
-    bool is_fd;         /**< needs a CAN FD bus */
-    uint8_t cmd_len;    /**< payload bytes of a command frame */
-    uint8_t reply_len;  /**< payload bytes of a reply frame */
-    uint8_t n_cmd;      /**< frames per command cycle, 1..PS_ACT_MAX_FRAMES */
-    uint8_t n_reply;    /**< reply frames per command cycle */
-    uint32_t id_max;    /**< largest valid drive id (can_id and reply_id) */
+    const char *name;            /**< as written in robot files, e.g. "mit" */
+    uint8_t id_bits;             /**< 11 or 29 */
+    bool is_fd;                  /**< needs a CAN FD bus */
+    uint8_t cmd_len;             /**< payload bytes of a command frame */
+    uint8_t reply_len;           /**< payload bytes of a reply frame */
+    uint8_t n_cmd;               /**< frames per command cycle, 1..PS_ACT_MAX_FRAMES */
+    uint8_t n_reply;             /**< reply frames per command cycle */
+    uint32_t id_max;             /**< largest valid drive id (can_id and reply_id) */
     uint32_t resolution_bits[5]; /**< bits of q, qd, kp, kd, tau_ff in a command */
 
     /** Host side. @return frames written (1..max) | -PS_ERR_LIMIT a field outside
@@ -183,7 +183,8 @@ void ps_act_joint_lsb(const ps_act_cfg_t *a, float out_lsb[5]);
 /** Joint command -> motor command (gear, direction, zero offset).  @rt RT-SAFE, pure */
 void ps_act_cmd_to_motor(const ps_act_cfg_t *a, const ps_act_cmd_t *joint, ps_act_cmd_t *out_motor);
 /** Motor command -> joint command (the emulated drive's view).  @rt RT-SAFE, pure */
-void ps_act_cmd_from_motor(const ps_act_cfg_t *a, const ps_act_cmd_t *motor, ps_act_cmd_t *out_joint);
+void ps_act_cmd_from_motor(const ps_act_cfg_t *a, const ps_act_cmd_t *motor,
+                           ps_act_cmd_t *out_joint);
 /** Motor measurement -> joint measurement; fault bits, temperature and t_ns copied.
  *  @rt RT-SAFE, pure */
 void ps_act_meas_from_motor(const ps_act_cfg_t *a, const ps_act_meas_t *motor,

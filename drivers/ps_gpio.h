@@ -1,10 +1,26 @@
 /*
- * ps_gpio: the GPIO port interface (e-stop input, enable output, status LED).
+ * ps_gpio: the GPIO port interface (e-stop input, heartbeat output to the
+ * drives' power relay, status LED).
  *
  * Implementations: drivers/ps_gpio_gpiod.c (libgpiod v1.6, later),
- * sim/ps_gpio_sim.c, tests/fakes/ps_gpio_fake.c. The e-stop input is
- * active when pressed; implementations debounce nothing, the state machine
- * latches e-stop on the first sample that reads pressed.
+ * sim/ps_gpio_sim.c, tests/fakes/ps_gpio_fake.c.
+ *
+ * E-stop: active when pressed. The loop reads it once a tick, so a press
+ * shorter than a tick would be lost if read as a level: read_estop reports
+ * "pressed since the last read", latched inside the implementation (an edge
+ * interrupt or an edge event on real hardware): true if the input is pressed
+ * now OR was pressed at any time since the previous read_estop call (the
+ * first call: since open). Implementations debounce nothing; the state
+ * machine latches e-stop on the first read that says pressed.
+ *
+ * Heartbeat: the drives' power stage is fed through an external watchdog
+ * relay, not switched by a level: the relay keeps power on only while the
+ * heartbeat output changed level within the last PS_GPIO_HEARTBEAT_TIMEOUT_NS,
+ * and drops it otherwise (at power-up too, until the first change). The loop
+ * toggles it every tick while it wants the drives powered; to cut power it
+ * holds the level still (in ESTOP, at the end of a run), and a loop that stops
+ * ticking (hung, crashed, killed) cuts power the same way. A steady level,
+ * high or low, proves nothing and keeps no power on.
  *
  * Threads: loop thread only. Allocation: none.
  */
@@ -26,16 +42,23 @@ typedef struct {
     uint32_t led_line;
 } ps_gpio_cfg_t;
 
+/** The watchdog relay drops the drives' power when the heartbeat has not
+ *  changed level for this long: 10 servo periods at 1 kHz. */
+#define PS_GPIO_HEARTBEAT_TIMEOUT_NS 10000000LL
+
 typedef enum {
     PS_GPIO_LED_OFF = 0,
     PS_GPIO_LED_ON,
 } ps_gpio_led_t;
 
 typedef struct {
-    /** @post *out_pressed written on success  @return 0 | -errno  @rt RT-SAFE */
-    int (*read_estop)(void *ctx, bool *out_pressed);
-    /** Drive the power-stage enable output. @return 0 | -errno  @rt RT-SAFE */
-    int (*set_enable)(void *ctx, bool is_enabled);
+    /** @post *out_pressed_since_last_read written on success: pressed now or
+     *  at any time since the previous call; the latch is cleared
+     *  @return 0 | -errno (latch kept)  @rt RT-SAFE */
+    int (*read_estop)(void *ctx, bool *out_pressed_since_last_read);
+    /** Drive the heartbeat output to `level`; the relay sees a beat only when
+     *  the level changes. @return 0 | -errno  @rt RT-SAFE */
+    int (*set_heartbeat)(void *ctx, bool level);
     /** @return 0 | -errno  @rt RT-SAFE */
     int (*set_led)(void *ctx, ps_gpio_led_t led);
     /** Release lines. Safe to call twice. @rt INIT */
@@ -47,13 +70,13 @@ typedef struct {
     void *ctx;
 } ps_gpio_port_t;
 
-static inline int ps_gpio_read_estop(const ps_gpio_port_t *p, bool *out_pressed)
+static inline int ps_gpio_read_estop(const ps_gpio_port_t *p, bool *out_pressed_since_last_read)
 {
-    return p->ops->read_estop(p->ctx, out_pressed);
+    return p->ops->read_estop(p->ctx, out_pressed_since_last_read);
 }
-static inline int ps_gpio_set_enable(const ps_gpio_port_t *p, bool is_enabled)
+static inline int ps_gpio_set_heartbeat(const ps_gpio_port_t *p, bool level)
 {
-    return p->ops->set_enable(p->ctx, is_enabled);
+    return p->ops->set_heartbeat(p->ctx, level);
 }
 static inline int ps_gpio_set_led(const ps_gpio_port_t *p, ps_gpio_led_t led)
 {

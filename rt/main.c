@@ -373,27 +373,14 @@ static int64_t wall_ns(void)
     return (int64_t)ts.tv_sec * PS_NS_PER_S + ts.tv_nsec;
 }
 
-/* The lowest CoM while the controller is in charge, sampled from the main
- * thread every TRUTH_POLL_NS of wall time (informative; whether the robot
- * fell is decided exactly at the end from the plant's fall time). */
+/* Wait for the loop thread to end. (The lowest CoM while the controller is in
+ * charge is recorded by the plant on simulated time, ps_sim_truth_t.) */
 static void watch_truth(ps_summary_t *sum)
 {
+    (void)sum;
     const struct timespec poll = {0, TRUTH_POLL_NS};
-    sum->truth_min_com_height_active_m = 1e9;
-    while (!atomic_load(&g.is_loop_done)) {
+    while (!atomic_load(&g.is_loop_done))
         nanosleep(&poll, NULL);
-        if (g.app.sim == NULL)
-            continue;
-        ps_sm_state_t st = ps_loop_get_state(&g.app.loop);
-        if (st != PS_SM_ACTIVE)
-            continue;
-        ps_sim_truth_t t;
-        ps_sim_get_truth(g.app.sim, &t);
-        if (t.com_m[2] < sum->truth_min_com_height_active_m)
-            sum->truth_min_com_height_active_m = t.com_m[2];
-    }
-    if (sum->truth_min_com_height_active_m > 1e8)
-        sum->truth_min_com_height_active_m = 0;
 }
 
 static int run_loop(ps_summary_t *sum)
@@ -504,6 +491,12 @@ static void finish_summary(ps_summary_t *sum)
         sum->truth_first_fall_t_s = t.first_fall_t_s;
         sum->truth_cmd_out_of_limits = t.n_cmd_out_of_limits;
         sum->truth_plant_overruns = t.n_plant_overruns;
+        sum->truth_min_com_height_active_m =
+            t.min_com_height_active_m >= 0 ? t.min_com_height_active_m : 0.0;
+        sum->truth_plant_max_lag_ms = (double)t.max_plant_lag_ns * 1e-6;
+        sum->truth_plant_err = t.plant_err;
+        sum->truth_plant_err_reason = t.plant_err_reason;
+        sum->truth_plant_err_t_s = t.plant_err_t_s;
     }
 }
 
@@ -606,6 +599,24 @@ int main(int argc, char **argv)
         }
         if (g.opt.is_profile)
             rc = finish_profile(&sum) < 0 ? -EIO : rc;
+        if (g.opt.is_rt_required && sum.has_truth &&
+            (sum.truth_plant_overruns > 0 || sum.truth_plant_max_lag_ms > 0)) {
+            fprintf(stderr,
+                    "pushstep: --require-rt: the simulation fell behind real time (%llu plant "
+                    "periods skipped, up to %.1f ms behind)\n",
+                    (unsigned long long)sum.truth_plant_overruns, sum.truth_plant_max_lag_ms);
+            if (rc == 0)
+                rc = -PS_ERR_RT_UNAVAILABLE;
+        }
+        if (sum.has_truth && sum.truth_plant_err != 0) {
+            /* the physics stopped: what the run shows after it is not a robot */
+            fprintf(stderr, "pushstep: simulation failed at t=%.4f s: %s\n",
+                    sum.truth_plant_err_t_s,
+                    sum.truth_plant_err_reason ? sum.truth_plant_err_reason
+                                               : ps_strerror(sum.truth_plant_err));
+            if (rc == 0)
+                rc = sum.truth_plant_err;
+        }
     }
     ps_trace_close(&g.trace);
     ps_app_deinit(&g.app);

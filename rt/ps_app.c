@@ -171,13 +171,21 @@ static void hook_resume_guard(void *ctx)
     ps_guard_resume();
 }
 
-ps_sim_hooks_t ps_app_sim_hooks(void)
+/* For the plant's truth: the controller is in charge in RAMP and ACTIVE. */
+static bool is_loop_in_charge(void *ctx)
+{
+    const ps_sm_state_t st = ps_loop_get_state(ctx);
+    return st == PS_SM_RAMP || st == PS_SM_ACTIVE;
+}
+
+ps_sim_hooks_t ps_app_sim_hooks(ps_loop_t *loop)
 {
     const ps_sim_hooks_t h = {
-        .ctx = NULL,
+        .ctx = loop,
         .setup_thread = hook_setup_thread,
         .pause_guard = hook_pause_guard,
         .resume_guard = hook_resume_guard,
+        .is_controller_active = loop != NULL ? is_loop_in_charge : NULL,
     };
     return h;
 }
@@ -193,7 +201,7 @@ static int wire_sim(ps_app_t *app, ps_loop_cfg_t *lc, char *err, size_t len)
         .model_path = app->model_path,
         .is_lockstep = app->is_lockstep,
         .period_ns = PS_NS_PER_S / app->robot.control.servo_hz,
-        .hooks = ps_app_sim_hooks(),
+        .hooks = ps_app_sim_hooks(&app->loop),
     };
     int rc = ps_sim_create(&sc, &app->sim, err, len);
     if (rc < 0)

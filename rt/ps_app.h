@@ -79,8 +79,10 @@ void ps_app_sim_board(const ps_board_cfg_t *b, ps_sim_board_t *out);
 void ps_app_sim_robot(const ps_robot_cfg_t *r, ps_sim_robot_t *out);
 
 /** Hooks the simulation calls back into the application: RT setup of the
- *  plant thread, the allocation guard's pause.  @rt INIT */
-ps_sim_hooks_t ps_app_sim_hooks(void);
+ *  plant thread, the allocation guard's pause, whether the loop is in charge
+ *  (RAMP or ACTIVE; never when loop is NULL).  @pre loop outlives the sim
+ *  @rt INIT */
+ps_sim_hooks_t ps_app_sim_hooks(ps_loop_t *loop);
 
 /** Request START at an absolute loop time (real boards without an operator).
  *  @rt any thread */

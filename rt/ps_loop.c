@@ -585,8 +585,12 @@ static void stage_write(ps_loop_t *loop)
     int64_t half = BLINK_HALF_PERIOD_NS[loop->state];
     if (half > 0)
         led = ((loop->t_deadline_ns / half) & 1) ? PS_GPIO_LED_ON : PS_GPIO_LED_OFF;
-    if (ps_gpio_set_enable(&loop->cfg.gpio, loop->state != PS_SM_ESTOP) < 0 ||
-        ps_gpio_set_led(&loop->cfg.gpio, led) < 0)
+    /* Heartbeat to the power relay: a new level every tick; held still in
+     * ESTOP so the relay drops the drives' power (drivers/ps_gpio.h). */
+    int hb_rc = loop->state == PS_SM_ESTOP
+                    ? 0
+                    : ps_gpio_set_heartbeat(&loop->cfg.gpio, (loop->counters.n_ticks & 1u) != 0);
+    if (hb_rc < 0 || ps_gpio_set_led(&loop->cfg.gpio, led) < 0)
         loop->counters.n_gpio_errors++;
 }
 
@@ -718,8 +722,8 @@ void ps_loop_release_drives(ps_loop_t *loop)
     }
     for (uint32_t j = 0; j < r->n_joints; j++)
         loop->is_entered[j] = false;
-    if (ps_gpio_set_enable(&loop->cfg.gpio, false) < 0 ||
-        ps_gpio_set_led(&loop->cfg.gpio, PS_GPIO_LED_OFF) < 0)
+    /* The heartbeat is not written again: held still, the relay cuts power. */
+    if (ps_gpio_set_led(&loop->cfg.gpio, PS_GPIO_LED_OFF) < 0)
         loop->counters.n_gpio_errors++;
 }
 

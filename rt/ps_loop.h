@@ -5,7 +5,7 @@
  * samples, sample the e-stop input) -> ESTIMATE -> POLICY (every
  * servo_hz / policy_hz ticks) -> safety state machine -> SERVO (a neutral joint
  * command for every joint due on this tick per the bus plan) -> WRITE (one
- * batch per bus, enable output, LED) -> latency accounting. Records for the
+ * batch per bus, heartbeat output, LED) -> latency accounting. Records for the
  * non-RT side (status, state transitions, refused requests) go through an
  * SPSC ring; nothing here prints, allocates, locks or blocks.
  *

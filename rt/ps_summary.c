@@ -153,6 +153,17 @@ static cJSON *summary_json(const ps_summary_t *s)
         cJSON_AddNumberToObject(sim, "min_com_height_active_m", s->truth_min_com_height_active_m);
         cJSON_AddNumberToObject(sim, "commands_out_of_limits", (double)s->truth_cmd_out_of_limits);
         cJSON_AddNumberToObject(sim, "plant_overruns", (double)s->truth_plant_overruns);
+        cJSON_AddNumberToObject(sim, "plant_max_lag_ms", s->truth_plant_max_lag_ms);
+        cJSON_AddBoolToObject(sim, "fell_behind_real_time",
+                              s->truth_plant_overruns > 0 || s->truth_plant_max_lag_ms > 0);
+        if (s->truth_plant_err != 0) {
+            cJSON_AddStringToObject(sim, "plant_error",
+                                    s->truth_plant_err_reason ? s->truth_plant_err_reason
+                                                              : ps_strerror(s->truth_plant_err));
+            cJSON_AddNumberToObject(sim, "plant_error_t_s", s->truth_plant_err_t_s);
+        } else {
+            cJSON_AddNullToObject(sim, "plant_error");
+        }
     }
     return root;
 }
@@ -232,4 +243,15 @@ void ps_summary_print(const ps_summary_t *s, FILE *out)
                 s->truth_fell_while_active ? "yes" : "no", s->truth_min_com_height_active_m,
                 (unsigned long long)s->truth_cmd_out_of_limits,
                 (unsigned long long)s->truth_plant_overruns);
+    if (s->has_truth && (s->truth_plant_overruns > 0 || s->truth_plant_max_lag_ms > 0))
+        fprintf(out,
+                " WARNING: the simulation fell behind real time: %llu plant periods skipped, "
+                "simulated time up to %.1f ms behind the wall clock (device timestamps follow "
+                "the wall clock; the run is not faithful)\n",
+                (unsigned long long)s->truth_plant_overruns, s->truth_plant_max_lag_ms);
+    if (s->has_truth && s->truth_plant_err != 0)
+        fprintf(out, " sim truth: PLANT ERROR at t=%.4f s, physics stopped: %s\n",
+                s->truth_plant_err_t_s,
+                s->truth_plant_err_reason ? s->truth_plant_err_reason
+                                          : ps_strerror(s->truth_plant_err));
 }

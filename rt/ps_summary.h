@@ -41,6 +41,10 @@ typedef struct {
     double truth_min_com_height_active_m;
     uint64_t truth_cmd_out_of_limits;
     uint64_t truth_plant_overruns;
+    double truth_plant_max_lag_ms;      /**< real time: simulated time behind the wall clock */
+    int truth_plant_err;                /**< 0, or the plant's first step error */
+    const char *truth_plant_err_reason; /**< why, NULL: none */
+    double truth_plant_err_t_s;         /**< simulated time of it since start */
 } ps_summary_t;
 
 /** @return 0 | -EIO (err says why)  @rt NON-RT */

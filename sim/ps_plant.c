@@ -38,9 +38,12 @@ struct ps_plant {
     bool is_harness_engaged;
     double anchor_pos_m[3];
     double anchor_quat[4];
-    double *ext_force_n;    /**< nbody x 3, caller's pushes (world) */
-    unsigned char *is_foot; /**< nbody, 1 for bodies named *foot */
-    int n_bad_warnings;     /**< MuJoCo's bad-qpos/qvel/qacc count at last check */
+    double *ext_force_n;     /**< nbody x 3, caller's pushes (world) */
+    unsigned char *is_foot;  /**< nbody, 1 for robot bodies named *foot */
+    unsigned char *is_robot; /**< nbody, 1 for the root body and its descendants */
+    int n_bad_warnings;      /**< MuJoCo's bad-qpos/qvel/qacc count at last check */
+    int n_full_warnings;     /**< MuJoCo's contact/constraint-full count at last check */
+    const char *err_reason;  /**< why the last failing step failed (static), NULL: none */
 };
 
 /* MuJoCo's parser messages span lines; logs want one line. */
@@ -66,6 +69,25 @@ static int bad_warning_count(const mjData *d)
 {
     return d->warning[mjWARN_BADQPOS].number + d->warning[mjWARN_BADQVEL].number +
            d->warning[mjWARN_BADQACC].number;
+}
+
+/* Contacts beyond nconmax and constraints beyond njmax are dropped by MuJoCo
+ * with only a warning: the physics is then wrong (a body sinks through the
+ * floor), so the plant reports them as errors. */
+static int full_warning_count(const mjData *d)
+{
+    return d->warning[mjWARN_CONTACTFULL].number + d->warning[mjWARN_CNSTRFULL].number;
+}
+
+/* Which warning is new since the contact-full and constraint-full counts
+ * were taken (else a bad-number warning). */
+static const char *warning_reason(const mjData *d, int contact_full, int cnstr_full)
+{
+    if (d->warning[mjWARN_CONTACTFULL].number != contact_full)
+        return "contacts beyond the model's nconmax were dropped (mjWARN_CONTACTFULL)";
+    if (d->warning[mjWARN_CNSTRFULL].number != cnstr_full)
+        return "constraints beyond the model's njmax were dropped (mjWARN_CNSTRFULL)";
+    return "bad qpos/qvel/qacc: MuJoCo reset the state (mjWARN_BADQPOS/QVEL/QACC)";
 }
 
 static bool ends_with(const char *s, const char *suffix)
@@ -141,22 +163,50 @@ static int map_joints(ps_plant_t *p, const ps_plant_cfg_t *robot, char *err, siz
     return 0;
 }
 
+/* The robot's floating base is the free joint of body PS_PLANT_ROOT_BODY_NAME,
+ * wherever it sits in the model: other free bodies (crowd, props) may come
+ * before it. */
+static int find_root(ps_plant_t *p, char *err, size_t err_len)
+{
+    const mjModel *m = p->m;
+    const int b = mj_name2id(m, mjOBJ_BODY, PS_PLANT_ROOT_BODY_NAME);
+    if (b < 0) {
+        ps_err_format(err, err_len, "body '%s' (the robot's root) not found in the model",
+                      PS_PLANT_ROOT_BODY_NAME);
+        return -PS_ERR_CONFIG;
+    }
+    for (int k = 0; k < m->body_jntnum[b]; k++) {
+        const int j = m->body_jntadr[b] + k;
+        if (m->jnt_type[j] == mjJNT_FREE) {
+            p->root_body = b;
+            p->root_qpos_adr = m->jnt_qposadr[j];
+            p->root_dof_adr = m->jnt_dofadr[j];
+            return 0;
+        }
+    }
+    ps_err_format(err, err_len, "body '%s' has no free joint (floating base)",
+                  PS_PLANT_ROOT_BODY_NAME);
+    return -PS_ERR_CONFIG;
+}
+
+/* Bodies of the robot: the root and its descendants (parents come first in
+ * MuJoCo's body order, so one pass marks the whole subtree). */
+static void mark_robot_bodies(ps_plant_t *p)
+{
+    const mjModel *m = p->m;
+    for (int b = 0; b < m->nbody; b++)
+        p->is_robot[b] =
+            (b == p->root_body || (b > 0 && p->is_robot[m->body_parentid[b]])) ? 1u : 0u;
+}
+
 static int map_bodies(ps_plant_t *p, char *err, size_t err_len)
 {
     const mjModel *m = p->m;
     p->root_body = -1;
-    for (int j = 0; j < m->njnt; j++) {
-        if (m->jnt_type[j] == mjJNT_FREE) {
-            p->root_body = m->jnt_bodyid[j];
-            p->root_qpos_adr = m->jnt_qposadr[j];
-            p->root_dof_adr = m->jnt_dofadr[j];
-            break;
-        }
-    }
-    if (p->root_body < 0) {
-        ps_err_format(err, err_len, "model has no free joint (floating base)");
-        return -PS_ERR_CONFIG;
-    }
+    const int rc = find_root(p, err, err_len);
+    if (rc < 0)
+        return rc;
+    mark_robot_bodies(p);
     p->head_body = mj_name2id(m, mjOBJ_BODY, HEAD_BODY_NAME);
     if (p->head_body < 0) {
         ps_err_format(err, err_len, "body '%s' not found in the model", HEAD_BODY_NAME);
@@ -165,7 +215,8 @@ static int map_bodies(ps_plant_t *p, char *err, size_t err_len)
     int n_feet = 0;
     for (int b = 0; b < m->nbody; b++) {
         const char *name = mj_id2name(m, mjOBJ_BODY, b);
-        p->is_foot[b] = (name != NULL && ends_with(name, FOOT_NAME_SUFFIX)) ? 1u : 0u;
+        p->is_foot[b] =
+            (p->is_robot[b] && name != NULL && ends_with(name, FOOT_NAME_SUFFIX)) ? 1u : 0u;
         n_feet += p->is_foot[b];
     }
     if (n_feet == 0) {
@@ -235,7 +286,8 @@ int ps_plant_create(const ps_plant_cfg_t *robot, ps_plant_t **out, char *err, si
     p->d = mj_makeData(p->m);
     p->ext_force_n = calloc((size_t)p->m->nbody * 3u, sizeof(double));
     p->is_foot = calloc((size_t)p->m->nbody, 1u);
-    if (p->d == NULL || p->ext_force_n == NULL || p->is_foot == NULL) {
+    p->is_robot = calloc((size_t)p->m->nbody, 1u);
+    if (p->d == NULL || p->ext_force_n == NULL || p->is_foot == NULL || p->is_robot == NULL) {
         ps_err_format(err, err_len, "%s: out of memory", model_path);
         rc = -ENOMEM;
         goto fail;
@@ -248,8 +300,15 @@ int ps_plant_create(const ps_plant_cfg_t *robot, ps_plant_t **out, char *err, si
         goto fail;
 
     place_in_stance(p, robot);
+    if (full_warning_count(p->d) != 0) {
+        ps_err_format(err, err_len, "%s: at the stance: %s", model_path,
+                      warning_reason(p->d, 0, 0));
+        rc = -PS_ERR_PLANT;
+        goto fail;
+    }
     p->is_harness_engaged = true;
     p->n_bad_warnings = bad_warning_count(p->d);
+    p->n_full_warnings = 0;
     *out = p;
     return 0;
 
@@ -357,22 +416,40 @@ int ps_plant_step(ps_plant_t *p)
             x[3 + k] += t[k];
         }
     }
+    const int contact_full = d->warning[mjWARN_CONTACTFULL].number;
+    const int cnstr_full = d->warning[mjWARN_CNSTRFULL].number;
     mj_step(m, d);
 
     /* MuJoCo resets the data itself when qpos/qvel/qacc go bad and only
-     * warns, so the warning counters catch what a NaN scan would miss. */
+     * warns, so the warning counters catch what a NaN scan would miss; it
+     * also only warns when it drops contacts or constraints. */
     const int n_bad = bad_warning_count(d);
-    const bool is_reset = n_bad != p->n_bad_warnings;
+    const int n_full = full_warning_count(d);
+    const bool is_warned = n_bad != p->n_bad_warnings || n_full != p->n_full_warnings;
     p->n_bad_warnings = n_bad;
-    if (is_reset)
+    p->n_full_warnings = n_full;
+    if (is_warned) {
+        p->err_reason = warning_reason(d, contact_full, cnstr_full);
         return -PS_ERR_PLANT;
-    for (int i = 0; i < m->nq; i++)
-        if (!isfinite(d->qpos[i]))
+    }
+    for (int i = 0; i < m->nq; i++) {
+        if (!isfinite(d->qpos[i])) {
+            p->err_reason = "non-finite qpos";
             return -PS_ERR_PLANT;
-    for (int i = 0; i < m->nv; i++)
-        if (!isfinite(d->qacc[i]))
+        }
+    }
+    for (int i = 0; i < m->nv; i++) {
+        if (!isfinite(d->qacc[i])) {
+            p->err_reason = "non-finite qacc";
             return -PS_ERR_PLANT;
+        }
+    }
     return 0;
+}
+
+const char *ps_plant_error_reason(const ps_plant_t *p)
+{
+    return p->err_reason;
 }
 
 static bool touches_floor_off_feet(const ps_plant_t *p)
@@ -382,10 +459,9 @@ static bool touches_floor_off_feet(const ps_plant_t *p)
     for (int c = 0; c < d->ncon; c++) {
         const int b1 = m->geom_bodyid[d->contact[c].geom1];
         const int b2 = m->geom_bodyid[d->contact[c].geom2];
-        /* the floor is any geom of the world body */
-        if (b1 == 0 && b2 != 0 && !p->is_foot[b2])
+        if (b1 == 0 && p->is_robot[b2] && !p->is_foot[b2])
             return true;
-        if (b2 == 0 && b1 != 0 && !p->is_foot[b1])
+        if (b2 == 0 && p->is_robot[b1] && !p->is_foot[b1])
             return true;
     }
     return false;
@@ -423,5 +499,6 @@ void ps_plant_destroy(ps_plant_t *p)
         mj_deleteModel(p->m);
     free(p->ext_force_n);
     free(p->is_foot);
+    free(p->is_robot);
     free(p);
 }

@@ -7,11 +7,16 @@
  * Units: SI, double (MuJoCo's mjtNum). Joint arrays are indexed like the
  * robot file's joints. World frame: z up, robot initially facing +x.
  *
- * Model requirements (sim/models/ps1.xml meets them): one free joint (the
- * floating base, "pelvis"); per robot joint a hinge and a motor actuator of
- * the same name; a body "head"; foot bodies whose names end in "foot" (every
- * other geom touching a world-body geom counts as a fall); a site "imu" with a
- * gyro sensor "imu_gyro" and an accelerometer "imu_accel" on it.
+ * Model requirements (sim/models/ps1.xml meets them): a body named
+ * PS_PLANT_ROOT_BODY_NAME ("pelvis") with a free joint, the robot's floating
+ * base; the robot is that body and its descendants (its subtree), and the
+ * model may hold other bodies, free ones included, anywhere in worldbody
+ * (crowd, props); per robot joint a hinge and a motor actuator of the same
+ * name; a body "head"; foot bodies in the robot's subtree whose names end in
+ * "foot" (a contact between a world-body geom, the floor, and a geom of any
+ * other body of the robot's subtree counts as a fall; other bodies touching
+ * the floor do not); a site "imu" with a gyro sensor "imu_gyro" and an
+ * accelerometer "imu_accel" on it.
  *
  * Harness: spring 20 kN/m + 1.5 kN s/m and 1.5 kN m/rad + 100 N m s/rad on
  * the pelvis toward its pose at create (holds the limp robot within ~2 cm).
@@ -19,7 +24,11 @@
  * Threads: one thread at a time (the plant thread, or the loop thread in
  * lockstep). Allocation: at create only (mj_loadXML, mj_makeData). The first
  * create installs a silent MuJoCo warning handler (if none is installed) so
- * the library never prints; instability is reported by ps_plant_step.
+ * the library never prints; what MuJoCo warns about is read from its warning
+ * counters instead and reported as a plant error (ps_plant_step, with a
+ * reason from ps_plant_error_reason): instability (bad qpos/qvel/qacc, which
+ * MuJoCo answers by resetting the state) and contacts or constraints dropped
+ * because the model's <size nconmax/njmax> is too small for them.
  */
 #ifndef PS_PLANT_H
 #define PS_PLANT_H
@@ -30,6 +39,9 @@
 #include <stdint.h>
 
 #include "../rt/ps_limits.h"
+
+/** Name of the robot's root body, whose free joint is the floating base. */
+#define PS_PLANT_ROOT_BODY_NAME "pelvis"
 
 typedef struct ps_plant ps_plant_t;
 
@@ -46,7 +58,7 @@ typedef struct {
     double com_m[3];      /**< whole-body centre of mass, world */
     double head_height_m; /**< world z of the head body */
     double pelvis_m[3];
-    bool is_fallen; /**< a body other than the feet touches the floor */
+    bool is_fallen; /**< a robot body (root subtree) other than the feet touches the floor */
 } ps_plant_truth_t;
 
 /** Load the model and place the robot in its stance (robot->stance_rad)
@@ -54,9 +66,12 @@ typedef struct {
  *  world origin facing +x, at rest; the harness is engaged.
  *  @pre robot->n_joints <= PS_MAX_JOINTS  @post *out set only on success;
  *       err holds a one-line message on failure
- *  @return 0 | -PS_ERR_PLANT (model fails to load; err has MuJoCo's message)
+ *  @return 0 | -PS_ERR_PLANT (model fails to load, err has MuJoCo's message;
+ *            or the stance already needs more contacts or constraints than
+ *            the model's nconmax/njmax, err says which)
  *          | -PS_ERR_CONFIG (a robot joint or actuator is missing in the model,
- *            or the model lacks the free joint, head, feet or IMU; err names it)
+ *            or the model lacks the root body PS_PLANT_ROOT_BODY_NAME, its free
+ *            joint, head, feet or IMU; err names it)
  *          | -EINVAL (NULL argument) | -ENOMEM  @rt INIT */
 int ps_plant_create(const ps_plant_cfg_t *robot, ps_plant_t **out, char *err, size_t err_len);
 
@@ -85,14 +100,23 @@ void ps_plant_set_external_force(ps_plant_t *p, int body_idx, const double force
  *  (like a gantry on a real robot). Engaged at create. */
 void ps_plant_set_harness(ps_plant_t *p, bool is_engaged);
 
-/** Advance physics by one timestep. @return 0 | -PS_ERR_PLANT (NaN/instability;
- *  MuJoCo has then reset the state, so stop stepping) */
+/** Advance physics by one timestep.
+ *  @return 0 | -PS_ERR_PLANT: NaN/instability (MuJoCo has then reset the
+ *          state), or contacts beyond nconmax / constraints beyond njmax were
+ *          dropped (mjWARN_CONTACTFULL / mjWARN_CNSTRFULL); the physics is
+ *          wrong from then on, so stop stepping. ps_plant_error_reason says
+ *          which. */
 int ps_plant_step(ps_plant_t *p);
+
+/** @return why the last failing ps_plant_step failed, a static string
+ *  (valid for the program's life), or NULL when no step has failed
+ *  @rt RT-SAFE O(1) */
+const char *ps_plant_error_reason(const ps_plant_t *p);
 
 /** @post *out = current truth */
 void ps_plant_get_truth(const ps_plant_t *p, ps_plant_truth_t *out);
 
-/** Total mass of the floating robot (the free joint's subtree).
+/** Total mass of the floating robot (the root body's subtree).
  *  @pre created  @return mass  @units kg  @rt RT-SAFE O(1) */
 double ps_plant_total_mass_kg(const ps_plant_t *p);
 

@@ -1,5 +1,6 @@
 #include "ps_sim.h"
 
+#include <math.h>
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdio.h>
@@ -61,7 +62,13 @@ struct ps_sim {
     uint64_t n_unrouted;
     uint64_t n_dev_tx_dropped;
     uint64_t n_overruns;
+    int64_t max_lag_ns; /**< real time: most simulated time lagged the wall clock */
+    int64_t slow_ns;    /**< test knob PUSHSTEP_SIM_SLOW_NS: extra sleep per period */
     int plant_err;
+    const char *plant_err_reason;
+    double plant_err_t_s;
+    double min_com_active_m; /**< INFINITY until the controller is active */
+    double tau_abs_sum_nm;   /**< sum of |torque| applied at the last physics step */
 
     /* real-time plant thread */
     pthread_t thread;
@@ -189,15 +196,25 @@ static void substep(ps_sim_t *s, int64_t t_dev_ns, int64_t rel_ns)
             send_dev(s, s->robot.imu.bus_idx, f, 2);
     }
 
-    for (uint32_t j = 0; j < s->robot.n_joints; j++)
-        s->tau_nm[j] =
+    /* The drives' power stage is fed through the watchdog relay: without the
+     * loop's heartbeat it gives no torque (the drives' logic keeps running). */
+    const bool is_power_on = ps_gpio_sim_update_relay(&s->gpio, t_dev_ns);
+    s->tau_abs_sum_nm = 0.0;
+    for (uint32_t j = 0; j < s->robot.n_joints; j++) {
+        const double tau =
             ps_devices_step_actuator(&s->act[j], s->q_rad[j], s->qd_rad_s[j], t_dev_ns, s->dt_s);
+        s->tau_nm[j] = is_power_on ? tau : 0.0;
+        s->tau_abs_sum_nm += fabs(s->tau_nm[j]);
+    }
     if (s->plant_err == 0) {
         ps_plant_set_torques(s->plant, s->tau_nm);
         const int rc = ps_plant_step(s->plant);
-        if (rc < 0)
-            s->plant_err = rc; /* NaN or instability: freeze physics, keep the devices */
-        else
+        if (rc < 0) {
+            /* NaN, instability, dropped contacts: freeze physics, keep the devices */
+            s->plant_err = rc;
+            s->plant_err_reason = ps_plant_error_reason(s->plant);
+            s->plant_err_t_s = ps_ns_to_s(rel_ns);
+        } else
             s->n_steps++;
     }
     s->plant_rel_ns += s->dt_ns;
@@ -231,10 +248,20 @@ static void update_truth(ps_sim_t *s)
     t.n_imu_samples = s->imu.n_samples;
     t.n_dev_tx_dropped = s->n_dev_tx_dropped;
     t.n_plant_overruns = s->n_overruns;
+    t.max_plant_lag_ns = s->max_lag_ns;
+    if (s->is_started && s->hooks.is_controller_active != NULL &&
+        s->hooks.is_controller_active(s->hooks.ctx) && pt.com_m[2] < s->min_com_active_m)
+        s->min_com_active_m = pt.com_m[2];
+    t.min_com_height_active_m = isfinite(s->min_com_active_m) ? s->min_com_active_m : -1.0;
     if (pt.is_fallen && s->first_fall_t_s < 0)
         s->first_fall_t_s = pt.t_s;
     t.first_fall_t_s = s->first_fall_t_s;
     t.plant_err = s->plant_err;
+    t.is_drive_power_on = ps_gpio_sim_is_power_on(&s->gpio);
+    t.n_power_cuts = s->gpio.n_power_cuts;
+    t.tau_abs_sum_nm = s->tau_abs_sum_nm;
+    t.plant_err_reason = s->plant_err_reason;
+    t.plant_err_t_s = s->plant_err_t_s;
     /* Held only for the copy, so the plant thread is never delayed for long. */
     pthread_mutex_lock(&s->truth_mu);
     s->truth = t;
@@ -298,9 +325,16 @@ static void *plant_thread(void *arg)
             break;
         for (int64_t i = 0; i < n_sub; i++)
             substep(s, next_ns + i * s->dt_ns, s->plant_rel_ns);
-        update_truth(s);
+        if (s->slow_ns > 0)
+            sleep_abs(ps_clock_now_ns(mono) + s->slow_ns); /* test knob: a slow plant */
         next_ns += s->period_ns;
         const int64_t now = ps_clock_now_ns(mono);
+        /* Simulated time should reach start + plant_rel_ns by the next slot;
+         * skipped periods leave it behind the wall clock for good. */
+        const int64_t lag = now - (s->start_ns + s->period_ns / 2 + s->plant_rel_ns);
+        if (lag > s->max_lag_ns)
+            s->max_lag_ns = lag;
+        update_truth(s);
         if (now > next_ns) {
             /* Physics slower than real time: skip to the next future slot of
              * the grid, like hardware that misses its tick, and count it. */
@@ -392,6 +426,12 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
     s->period_ns = cfg->period_ns;
     atomic_init(&s->now_ns, 0);
     s->first_fall_t_s = -1.0;
+    s->plant_err_t_s = -1.0;
+    const char *slow = getenv("PUSHSTEP_SIM_SLOW_NS");
+    s->slow_ns = slow != NULL ? strtoll(slow, NULL, 10) : 0;
+    if (s->slow_ns < 0 || s->slow_ns > PS_NS_PER_S)
+        s->slow_ns = 0;
+    s->min_com_active_m = INFINITY;
     atomic_init(&s->requests, 0u);
     atomic_init(&s->is_running, false);
     s->clock = (ps_clock_t){.now_ns = sim_now_ns, .sleep_until_ns = sim_sleep_until_ns, .ctx = s};

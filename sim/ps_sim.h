@@ -30,6 +30,13 @@
  * ps_sim_hooks_t; operator requests from the scenario leave as PS_SIM_REQ_*
  * bits that the application maps to its state machine.
  *
+ * Drive power: the drives' power stage is fed through an emulated watchdog
+ * relay on the GPIO heartbeat (sim/ps_gpio_sim.h, drivers/ps_gpio.h): at each
+ * physics step, unless the heartbeat changed level within the last
+ * PS_GPIO_SIM_RELAY_TIMEOUT_NS (10 ms), every joint gets zero torque, like a
+ * cut power stage (the drives' logic stays powered: they still decode
+ * commands and answer). Power is off until the loop's first heartbeat edge.
+ *
  * Timing: each servo period runs the model's physics steps (the model's
  * timestep must divide the period). At each physics step the devices take the
  * frames whose end-of-frame time has come, reply, and set torques; the IMU
@@ -38,6 +45,17 @@
  * first physics step after they are on the wire. In real time the plant
  * thread runs the period at start + period/2 + k period (half a period after
  * the loop's tick) so commands sent early in a tick act in the same period.
+ *
+ * Falling behind (real time): when the physics of a period takes longer than
+ * the period, the plant thread skips slots of its grid (n_plant_overruns)
+ * while the devices keep stamping frames with the wall clock, so simulated
+ * time lags the wall clock from then on (max_plant_lag_ns); the run is then
+ * not faithful, and pushstep --require-rt fails it.
+ *
+ * Test knob: the environment variable PUSHSTEP_SIM_SLOW_NS (read at create,
+ * real time only, 0 to 1e9) makes the plant thread sleep that many ns after
+ * each period's physics, to emulate a plant too slow for real time. Unset
+ * in normal use.
  *
  * Threads: create/destroy on the main thread; ports used by the loop thread;
  * the plant thread is internal. Allocation: all at create.
@@ -91,6 +109,12 @@ typedef struct {
      *  allocation guard on that thread does not count it. */
     void (*pause_guard)(void *ctx);
     void (*resume_guard)(void *ctx);
+    /** Whether the controller is in charge of the robot now (the runtime: state
+     *  RAMP or ACTIVE), for the truth's lowest CoM. Called once per servo period
+     *  on the thread that steps the plant (the plant thread, or the loop thread
+     *  inside sleep_until in lockstep), so it must be RT-SAFE and thread-safe
+     *  (an atomic load). NULL: never active. */
+    bool (*is_controller_active)(void *ctx);
 } ps_sim_hooks_t;
 
 /** Operator requests a scenario makes (ps_sim_take_requests). */
@@ -112,28 +136,42 @@ typedef struct {
 
 /** Ground truth from the plant, for tests and the summary. */
 typedef struct {
-    double t_s;            /**< simulated time */
-    double com_m[3];       /**< whole-body CoM, world */
-    double head_height_m;  /**< height of the head/trunk top */
-    bool is_fallen;        /**< any body other than the feet touches the ground, or CoM low */
-    uint64_t n_steps;      /**< physics steps taken */
-    uint64_t n_cmd_frames; /**< command frames the emulated drivers consumed */
+    double t_s;                   /**< simulated time */
+    double com_m[3];              /**< whole-body CoM, world */
+    double head_height_m;         /**< height of the head/trunk top */
+    bool is_fallen;               /**< a robot body other than the feet touches the ground */
+    uint64_t n_steps;             /**< physics steps taken */
+    uint64_t n_cmd_frames;        /**< command frames the emulated drivers consumed */
     uint64_t n_cmd_out_of_limits; /**< commands outside the joint's configured limits */
     uint64_t n_bad_frames;        /**< frames the emulated devices rejected */
     double max_temp_c;
     /* Added by sim/ps_sim.c (documented extensions): */
-    double pelvis_m[3];         /**< pelvis origin, world */
-    double first_fall_t_s;      /**< simulated time since start of the first fall, -1: none */
-    uint64_t n_plant_overruns;  /**< real time: plant periods skipped because physics
-                                     fell behind the clock (0 in lockstep) */
-    uint64_t n_cmd_ignored;     /**< command frames received outside motor mode */
-    uint64_t n_reply_frames;    /**< replies the emulated drivers put on the buses */
-    uint64_t n_imu_samples;     /**< IMU samples sent (two frames each) */
-    uint64_t n_dev_tx_dropped;  /**< device frames refused by a full bus queue */
-    uint64_t n_unrouted_frames; /**< frames on a bus that no device's id matches
-                                     (also counted in n_bad_frames) */
-    int plant_err;              /**< 0, or the first ps_plant_step error; physics
-                                     stops advancing after it */
+    double pelvis_m[3];             /**< pelvis origin, world */
+    double first_fall_t_s;          /**< simulated time since start of the first fall, -1: none */
+    uint64_t n_plant_overruns;      /**< real time: plant periods skipped because physics
+                                         fell behind the clock (0 in lockstep) */
+    int64_t max_plant_lag_ns;       /**< real time: most that simulated time lagged
+                                         the wall clock at the end of a period (0
+                                         when never behind; 0 in lockstep) */
+    uint64_t n_cmd_ignored;         /**< command frames received outside motor mode */
+    uint64_t n_reply_frames;        /**< replies the emulated drivers put on the buses */
+    uint64_t n_imu_samples;         /**< IMU samples sent (two frames each) */
+    uint64_t n_dev_tx_dropped;      /**< device frames refused by a full bus queue */
+    uint64_t n_unrouted_frames;     /**< frames on a bus that no device's id matches
+                                         (also counted in n_bad_frames) */
+    int plant_err;                  /**< 0, or the first ps_plant_step error; physics
+                                         stops advancing after it */
+    const char *plant_err_reason;   /**< why (ps_plant_error_reason, a static
+                                         string), NULL when plant_err is 0 */
+    double plant_err_t_s;           /**< simulated time of plant_err, -1: none */
+    bool is_drive_power_on;         /**< the watchdog relay feeds the drives now */
+    uint64_t n_power_cuts;          /**< times the relay dropped the drives' power */
+    double tau_abs_sum_nm;          /**< sum of |torque| applied to the plant at the
+                                         last physics step (0 with power off) */
+    double min_com_height_active_m; /**< lowest CoM z at the end of a servo period
+                                         while hooks.is_controller_active said so,
+                                         on simulated time (deterministic in
+                                         lockstep); -1: never active */
 } ps_sim_truth_t;
 
 /** Load the model, build devices and buses, apply the scenario's initial

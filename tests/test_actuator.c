@@ -136,7 +136,7 @@ static void test_ps_act_encode_request_mit_special_frames(void **state)
         /* and the drive side reads it back as the same request (clear = enable) */
         const int back = ps_mit_proto.classify_request(&a, &f[0]);
         assert_int_equal(back, CASES[i].req == PS_ACT_REQ_CLEAR_FAULT ? PS_ACT_REQ_ENABLE
-                                                                       : (int)CASES[i].req);
+                                                                      : (int)CASES[i].req);
     }
     ps_can_frame_t f[1];
     assert_int_equal(ps_act_encode_request(&a, PS_ACT_REQ_COUNT, f, 1), -EINVAL);

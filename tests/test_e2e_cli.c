@@ -15,6 +15,7 @@
 #include <time.h>
 #include <setjmp.h>
 #include <stdarg.h>
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -168,6 +169,37 @@ static void test_cli_lockstep_shove_fall_detected_and_in_truth(void **state)
     unlink(path);
 }
 
+/* Lockstep is deterministic for a scenario and seed: two runs of the shove
+ * give the same summary, apart from the wall-clock figures (wall_s and the
+ * stage latencies), the lowest CoM while in charge included. */
+static void test_cli_lockstep_same_scenario_twice_identical_summaries(void **state)
+{
+    (void)state;
+    char path[2][32];
+    cJSON *j[2];
+    for (int i = 0; i < 2; i++) {
+        make_temp_file(path[i], sizeof(path[i]));
+        char args[256];
+        snprintf(args, sizeof(args),
+                 "--lockstep --quiet --scenario scenarios/shove.yaml --summary %s", path[i]);
+        const int rc = run(args);
+        if (rc != 0)
+            fail_msg("run %d: exit %d:\n%s", i, rc, out);
+        j[i] = read_json(path[i]);
+        cJSON_DeleteItemFromObjectCaseSensitive(j[i], "wall_s");
+        cJSON_DeleteItemFromObjectCaseSensitive(j[i], "latency");
+        unlink(path[i]);
+    }
+    const double min_com = num(obj(j[0], "sim_truth"), "min_com_height_active_m");
+    assert_true(min_com > 0.1 && min_com < 0.7);
+    if (!cJSON_Compare(j[0], j[1], true)) {
+        char *a = cJSON_Print(j[0]), *b = cJSON_Print(j[1]);
+        fail_msg("summaries differ:\n%s\n---\n%s", a, b);
+    }
+    cJSON_Delete(j[0]);
+    cJSON_Delete(j[1]);
+}
+
 /* Names are looked up in $PUSHSTEP_DATA_DIR when set, and an error names
  * the path it tried. */
 static void test_cli_data_dir_from_environment(void **state)
@@ -208,6 +240,38 @@ static void test_cli_realtime_run_paced_in_real_time(void **state)
     assert_int_equal((int)num(after, "locks"), 0);
     cJSON_Delete(j);
     unlink(path);
+}
+
+/* A plant too slow for real time (test knob PUSHSTEP_SIM_SLOW_NS: 1.5 ms
+ * of sleep per 1 ms period): the summary counts the skipped periods and the
+ * lag and warns; with --require-rt the run fails with a message. */
+static void test_cli_realtime_slow_plant_require_rt_fatal(void **state)
+{
+    (void)state;
+    char path[32];
+    make_temp_file(path, sizeof(path));
+    char args[256];
+    assert_int_equal(setenv("PUSHSTEP_SIM_SLOW_NS", "1500000", 1), 0);
+    snprintf(args, sizeof(args), "--duration 1 --quiet --summary %s", path);
+    int rc = run(args);
+    if (rc != 0) {
+        assert_int_equal(unsetenv("PUSHSTEP_SIM_SLOW_NS"), 0);
+        fail_msg("exit %d:\n%s", rc, out);
+    }
+    assert_non_null(strstr(out, "WARNING: the simulation fell behind real time"));
+    cJSON *j = read_json(path);
+    const cJSON *truth = obj(j, "sim_truth");
+    assert_true(num(truth, "plant_overruns") > 0);
+    assert_true(num(truth, "plant_max_lag_ms") > 1.0);
+    assert_true(cJSON_IsTrue(obj(truth, "fell_behind_real_time")));
+    cJSON_Delete(j);
+    unlink(path);
+    rc = run("--duration 1 --quiet --require-rt");
+    assert_int_equal(unsetenv("PUSHSTEP_SIM_SLOW_NS"), 0);
+    if (rc == 1 && strstr(out, "fell behind") == NULL && strstr(out, "--require-rt") != NULL)
+        skip(); /* no real-time privileges here: refused before the run */
+    assert_int_equal(rc, 1);
+    assert_non_null(strstr(out, "--require-rt: the simulation fell behind real time"));
 }
 
 /* `pushstep profile`: profile.json with the conditions, and wakeup.hist in
@@ -514,8 +578,10 @@ int main(void)
         cmocka_unit_test(test_cli_help_documents_every_option),
         cmocka_unit_test(test_cli_lockstep_summary_json_has_the_figures),
         cmocka_unit_test(test_cli_lockstep_shove_fall_detected_and_in_truth),
+        cmocka_unit_test(test_cli_lockstep_same_scenario_twice_identical_summaries),
         cmocka_unit_test(test_cli_data_dir_from_environment),
         cmocka_unit_test(test_cli_realtime_run_paced_in_real_time),
+        cmocka_unit_test(test_cli_realtime_slow_plant_require_rt_fatal),
         cmocka_unit_test(test_cli_profile_writes_json_and_cyclictest_histogram),
         cmocka_unit_test(test_cli_profile_without_rt_privileges_says_so),
         cmocka_unit_test(test_cli_bad_option_exit_2),

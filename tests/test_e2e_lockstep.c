@@ -12,8 +12,10 @@
 #include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
 
 #include <cmocka.h>
 
@@ -295,6 +297,30 @@ static void test_lockstep_estop_latches_until_reset(void **state)
     assert_int_equal(app.loop.counters.n_refused, 0);
 }
 
+/* An e-stop press shorter than a tick (pressed and released 0.2 ms apart,
+ * inside one physics step) is latched by the GPIO port and reaches the state
+ * machine at the next tick. */
+static void test_lockstep_subtick_estop_press_reaches_estop(void **state)
+{
+    (void)state;
+    char path[] = "/tmp/ps_e2e_subtick_XXXXXX.yaml";
+    const int fd = mkstemps(path, 5);
+    assert_true(fd >= 0);
+    const char *yaml = "name: subtick\nduration_s: 5\nseed: 3\nevents:\n"
+                       "  - {t_s: 0.2, kind: start}\n"
+                       "  - {t_s: 2.0, kind: harness_release}\n"
+                       "  - {t_s: 3.0001, kind: estop_press}\n"
+                       "  - {t_s: 3.0003, kind: estop_release}\n";
+    assert_int_equal(write(fd, yaml, strlen(yaml)), (ssize_t)strlen(yaml));
+    assert_int_equal(close(fd), 0);
+    start_app(path);
+    (void)unlink(path);
+    step_until(2.99);
+    assert_int_equal(app.loop.state, PS_SM_ACTIVE);
+    step_until(3.003);
+    assert_int_equal(app.loop.state, PS_SM_ESTOP);
+}
+
 /* ---- guarded runs through the safety paths ------------------------------ */
 
 #define MAX_RECS 256
@@ -532,6 +558,7 @@ int main(void)
         cmocka_unit_test_teardown(test_lockstep_refused_requests_while_estop_pressed_guarded,
                                   teardown),
         cmocka_unit_test_teardown(test_lockstep_slow_policy_overruns_counted, teardown),
+        cmocka_unit_test_teardown(test_lockstep_subtick_estop_press_reaches_estop, teardown),
     };
     return cmocka_run_group_tests_name("e2e_lockstep", tests, NULL, NULL);
 }

@@ -47,7 +47,10 @@ typedef struct {
     ps_robot_cfg_t robot;
     ps_canbus_plan_t plan;
     fake_bus_t buses[PS_MAX_BUSES];
-    bool is_estop_pressed, is_enabled, has_gpio_error;
+    bool is_estop_pressed, has_gpio_error;
+    bool heartbeat;              /**< level of the heartbeat output */
+    uint64_t n_hb_edges;         /**< its level changes */
+    uint64_t n_hb_calls;         /**< set_heartbeat calls */
     bool is_mute[PS_MAX_JOINTS]; /* joint does not answer */
     uint8_t fault[PS_MAX_JOINTS];
     bool is_imu_mute;
@@ -165,10 +168,13 @@ static int gpio_read(void *ctx, bool *out)
     *out = fx->is_estop_pressed;
     return 0;
 }
-static int gpio_enable(void *ctx, bool on)
+static int gpio_heartbeat(void *ctx, bool level)
 {
     (void)ctx;
-    fx->is_enabled = on;
+    fx->n_hb_calls++;
+    if (level != fx->heartbeat)
+        fx->n_hb_edges++;
+    fx->heartbeat = level;
     return 0;
 }
 static int gpio_led(void *ctx, ps_gpio_led_t led)
@@ -178,7 +184,7 @@ static int gpio_led(void *ctx, ps_gpio_led_t led)
     return 0;
 }
 static const ps_gpio_ops_t FAKE_GPIO_OPS = {
-    .read_estop = gpio_read, .set_enable = gpio_enable, .set_led = gpio_led};
+    .read_estop = gpio_read, .set_heartbeat = gpio_heartbeat, .set_led = gpio_led};
 
 /* A policy that holds the stance, or returns what the test scripts. */
 static int fake_policy_step(void *ctx, const ps_meas_t *m, const ps_estimate_t *e,
@@ -355,7 +361,10 @@ static void test_loop_start_then_ramp_reaches_active_with_gains(void **state)
         assert_float_equal(cmd.kp_nm_rad, jc_s->kp_nm_rad, kp_step);
         assert_float_equal(cmd.p_rad, jc_s->stance_rad, 0.01);
     }
-    assert_true(fx->is_enabled);
+    /* the heartbeat beats: a new level every tick */
+    const uint64_t e0 = fx->n_hb_edges;
+    steps(4);
+    assert_int_equal(fx->n_hb_edges - e0, 4);
 }
 
 static void test_loop_start_without_replies_refused(void **state)
@@ -461,7 +470,11 @@ static void test_loop_estop_input_latches_estop_sends_exit(void **state)
                     n_exit++;
     }
     assert_int_equal(fx->loop.state, PS_SM_ESTOP);
-    assert_false(fx->is_enabled);
+    /* the heartbeat holds still in ESTOP, so the relay drops the power */
+    const uint64_t e0 = fx->n_hb_edges, c0 = fx->n_hb_calls;
+    steps(5);
+    assert_int_equal(fx->n_hb_edges, e0);
+    assert_int_equal(fx->n_hb_calls, c0);
     assert_int_equal(n_exit, fx->robot.n_joints);
     /* reset refused while pressed, accepted once released */
     ps_loop_request(&fx->loop, PS_SM_C_REQ_RESET);
@@ -744,7 +757,8 @@ static void test_loop_latched_fault_cleared_by_enter_no_estop(void **state)
     assert_int_equal(fx->loop.state, PS_SM_RAMP);
 }
 
-/* The end of a run leaves the drives disabled and the enable output off. */
+/* The end of a run leaves the drives disabled and the heartbeat still (the
+ * relay then drops the power). */
 static void test_loop_run_end_releases_drives(void **state)
 {
     (void)state;
@@ -755,7 +769,9 @@ static void test_loop_run_end_releases_drives(void **state)
     for (uint32_t b = 0; b < fx->board.n_buses; b++)
         n_exit += fx->buses[b].n_exit_total;
     assert_int_equal(n_exit, fx->robot.n_joints);
-    assert_false(fx->is_enabled);
+    const uint64_t c0 = fx->n_hb_calls;
+    ps_loop_release_drives(&fx->loop);
+    assert_int_equal(fx->n_hb_calls, c0);
 }
 
 /* The clock fails mid-run: one last tick in ESTOP, then the error. */
@@ -767,9 +783,11 @@ static void test_loop_run_clock_failure_estops(void **state)
     fx->clock.rc_script = RC;
     fx->clock.n_rc_script = 3;
     fx->clock.n_sleep_calls = 0;
+    const uint64_t c0 = fx->n_hb_calls;
     assert_int_equal(ps_loop_run(&fx->loop, fx->loop.pacer.next_ns, 0), -EIO);
     assert_int_equal(fx->loop.state, PS_SM_ESTOP);
-    assert_false(fx->is_enabled);
+    /* two paced ticks beat; the last one, in ESTOP, and the release do not */
+    assert_int_equal(fx->n_hb_calls - c0, 2);
 }
 
 int main(void)

@@ -496,6 +496,220 @@ static void test_ps_plant_set_external_force_sustained_push_falls(void **st)
     assert_true(t_fall > 0.0);
 }
 
+/* ---- the robot among other free bodies ------------------------------------ */
+
+/* A copy of the ps1 model with `extra` inserted as the first child of
+ * worldbody (before the floor and the robot), written to a temp file; when
+ * size is not NULL it replaces the model's <size .../> element. */
+static void write_model_with(char *path, size_t len, const char *extra, const char *size)
+{
+    FILE *in = fopen(MODEL_PATH, "r");
+    assert_non_null(in);
+    static char text[128 * 1024];
+    const size_t n = fread(text, 1, sizeof(text) - 1, in);
+    text[n] = '\0';
+    (void)fclose(in);
+    const char *wb = strstr(text, "<worldbody>");
+    assert_non_null(wb);
+    const size_t head = (size_t)(wb - text) + strlen("<worldbody>");
+    (void)snprintf(path, len, "/tmp/test_plant_extra_XXXXXX.xml");
+    const int fd = mkstemps(path, 4);
+    assert_true(fd >= 0);
+    FILE *out = fdopen(fd, "w");
+    assert_non_null(out);
+    const char *sz = strstr(text, "<size ");
+    assert_non_null(sz);
+    const char *sz_end = strstr(sz, "/>") + 2;
+    assert_true(sz < wb);
+    if (size == NULL)
+        size = "";
+    assert_int_equal(fwrite(text, 1, (size_t)(sz - text), out), (size_t)(sz - text));
+    assert_true(fputs(size[0] ? size : "<size njmax=\"600\" nconmax=\"150\"/>", out) >= 0);
+    assert_int_equal(fwrite(sz_end, 1, (size_t)(text + head - sz_end), out),
+                     (size_t)(text + head - sz_end));
+    assert_true(fputs(extra, out) >= 0);
+    assert_true(fputs(text + head, out) >= 0);
+    assert_int_equal(fclose(out), 0);
+}
+
+/* a 5 kg crate resting on the floor 2 m in front of the robot */
+#define EXTRA_CRATE                                                                                \
+    "<body name='crate' pos='2 0 0.1'><freejoint/>"                                                \
+    "<geom type='box' size='0.1 0.1 0.1' mass='5'/></body>"
+
+static int setup_with_crate(void **st)
+{
+    static state_t s;
+    static char path[64];
+    memset(&s, 0, sizeof(s));
+    build_robot(&s.robot);
+    write_model_with(path, sizeof(path), EXTRA_CRATE, NULL);
+    const int rc = plant_create(path, &s.robot, &s.plant, s.err, sizeof(s.err));
+    (void)unlink(path);
+    if (rc != 0) {
+        fprintf(stderr, "create: %d %s\n", rc, s.err);
+        return -1;
+    }
+    *st = &s;
+    return 0;
+}
+
+static void test_ps_plant_create_free_body_before_robot_roots_at_pelvis(void **st)
+{
+    state_t *s = *st;
+    /* the robot's mass and stance, not the crate's */
+    assert_float_equal(ps_plant_total_mass_kg(s->plant), s->robot.kin.mass_kg, 0.01);
+    ps_plant_truth_t tr;
+    ps_plant_get_truth(s->plant, &tr);
+    assert_float_equal(tr.pelvis_m[0], 0.0, 1e-9);
+    assert_float_equal(tr.pelvis_m[1], 0.0, 1e-9);
+    assert_true(tr.pelvis_m[2] > 0.6 && tr.pelvis_m[2] < 0.8);
+    assert_true(tr.head_height_m > 1.1 && tr.head_height_m < 1.3);
+    assert_true(fabs(ps_plant_foot_min_z_m(s->plant)) < 0.002);
+    /* the harness holds the pelvis, not the crate: the limp robot stays up */
+    assert_true(run(s, 1.0, false) < 0.0);
+    ps_plant_get_truth(s->plant, &tr);
+    assert_true(fabs(tr.pelvis_m[0]) < 0.03 && tr.pelvis_m[2] > 0.6);
+}
+
+static void test_ps_plant_get_truth_crate_on_floor_not_fallen(void **st)
+{
+    state_t *s = *st;
+    ps_plant_set_harness(s->plant, false);
+    /* the crate rests on the floor all along; the robot stands */
+    assert_true(run(s, 0.5, true) < 0.0);
+    ps_plant_truth_t tr;
+    ps_plant_get_truth(s->plant, &tr);
+    assert_false(tr.is_fallen);
+}
+
+static void test_ps_plant_get_truth_robot_on_floor_among_crates_fallen(void **st)
+{
+    state_t *s = *st;
+    ps_plant_set_harness(s->plant, false);
+    const double t_fall = run(s, 3.0, false); /* limp: knees and trunk reach the floor */
+    printf("  limp beside a crate: fallen at t = %.3f s\n", t_fall);
+    assert_true(t_fall > 0.1);
+}
+
+static void test_ps_plant_create_no_root_body_config_error(void **st)
+{
+    (void)st;
+    const char *path = "/tmp/test_plant_noroot.xml";
+    FILE *f = fopen(path, "w");
+    assert_non_null(f);
+    fputs("<mujoco><worldbody><geom type='plane' size='1 1 .1'/>"
+          "<body name='base' pos='0 0 1'><freejoint/><site name='imu'/>"
+          "<geom type='sphere' size='.1'/><body name='head'><geom type='sphere' size='.05'/>"
+          "</body><body name='foot'><joint name='j' axis='0 1 0'/>"
+          "<geom type='box' pos='0 0 -.5' size='.1 .1 .1'/></body></body></worldbody>"
+          "<actuator><motor name='j' joint='j'/></actuator>"
+          "<sensor><gyro name='imu_gyro' site='imu'/>"
+          "<accelerometer name='imu_accel' site='imu'/></sensor></mujoco>",
+          f);
+    assert_int_equal(fclose(f), 0);
+    ps_robot_cfg_t r;
+    build_robot(&r);
+    r.n_joints = 1;
+    (void)snprintf(r.joint_name[0], sizeof(r.joint_name[0]), "j");
+    ps_plant_t *p = NULL;
+    char err[PS_ERR_MSG_LEN] = "";
+    assert_int_equal(plant_create(path, &r, &p, err, sizeof(err)), -PS_ERR_CONFIG);
+    assert_null(p);
+    assert_non_null(strstr(err, PS_PLANT_ROOT_BODY_NAME));
+    (void)unlink(path);
+}
+
+/* ---- MuJoCo's warnings are plant errors ---------------------------------- */
+
+/* a crate dropped from 0.4 m lands 2 m in front of the robot at ~0.3 s:
+ * 4 more contacts and 16 more constraint rows than the stance's 8 and 53 */
+#define EXTRA_DROPPED_CRATE                                                                        \
+    "<body name='crate' pos='2 0 0.5'><freejoint/>"                                                \
+    "<geom type='box' size='0.1 0.1 0.1' mass='5'/></body>"
+
+/* Step the limp robot in its harness until a step fails or t_s passes;
+ * return the failing step's code (0: none failed). */
+static int step_until_error(ps_plant_t *p, double t_s)
+{
+    const double zero[PS_MAX_JOINTS] = {0};
+    const int n = (int)lround(t_s / ps_plant_timestep_s(p));
+    for (int k = 0; k < n; k++) {
+        ps_plant_set_torques(p, zero);
+        const int rc = ps_plant_step(p);
+        if (rc != 0)
+            return rc;
+    }
+    return 0;
+}
+
+static ps_plant_t *create_sized(const char *extra, const char *size, int expect_rc, char *err,
+                                size_t err_len)
+{
+    char path[64];
+    ps_robot_cfg_t r;
+    build_robot(&r);
+    write_model_with(path, sizeof(path), extra, size);
+    ps_plant_t *p = NULL;
+    const int rc = plant_create(path, &r, &p, err, err_len);
+    (void)unlink(path);
+    if (rc != expect_rc)
+        fail_msg("create: %d, expected %d: %s", rc, expect_rc, err);
+    return p;
+}
+
+static void test_ps_plant_create_stance_beyond_nconmax_plant_error(void **st)
+{
+    (void)st;
+    char err[PS_ERR_MSG_LEN] = "";
+    /* a crate sunk 1 cm into the floor: 4 contacts already at create */
+    ps_plant_t *p =
+        create_sized("<body name='crate' pos='2 0 0.09'><freejoint/>"
+                     "<geom type='box' size='0.1 0.1 0.1' mass='5'/></body>",
+                     "<size nconmax='1' njmax='600'/>", -PS_ERR_PLANT, err, sizeof(err));
+    assert_null(p);
+    assert_non_null(strstr(err, "nconmax"));
+}
+
+static void test_ps_plant_step_contacts_beyond_nconmax_plant_error(void **st)
+{
+    (void)st;
+    char err[PS_ERR_MSG_LEN] = "";
+    /* room for the stance's 8 contacts, not for the crate's 4 more */
+    ps_plant_t *p =
+        create_sized(EXTRA_DROPPED_CRATE, "<size nconmax='10' njmax='600'/>", 0, err, sizeof(err));
+    assert_null(ps_plant_error_reason(p));
+    assert_int_equal(step_until_error(p, 1.0), -PS_ERR_PLANT);
+    assert_non_null(ps_plant_error_reason(p));
+    assert_non_null(strstr(ps_plant_error_reason(p), "nconmax"));
+    ps_plant_truth_t tr;
+    ps_plant_get_truth(p, &tr);
+    printf("  nconmax 10: plant error at t = %.4f s: %s\n", tr.t_s, ps_plant_error_reason(p));
+    assert_true(tr.t_s > 0.1); /* the crate's landing, not the stance */
+    ps_plant_destroy(p);
+}
+
+static void test_ps_plant_step_constraints_beyond_njmax_plant_error(void **st)
+{
+    (void)st;
+    char err[PS_ERR_MSG_LEN] = "";
+    ps_plant_t *p =
+        create_sized(EXTRA_DROPPED_CRATE, "<size nconmax='150' njmax='60'/>", 0, err, sizeof(err));
+    assert_int_equal(step_until_error(p, 1.0), -PS_ERR_PLANT);
+    assert_non_null(strstr(ps_plant_error_reason(p), "njmax"));
+    ps_plant_destroy(p);
+}
+
+static void test_ps_plant_step_model_sizes_enough_no_error(void **st)
+{
+    (void)st;
+    char err[PS_ERR_MSG_LEN] = "";
+    ps_plant_t *p = create_sized(EXTRA_DROPPED_CRATE, NULL, 0, err, sizeof(err));
+    assert_int_equal(step_until_error(p, 1.0), 0);
+    assert_null(ps_plant_error_reason(p));
+    ps_plant_destroy(p);
+}
+
 /* ---- kinematic convention ------------------------------------------------ */
 
 static void mat_mul(double out[9], const double a[9], const double b[9])
@@ -691,6 +905,17 @@ int main(void)
                                         setup, teardown),
         cmocka_unit_test_setup_teardown(test_ps_plant_set_external_force_sustained_push_falls,
                                         setup, teardown),
+        cmocka_unit_test_setup_teardown(test_ps_plant_create_free_body_before_robot_roots_at_pelvis,
+                                        setup_with_crate, teardown),
+        cmocka_unit_test_setup_teardown(test_ps_plant_get_truth_crate_on_floor_not_fallen,
+                                        setup_with_crate, teardown),
+        cmocka_unit_test_setup_teardown(test_ps_plant_get_truth_robot_on_floor_among_crates_fallen,
+                                        setup_with_crate, teardown),
+        cmocka_unit_test(test_ps_plant_create_no_root_body_config_error),
+        cmocka_unit_test(test_ps_plant_create_stance_beyond_nconmax_plant_error),
+        cmocka_unit_test(test_ps_plant_step_contacts_beyond_nconmax_plant_error),
+        cmocka_unit_test(test_ps_plant_step_constraints_beyond_njmax_plant_error),
+        cmocka_unit_test(test_ps_plant_step_model_sizes_enough_no_error),
         cmocka_unit_test(test_model_kinematics_match_convention),
         cmocka_unit_test(test_ps_config_load_robot_ps1_matches_model),
     };

@@ -14,6 +14,7 @@
 
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <time.h>
 #include <unistd.h>
@@ -25,6 +26,7 @@
 #include "../rt/ps_config.h"
 #include "../rt/ps_err.h"
 #include "../rt/ps_sm.h"
+#include "../sim/ps_gpio_sim.h"
 #include "../sim/ps_sim.h"
 
 #define BOARD_PATH "boards/sim.yaml"
@@ -106,6 +108,8 @@ typedef struct {
     uint32_t requests_seen;
     int64_t request_t_ns[3]; /**< first time START, STOP, RESET were taken */
     unsigned n_request_takes[3];
+    bool is_heartbeat_stopped; /**< test may set: no more heartbeat writes */
+    bool is_heartbeat_steady;  /**< test may set: write a steady high level */
 } ctl_t;
 
 static void ctl_init(ctl_t *c, ps_sim_t *sim, const ps_robot_cfg_t *robot, uint32_t n_buses)
@@ -207,6 +211,10 @@ static void ctl_write(ctl_t *c)
         if (n_out[b] > 0)
             assert_int_equal(ps_can_send_batch(&c->port[b], out[b], n_out[b]), (int)n_out[b]);
     }
+    /* the power relay's heartbeat, as the loop beats it (or a stuck level) */
+    if (!c->is_heartbeat_stopped)
+        assert_int_equal(ps_gpio_set_heartbeat(&c->gpio, c->is_heartbeat_steady || (c->tick & 1u)),
+                         0);
 }
 
 static void ctl_take_requests(ctl_t *c)
@@ -365,6 +373,89 @@ static void test_lockstep_replies_and_imu_arrive_with_right_ids(void **state)
     assert_int_equal(t.n_dev_tx_dropped, 0);
     assert_int_equal(t.n_imu_samples, want_imu); /* the last may still be on the wire */
     assert_int_equal(t.plant_err, 0);
+    ps_sim_destroy(sim);
+}
+
+/* A model too small for the robot's contacts: the plant's error and its
+ * reason reach the truth, and physics stops there. */
+static void test_lockstep_contacts_beyond_nconmax_plant_err_in_truth(void **state)
+{
+    fixture_t *fx = *state;
+    FILE *in = fopen(fx->model, "r");
+    assert_non_null(in);
+    static char text[128 * 1024];
+    const size_t n = fread(text, 1, sizeof text - 1, in);
+    text[n] = '\0';
+    (void)fclose(in);
+    char *sz = strstr(text, "nconmax=\"150\"");
+    assert_non_null(sz);
+    memcpy(sz, "nconmax=\"2\"  ", strlen("nconmax=\"150\"")); /* same length */
+    char path[] = "/tmp/test_sim_nconmax_XXXXXX.xml";
+    const int fd = mkstemps(path, 4);
+    assert_true(fd >= 0);
+    assert_int_equal(write(fd, text, n), (ssize_t)n);
+    assert_int_equal(close(fd), 0);
+    (void)snprintf(fx->model, sizeof fx->model, "%s", path);
+    ctl_t c;
+    ps_sim_t *sim = make_lockstep(fx, &c);
+    ctl_run_until(&c, 50 * PS_NS_PER_MS);
+    (void)unlink(path);
+    ps_sim_truth_t t;
+    ps_sim_get_truth(sim, &t);
+    assert_int_equal(t.plant_err, -PS_ERR_PLANT);
+    assert_non_null(t.plant_err_reason);
+    assert_non_null(strstr(t.plant_err_reason, "nconmax"));
+    assert_true(t.plant_err_t_s >= 0.0 && t.plant_err_t_s < 0.05);
+    assert_true(t.n_steps < 100); /* physics stopped at the error */
+    ps_sim_destroy(sim);
+}
+
+/* A loop that stops ticking stops the heartbeat: the watchdog relay cuts
+ * the drives' power within its timeout and they give no torque, though
+ * commands still arrive. */
+static void test_lockstep_heartbeat_stops_drives_limp_within_relay_timeout(void **state)
+{
+    fixture_t *fx = *state;
+    ctl_t c;
+    ps_sim_t *sim = make_lockstep(fx, &c);
+    ctl_run_until(&c, 200 * PS_NS_PER_MS);
+    ps_sim_truth_t t;
+    ps_sim_get_truth(sim, &t);
+    assert_true(t.is_drive_power_on);
+    assert_true(t.tau_abs_sum_nm > 1.0); /* the PD holds the stance in the harness */
+    c.is_heartbeat_stopped = true;
+    const int64_t t_stop = c.t_ns;
+    int64_t t_off = -1;
+    while (c.t_ns < t_stop + 3 * PS_GPIO_SIM_RELAY_TIMEOUT_NS) {
+        ctl_tick(&c);
+        ps_sim_get_truth(sim, &t);
+        if (!t.is_drive_power_on && t_off < 0) {
+            t_off = c.t_ns;
+            assert_true(t.tau_abs_sum_nm == 0.0);
+        }
+    }
+    assert_true(t_off > t_stop);
+    assert_true(t_off <= t_stop + PS_GPIO_SIM_RELAY_TIMEOUT_NS + PERIOD_NS);
+    assert_int_equal(t.n_power_cuts, 1);
+    assert_true(t.tau_abs_sum_nm == 0.0);
+    ps_devices_actuator_t a;
+    assert_int_equal(ps_sim_get_actuator(sim, 0, &a), 0);
+    assert_true(a.is_motor_mode); /* the drive's logic still runs and obeys */
+    ps_sim_destroy(sim);
+}
+
+/* A steady enable-style level written every tick keeps no power on. */
+static void test_lockstep_steady_heartbeat_level_no_drive_power(void **state)
+{
+    fixture_t *fx = *state;
+    ctl_t c;
+    ps_sim_t *sim = make_lockstep(fx, &c);
+    c.is_heartbeat_steady = true;
+    ctl_run_until(&c, 100 * PS_NS_PER_MS);
+    ps_sim_truth_t t;
+    ps_sim_get_truth(sim, &t);
+    assert_false(t.is_drive_power_on);
+    assert_true(t.tau_abs_sum_nm == 0.0);
     ps_sim_destroy(sim);
 }
 
@@ -569,6 +660,10 @@ int main(void)
         cmocka_unit_test(test_create_null_cfg_einval),
         cmocka_unit_test_setup(test_get_actuator_bad_index_einval, setup),
         cmocka_unit_test_setup(test_lockstep_replies_and_imu_arrive_with_right_ids, setup),
+        cmocka_unit_test_setup(test_lockstep_contacts_beyond_nconmax_plant_err_in_truth, setup),
+        cmocka_unit_test_setup(test_lockstep_heartbeat_stops_drives_limp_within_relay_timeout,
+                               setup),
+        cmocka_unit_test_setup(test_lockstep_steady_heartbeat_level_no_drive_power, setup),
         cmocka_unit_test_setup(test_lockstep_stands_5s_after_harness_release, setup),
         cmocka_unit_test_setup(test_lockstep_estop_events_toggle_gpio, setup),
         cmocka_unit_test_setup(test_lockstep_requests_taken_once_at_their_times, setup),

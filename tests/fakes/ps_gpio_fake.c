@@ -11,31 +11,32 @@ static int take_fault(ps_gpio_fake_fault_t *fault)
     return fault->err;
 }
 
-static int fake_read_estop(void *ctx, bool *out_pressed)
+static int fake_read_estop(void *ctx, bool *out_pressed_since_last_read)
 {
     ps_gpio_fake_t *f = ctx;
     f->n_read_calls++;
     const int err = take_fault(&f->read_fault);
     if (err != 0)
         return err;
-    if (out_pressed == NULL)
+    if (out_pressed_since_last_read == NULL)
         return -EINVAL;
-    *out_pressed = f->is_estop_pressed;
+    *out_pressed_since_last_read = f->is_estop_pressed || f->is_estop_latched;
+    f->is_estop_latched = false;
     return 0;
 }
 
-static int fake_set_enable(void *ctx, bool is_enabled)
+static int fake_set_heartbeat(void *ctx, bool level)
 {
     ps_gpio_fake_t *f = ctx;
-    const int err = take_fault(&f->enable_fault);
+    const int err = take_fault(&f->heartbeat_fault);
     if (err != 0)
         return err;
-    if (f->n_enable_calls < PS_GPIO_FAKE_MAX_LOG)
-        f->enable_log[f->n_enable_calls] = is_enabled;
-    f->n_enable_calls++;
-    if (f->is_enabled != is_enabled)
-        f->n_enable_edges++;
-    f->is_enabled = is_enabled;
+    if (f->n_heartbeat_calls < PS_GPIO_FAKE_MAX_LOG)
+        f->heartbeat_log[f->n_heartbeat_calls] = level;
+    f->n_heartbeat_calls++;
+    if (f->heartbeat != level)
+        f->n_heartbeat_edges++;
+    f->heartbeat = level;
     return 0;
 }
 
@@ -60,7 +61,7 @@ static void fake_close(void *ctx)
 
 static const ps_gpio_ops_t FAKE_OPS = {
     .read_estop = fake_read_estop,
-    .set_enable = fake_set_enable,
+    .set_heartbeat = fake_set_heartbeat,
     .set_led = fake_set_led,
     .close = fake_close,
 };
@@ -81,9 +82,9 @@ void ps_gpio_fake_fail_read(ps_gpio_fake_t *f, int err, uint32_t n_calls)
     f->read_fault = (ps_gpio_fake_fault_t){.err = err, .n_calls = n_calls};
 }
 
-void ps_gpio_fake_fail_enable(ps_gpio_fake_t *f, int err, uint32_t n_calls)
+void ps_gpio_fake_fail_heartbeat(ps_gpio_fake_t *f, int err, uint32_t n_calls)
 {
-    f->enable_fault = (ps_gpio_fake_fault_t){.err = err, .n_calls = n_calls};
+    f->heartbeat_fault = (ps_gpio_fake_fault_t){.err = err, .n_calls = n_calls};
 }
 
 void ps_gpio_fake_fail_led(ps_gpio_fake_t *f, int err, uint32_t n_calls)

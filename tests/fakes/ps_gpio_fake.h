@@ -1,8 +1,9 @@
 /*
  * ps_gpio_fake: a scripted GPIO port for tests of the loop.
  *
- * The test sets the e-stop level, reads back the enable and LED outputs and a
- * log of every successful set call, and makes the next N calls of an op fail
+ * The test sets the e-stop level (or a latched press, as a press shorter
+ * than a tick leaves it), reads back the heartbeat and LED outputs and a log
+ * of every successful set call, and makes the next N calls of an op fail
  * with an error of its choice (the line then keeps its level).
  *
  * Threads: not thread-safe (one test thread). Allocation: none.
@@ -25,24 +26,25 @@ typedef struct {
 
 typedef struct {
     /* script (test may modify) */
-    bool is_estop_pressed;
+    bool is_estop_pressed; /**< the level */
+    bool is_estop_latched; /**< pressed since the last read; a read clears it */
     ps_gpio_fake_fault_t read_fault;
-    ps_gpio_fake_fault_t enable_fault;
+    ps_gpio_fake_fault_t heartbeat_fault;
     ps_gpio_fake_fault_t led_fault;
 
     /* outputs and records (read-only) */
-    bool is_enabled;
+    bool heartbeat;
     ps_gpio_led_t led;
-    bool enable_log[PS_GPIO_FAKE_MAX_LOG]; /**< value of each successful set_enable */
+    bool heartbeat_log[PS_GPIO_FAKE_MAX_LOG]; /**< level of each successful set_heartbeat */
     ps_gpio_led_t led_log[PS_GPIO_FAKE_MAX_LOG];
-    size_t n_enable_calls; /**< successful set_enable calls (log entries: min with MAX) */
+    size_t n_heartbeat_calls; /**< successful set_heartbeat calls (log: min with MAX) */
     size_t n_led_calls;
-    size_t n_enable_edges; /**< level changes of the enable output */
-    size_t n_read_calls;   /**< every read_estop call, failed included */
+    size_t n_heartbeat_edges; /**< level changes of the heartbeat output */
+    size_t n_read_calls;      /**< every read_estop call, failed included */
     size_t n_close_calls;
 } ps_gpio_fake_t;
 
-/** @post f zeroed: released, enable off, LED off, no script  @rt tests */
+/** @post f zeroed: released, heartbeat low, LED off, no script  @rt tests */
 void ps_gpio_fake_init(ps_gpio_fake_t *f);
 
 /** @return a port on f  @rt tests */
@@ -50,7 +52,7 @@ ps_gpio_port_t ps_gpio_fake_port(ps_gpio_fake_t *f);
 
 /** The next n_calls calls of that op return err (< 0) and change nothing. */
 void ps_gpio_fake_fail_read(ps_gpio_fake_t *f, int err, uint32_t n_calls);
-void ps_gpio_fake_fail_enable(ps_gpio_fake_t *f, int err, uint32_t n_calls);
+void ps_gpio_fake_fail_heartbeat(ps_gpio_fake_t *f, int err, uint32_t n_calls);
 void ps_gpio_fake_fail_led(ps_gpio_fake_t *f, int err, uint32_t n_calls);
 
 #endif /* PS_GPIO_FAKE_H */
