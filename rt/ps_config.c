@@ -39,6 +39,11 @@
 #define MAX_GPIO_LINE      1023u
 #define MAX_RATE_DIV       64u
 #define MAX_CAN_ID         0x7ffu
+#define MAX_OVERRUN_LIMIT  PS_LOOP_MAX_OVERRUN_LIMIT
+/* Stale data is judged within a few command periods, never seconds: a
+ * timeout above this many periods of the fastest joint (or of the IMU) is
+ * refused. */
+#define MAX_TIMEOUT_PERIODS 5u
 
 /* ====================================================================== */
 /* node tree built with libyaml: positions for every value and every key  */
@@ -907,6 +912,8 @@ typedef struct {
     uint32_t servo_hz, policy_hz;
     float ramp_s, damping_s, damping_kd_nm_s_rad, still_vel_rad_s;
     float reply_timeout_s, imu_timeout_s, policy_deadline_s;
+    uint32_t overrun_limit;
+    float overrun_window_s, hold_s;
 } control_file_t;
 
 typedef struct {
@@ -985,6 +992,9 @@ static const cyaml_schema_field_t CONTROL_FIELDS[] = {
     CYAML_FIELD_FLOAT("reply_timeout_s", CYAML_FLAG_DEFAULT, control_file_t, reply_timeout_s),
     CYAML_FIELD_FLOAT("imu_timeout_s", CYAML_FLAG_DEFAULT, control_file_t, imu_timeout_s),
     CYAML_FIELD_FLOAT("policy_deadline_s", CYAML_FLAG_DEFAULT, control_file_t, policy_deadline_s),
+    CYAML_FIELD_UINT("overrun_limit", CYAML_FLAG_DEFAULT, control_file_t, overrun_limit),
+    CYAML_FIELD_FLOAT("overrun_window_s", CYAML_FLAG_DEFAULT, control_file_t, overrun_window_s),
+    CYAML_FIELD_FLOAT("hold_s", CYAML_FLAG_DEFAULT, control_file_t, hold_s),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_field_t IMU_FIELDS[] = {
@@ -1107,6 +1117,11 @@ static const range_rule_t ROBOT_RANGES[] = {
      1.0},
     {0, NUM_F32, RANGE_OPEN_MIN, "control.policy_deadline_s", R_OFF(cfg.control.policy_deadline_s),
      0.0, 1.0},
+    {0, NUM_U32, 0, "control.overrun_limit", R_OFF(cfg.control.overrun_limit), 1.0,
+     MAX_OVERRUN_LIMIT},
+    {0, NUM_F32, RANGE_OPEN_MIN, "control.overrun_window_s", R_OFF(cfg.control.overrun_window_s),
+     0.0, 10.0},
+    {0, NUM_F32, 0, "control.hold_s", R_OFF(cfg.control.hold_s), 0.0, 60.0},
     {0, NUM_U32, 0, "imu.bus", R_OFF(cfg.imu.bus_idx), 0.0, PS_MAX_BUSES - 1u},
     {0, NUM_U32, RANGE_HEX, "imu.base_id", R_OFF(cfg.imu.base_id), 1.0, MAX_CAN_ID - 1u},
     {0, NUM_U32, 0, "imu.rate_div", R_OFF(cfg.imu.rate_div), 1.0, MAX_RATE_DIV},
@@ -1315,6 +1330,39 @@ static int check_joint_limits(ctx_t *c, const robot_work_t *w, uint32_t i)
 }
 
 /* 11-bit and 29-bit identifiers are different frames even with one value. */
+/* Timeouts in periods, not seconds: the policy runs inside one servo tick,
+ * so its deadline is at most half the period (the other half is the rest of
+ * the tick and the wake-up latency); a reply or IMU sample counts as stale
+ * after at most MAX_TIMEOUT_PERIODS of its own period. */
+static int check_timing(ctx_t *c, const robot_work_t *w)
+{
+    const control_file_t *ctl = &w->cfg.control;
+    const double period_s = 1.0 / (double)ctl->servo_hz;
+    if ((double)ctl->policy_deadline_s > 0.5 * period_s * (1.0 + 1e-6))
+        return fail_field(c, "control.policy_deadline_s",
+                          "value %g does not fit in the servo period: at most half of 1/servo_hz "
+                          "= %g s",
+                          (double)ctl->policy_deadline_s, 0.5 * period_s);
+    uint32_t min_div = UINT32_MAX;
+    for (uint32_t i = 0; i < w->cfg.n_joints; i++)
+        min_div = w->cfg.joints[i].rate_div < min_div ? w->cfg.joints[i].rate_div : min_div;
+    const double reply_max_s = MAX_TIMEOUT_PERIODS * (double)min_div * period_s;
+    if (w->cfg.n_joints > 0 && (double)ctl->reply_timeout_s > reply_max_s * (1.0 + 1e-6))
+        return fail_field(c, "control.reply_timeout_s",
+                          "value %g is more than %u command periods of the fastest joint "
+                          "(rate_div %u at %u Hz): at most %g s",
+                          (double)ctl->reply_timeout_s, MAX_TIMEOUT_PERIODS, min_div, ctl->servo_hz,
+                          reply_max_s);
+    const double imu_max_s = MAX_TIMEOUT_PERIODS * (double)w->cfg.imu.rate_div * period_s;
+    if ((double)ctl->imu_timeout_s > imu_max_s * (1.0 + 1e-6))
+        return fail_field(c, "control.imu_timeout_s",
+                          "value %g is more than %u IMU sample periods (rate_div %u at %u Hz): at "
+                          "most %g s",
+                          (double)ctl->imu_timeout_s, MAX_TIMEOUT_PERIODS, w->cfg.imu.rate_div,
+                          ctl->servo_hz, imu_max_s);
+    return 0;
+}
+
 static int claim_id(ctx_t *c, id_use_t *uses, uint32_t *n_uses, uint32_t bus_idx, uint32_t id,
                     bool is_ext, const char *field, const char *yaml_field)
 {
@@ -1346,6 +1394,9 @@ static int check_robot(ctx_t *c, robot_work_t *w)
     if (ctl->policy_hz > ctl->servo_hz || ctl->servo_hz % ctl->policy_hz != 0)
         return fail_field(c, "control.policy_hz", "servo_hz %u is not a multiple of policy_hz %u",
                           ctl->servo_hz, ctl->policy_hz);
+    const int trc = check_timing(c, w);
+    if (trc != 0)
+        return trc;
     /* Every device is sampled on every policy tick only if its divider
      * divides the number of servo ticks per policy tick. */
     const uint32_t ticks_per_policy = ctl->servo_hz / ctl->policy_hz;
@@ -1406,6 +1457,9 @@ static void compose_robot(const robot_file_t *f, ps_robot_cfg_t *out)
         .reply_timeout_s = c->reply_timeout_s,
         .imu_timeout_s = c->imu_timeout_s,
         .policy_deadline_s = c->policy_deadline_s,
+        .overrun_limit = c->overrun_limit,
+        .overrun_window_s = c->overrun_window_s,
+        .hold_s = c->hold_s,
     };
     out->servo_common.damping_kd_nm_s_rad = c->damping_kd_nm_s_rad;
     out->n_joints = f->n_joints;

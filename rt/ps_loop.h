@@ -58,9 +58,15 @@ typedef struct {
     float still_vel_rad_s;   /**< DAMPING ends early when all |qd| below this */
     float reply_timeout_s;   /**< actuator reply older than this: stale */
     float imu_timeout_s;     /**< IMU sample older than this: stale */
-    float policy_deadline_s; /**< policy compute longer than this: missed */
+    float policy_deadline_s; /**< policy compute longer than this: missed; at most half
+                                  a servo period (the policy runs inside one tick) */
+    uint32_t overrun_limit;  /**< this many overruns within overrun_window_s: OVERRUN */
+    float overrun_window_s;  /**< window of the overrun count */
+    float hold_s;            /**< longest HOLD before DAMPING; 0: soft faults damp at once */
 } ps_control_cfg_t;
 
+/** Largest control.overrun_limit: the loop keeps that many overrun times. */
+#define PS_LOOP_MAX_OVERRUN_LIMIT 64u
 /** Receive batches per bus per tick at most (of rx_buf's size). */
 #define PS_LOOP_MAX_RX_BATCHES 4u
 /** Frames one bus may be given in one tick: every joint's command frames. */

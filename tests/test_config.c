@@ -270,7 +270,10 @@ static void test_load_robot_fixture_exact_values(void **state)
     assert_string_equal(r->model, "../models/tiny.xml"); /* stored as given */
     assert_int_equal(r->control.servo_hz, 1000);
     assert_int_equal(r->control.policy_hz, 50);
-    assert_true(r->control.policy_deadline_s == 0.002f);
+    assert_true(r->control.policy_deadline_s == 0.0004f);
+    assert_int_equal(r->control.overrun_limit, 5);
+    assert_true(r->control.overrun_window_s == 1.0f);
+    assert_true(r->control.hold_s == 10.0f);
     assert_int_equal(r->imu.bus_idx, 1);
     assert_int_equal(r->imu.base_id, 0x80); /* hex in the file */
     assert_int_equal(r->imu.rate_div, 1);
@@ -590,6 +593,51 @@ static void test_load_robot_reply_id_on_imu_rejected(void **state)
          "{name: r_knee, bus: 1, can_id: 0x02, reply_id: 0x081");
     want(f, "%s:%d: joints[2].reply_id: id 0x081 on bus 1 already used by imu.base_id+1", f->path,
          line_of(f, "r_knee"));
+    expect_robot_error(f);
+}
+
+/* The policy runs inside one servo tick: a deadline beyond half the period
+ * (the 1.5 ms policy that overran every tick passed a 2 ms deadline) is
+ * refused, and so are stale-data timeouts of more than a few periods. */
+static void test_load_robot_policy_deadline_beyond_half_period_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "policy_deadline_s: 0.0004", "policy_deadline_s: 0.002");
+    want(f,
+         "%s:%d: control.policy_deadline_s: value 0.002 does not fit in the servo period: at most "
+         "half of 1/servo_hz = 0.0005 s",
+         f->path, line_of(f, "policy_deadline_s: 0.002"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_reply_timeout_beyond_periods_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "reply_timeout_s: 0.005", "reply_timeout_s: 0.5");
+    want(f,
+         "%s:%d: control.reply_timeout_s: value 0.5 is more than 5 command periods of the fastest "
+         "joint (rate_div 1 at 1000 Hz): at most 0.005 s",
+         f->path, line_of(f, "reply_timeout_s: 0.5"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_imu_timeout_beyond_periods_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "imu_timeout_s: 0.005", "imu_timeout_s: 0.0051");
+    want(f,
+         "%s:%d: control.imu_timeout_s: value 0.0051 is more than 5 IMU sample periods (rate_div "
+         "1 at 1000 Hz): at most 0.005 s",
+         f->path, line_of(f, "imu_timeout_s: 0.0051"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_overrun_limit_zero_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "overrun_limit: 5", "overrun_limit: 0");
+    want(f, "%s:%d: control.overrun_limit: value 0 outside [1, 64]", f->path,
+         line_of(f, "overrun_limit: 0"));
     expect_robot_error(f);
 }
 
@@ -953,6 +1001,10 @@ int main(void)
         T(test_load_robot_duplicate_can_id_rejected),
         T(test_load_robot_reply_id_on_imu_rejected),
         T(test_load_robot_can_id_high_rejected),
+        T(test_load_robot_policy_deadline_beyond_half_period_rejected),
+        T(test_load_robot_reply_timeout_beyond_periods_rejected),
+        T(test_load_robot_imu_timeout_beyond_periods_rejected),
+        T(test_load_robot_overrun_limit_zero_rejected),
         T(test_load_robot_can_id_beyond_29_bits_rejected),
         T(test_load_robot_gear_direction_zero_applied),
         T(test_load_robot_direction_not_unit_rejected),
