@@ -429,9 +429,9 @@ static int run_loop(ps_summary_t *sum)
 }
 
 /* Did the plant's first fall happen while the controller was in charge:
- * in ACTIVE, or in the DAMPING that the loop's own fall detection started
- * (the estimator sees the tilt before a body touches the floor)? Both
- * times count from the start of the run. */
+ * in ACTIVE or HOLD, or in the DAMPING that the loop's own fall detection
+ * started (the estimator sees the tilt before a body touches the floor)?
+ * Both times count from the start of the run. */
 static bool fell_while_active(double first_fall_t_s)
 {
     if (first_fall_t_s < 0)
@@ -442,10 +442,11 @@ static bool fell_while_active(double first_fall_t_s)
     double since = -1;
     for (uint32_t i = 0; i < n; i++) {
         const ps_logger_transition_t *t = &lg->transitions[i];
-        bool is_fall_damping =
-            t->from == PS_SM_ACTIVE && t->to == PS_SM_DAMPING && (t->cond & PS_SM_C_FALL);
-        if (t->to == PS_SM_ACTIVE) {
-            since = t->t_s;
+        const bool is_from_charge = t->from == PS_SM_ACTIVE || t->from == PS_SM_HOLD;
+        bool is_fall_damping = is_from_charge && t->to == PS_SM_DAMPING && (t->cond & PS_SM_C_FALL);
+        if (t->to == PS_SM_ACTIVE || t->to == PS_SM_HOLD) {
+            if (since < 0)
+                since = t->t_s;
         } else if (since >= 0 && !is_fall_damping) {
             if (first_fall_t_s >= since && first_fall_t_s <= t->t_s)
                 return true;

@@ -171,11 +171,11 @@ static void hook_resume_guard(void *ctx)
     ps_guard_resume();
 }
 
-/* For the plant's truth: the controller is in charge in RAMP and ACTIVE. */
+/* For the plant's truth: the controller is in charge in RAMP, ACTIVE and HOLD. */
 static bool is_loop_in_charge(void *ctx)
 {
     const ps_sm_state_t st = ps_loop_get_state(ctx);
-    return st == PS_SM_RAMP || st == PS_SM_ACTIVE;
+    return st == PS_SM_RAMP || st == PS_SM_ACTIVE || st == PS_SM_HOLD;
 }
 
 ps_sim_hooks_t ps_app_sim_hooks(ps_loop_t *loop)

@@ -229,7 +229,11 @@ static bool is_target_valid(const ps_robot_cfg_t *r, const ps_targets_t *t)
 
 static void stage_policy(ps_loop_t *loop, uint64_t tick)
 {
-    if (tick % loop->policy_div != 0)
+    const bool is_reset = loop->is_policy_reset;
+    loop->is_policy_reset = false;
+    if (is_reset)
+        loop->cfg.policy.ops->reset(loop->cfg.policy.ctx); /* before this tick's step */
+    else if (tick % loop->policy_div != 0)
         return;
     /* Statistics on the perf clock; the deadline on the deadline clock (the
      * pacing clock on hardware, the thread's CPU time in lockstep, so that a
@@ -245,10 +249,12 @@ static void stage_policy(ps_loop_t *loop, uint64_t tick)
     if (loop->has_policy_late)
         loop->counters.n_policy_late++;
     loop->has_target_invalid = rc < 0 || !is_target_valid(loop->cfg.robot, &loop->targets);
-    if (loop->has_target_invalid)
+    if (loop->has_target_invalid) {
         loop->counters.n_target_invalid++;
-    else
-        loop->has_targets = true;
+        return;
+    }
+    loop->has_targets = true;
+    memcpy(loop->safe_q_rad, loop->targets.q_rad, sizeof(loop->safe_q_rad));
 }
 
 /* ---- state machine ---------------------------------------------------- */
@@ -278,6 +284,24 @@ static bool is_stale(int64_t t_ns, int64_t now_ns, int64_t timeout_ns)
     return t_ns == 0 || now_ns - t_ns > timeout_ns;
 }
 
+/* OVERRUN: the last overrun_limit overruns all fell within overrun_window_s
+ * before this tick. */
+static bool is_overrunning(const ps_loop_t *loop)
+{
+    const ps_control_cfg_t *c = &loop->cfg.robot->control;
+    const uint32_t limit = c->overrun_limit;
+    if (limit == 0 || limit > PS_LOOP_MAX_OVERRUN_LIMIT || loop->n_overrun_times < limit)
+        return false;
+    const uint32_t oldest = (loop->n_overrun_times - limit) % PS_LOOP_MAX_OVERRUN_LIMIT;
+    return loop->t_deadline_ns - loop->overrun_t_ns[oldest] <= ps_s_to_ns(c->overrun_window_s);
+}
+
+static void note_overrun(ps_loop_t *loop, int64_t t_ns)
+{
+    loop->overrun_t_ns[loop->n_overrun_times % PS_LOOP_MAX_OVERRUN_LIMIT] = t_ns;
+    loop->n_overrun_times++;
+}
+
 static uint32_t watchdog_conditions(const ps_loop_t *loop)
 {
     const ps_robot_cfg_t *r = loop->cfg.robot;
@@ -302,6 +326,10 @@ static uint32_t watchdog_conditions(const ps_loop_t *loop)
         cond |= PS_SM_C_TARGET_INVALID;
     if (loop->bus_off_mask != 0)
         cond |= PS_SM_C_BUS_OFF;
+    if (loop->has_tx_refused)
+        cond |= PS_SM_C_TX_REFUSED;
+    if (is_overrunning(loop))
+        cond |= PS_SM_C_OVERRUN;
     if (loop->estimator.est.is_fallen)
         cond |= PS_SM_C_FALL;
     return cond;
@@ -325,6 +353,8 @@ static uint32_t timer_conditions(const ps_loop_t *loop)
     if (loop->state == PS_SM_DAMPING &&
         (in_state >= ps_s_to_ns(c->damping_s) || (in_state >= MIN_DAMPING_NS && is_still(loop))))
         return PS_SM_C_DAMP_DONE;
+    if (loop->state == PS_SM_HOLD && in_state >= ps_s_to_ns(c->hold_s))
+        return PS_SM_C_HOLD_DONE;
     return 0;
 }
 
@@ -378,7 +408,14 @@ static void enter_state(ps_loop_t *loop, ps_sm_state_t to)
     if (to == PS_SM_RAMP) {
         for (uint32_t j = 0; j < loop->meas.n_joints; j++)
             loop->ramp_from_q_rad[j] = loop->meas.joints[j].q_rad;
-        loop->cfg.policy.ops->reset(loop->cfg.policy.ctx);
+        loop->is_policy_reset = true; /* stage_policy resets, then steps this tick */
+    }
+    if (to == PS_SM_HOLD) {
+        /* The last safe pose: the targets of the last valid policy step, or
+         * where the robot is when there was none. */
+        for (uint32_t j = 0; j < loop->meas.n_joints; j++)
+            loop->hold_q_rad[j] =
+                loop->has_targets ? loop->safe_q_rad[j] : loop->meas.joints[j].q_rad;
     }
 }
 
@@ -515,6 +552,8 @@ static ps_servo_mode_kind_t servo_mode_of(const ps_loop_t *loop)
         return loop->has_targets ? PS_SERVO_RAMP : PS_SERVO_DAMP;
     case PS_SM_ACTIVE:
         return loop->has_targets ? PS_SERVO_TRACK : PS_SERVO_DAMP;
+    case PS_SM_HOLD:
+        return PS_SERVO_HOLD;
     case PS_SM_DAMPING:
         return PS_SERVO_DAMP;
     case PS_SM_STANDBY:
@@ -536,7 +575,7 @@ static void stage_servo(ps_loop_t *loop, uint64_t tick)
         .ramp_alpha = 0.0f,
         .ramp_from_q_rad = loop->ramp_from_q_rad,
         .meas_q_rad = meas_q,
-        .hold_q_rad = NULL,
+        .hold_q_rad = loop->hold_q_rad,
     };
     if (loop->state == PS_SM_RAMP) {
         float alpha = (float)(loop->t_deadline_ns - loop->state_since_ns) /
@@ -556,6 +595,7 @@ static void stage_servo(ps_loop_t *loop, uint64_t tick)
 
 static void stage_write(ps_loop_t *loop)
 {
+    bool has_refused = false;
     for (uint32_t b = 0; b < loop->cfg.board->n_buses; b++) {
         if (loop->n_tx[b] == 0)
             continue;
@@ -566,6 +606,8 @@ static void stage_write(ps_loop_t *loop)
         }
         loop->counters.n_tx_frames += (uint64_t)n;
         loop->counters.n_tx_refused += loop->n_tx[b] - (uint32_t)n;
+        if ((uint32_t)n < loop->n_tx[b])
+            has_refused = true;
         /* A refused ENTER/EXIT did not happen: send it again on the joint's
          * next due tick instead of believing the drive changed mode. */
         for (uint32_t i = (uint32_t)n; i < loop->n_tx[b]; i++) {
@@ -574,11 +616,13 @@ static void stage_write(ps_loop_t *loop)
                 loop->is_entered[j] = !loop->is_entered[j];
         }
     }
+    loop->has_tx_refused = has_refused; /* TX_REFUSED for the next tick's state machine */
     /* LED: on when the controller is in charge, blinking at 2 Hz in RAMP and
-     * DAMPING, 8 Hz in ESTOP, off in STANDBY. */
+     * DAMPING, 4 Hz in HOLD, 8 Hz in ESTOP, off in STANDBY. */
     static const int64_t BLINK_HALF_PERIOD_NS[PS_SM_STATE_COUNT] = {
         [PS_SM_RAMP] = 250 * PS_NS_PER_MS,
         [PS_SM_DAMPING] = 250 * PS_NS_PER_MS,
+        [PS_SM_HOLD] = 125 * PS_NS_PER_MS,
         [PS_SM_ESTOP] = 62 * PS_NS_PER_MS,
     };
     ps_gpio_led_t led = loop->state == PS_SM_ACTIVE ? PS_GPIO_LED_ON : PS_GPIO_LED_OFF;
@@ -607,9 +651,10 @@ void ps_loop_tick(ps_loop_t *loop, int64_t deadline_ns)
     int64_t t1 = ps_clock_now_ns(clk);
     ps_estimate_update(&loop->estimator, &loop->meas);
     int64_t t2 = ps_clock_now_ns(clk);
+    stage_state_machine(loop);
+    int64_t t2b = ps_clock_now_ns(clk);
     stage_policy(loop, tick);
     int64_t t3 = ps_clock_now_ns(clk);
-    stage_state_machine(loop);
     stage_servo(loop, tick);
     int64_t t4 = ps_clock_now_ns(clk);
     stage_write(loop);
@@ -617,7 +662,7 @@ void ps_loop_tick(ps_loop_t *loop, int64_t deadline_ns)
 
     ps_perf_record(&loop->perf[PS_STAGE_READ], t1 - t0);
     ps_perf_record(&loop->perf[PS_STAGE_ESTIMATE], t2 - t1);
-    ps_perf_record(&loop->perf[PS_STAGE_SERVO], t4 - t3);
+    ps_perf_record(&loop->perf[PS_STAGE_SERVO], (t4 - t3) + (t2b - t2)); /* with the SM */
     ps_perf_record(&loop->perf[PS_STAGE_WRITE], t5 - t4);
     ps_perf_record(&loop->perf[PS_STAGE_TICK], t5 - t0);
     bool is_policy_tick = tick % loop->policy_div == 0;
@@ -660,7 +705,8 @@ static void handle_stop_requests(ps_loop_t *loop)
             return;
         }
     }
-    if (is_stopping(loop) && (loop->state == PS_SM_RAMP || loop->state == PS_SM_ACTIVE))
+    if (is_stopping(loop) &&
+        (loop->state == PS_SM_RAMP || loop->state == PS_SM_ACTIVE || loop->state == PS_SM_HOLD))
         ps_loop_request(loop, PS_SM_C_REQ_STOP);
 }
 
@@ -690,9 +736,12 @@ int ps_loop_step(ps_loop_t *loop)
     const ps_clock_t *dl = loop->cfg.deadline_clock;
     const int64_t dl0_ns = dl != loop->cfg.clock ? ps_clock_now_ns(dl) : 0;
     ps_loop_tick(loop, loop->pacer.next_ns - loop->period_ns); /* this tick's deadline */
+    const uint64_t n_overruns_before = loop->pacer.n_overruns;
     uint64_t missed = ps_pacer_end_tick(&loop->pacer); /* the pacer counts overruns itself */
     if (missed == 0 && dl != loop->cfg.clock && ps_clock_now_ns(dl) - dl0_ns >= loop->period_ns)
         loop->pacer.n_overruns++; /* no deadline was skipped: n_missed stays */
+    if (loop->pacer.n_overruns != n_overruns_before)
+        note_overrun(loop, loop->t_deadline_ns); /* for OVERRUN from the next tick on */
     if (missed != 0)
         ps_trace_mark(loop->cfg.trace, "overrun", "n", (int64_t)loop->counters.n_ticks - 1,
                       "missed", (int64_t)missed);

@@ -2,8 +2,9 @@
  * ps_loop: the fixed-step control loop, one tick at a time.
  *
  * Each tick: READ (drain every CAN bus, decode actuator replies and IMU
- * samples, sample the e-stop input) -> ESTIMATE -> POLICY (every
- * servo_hz / policy_hz ticks) -> safety state machine -> SERVO (a neutral joint
+ * samples, sample the e-stop input) -> ESTIMATE -> safety state machine ->
+ * POLICY (every servo_hz / policy_hz ticks, and on the tick RAMP is entered,
+ * right after the policy's reset) -> SERVO (a neutral joint
  * command for every joint due on this tick per the bus plan) -> WRITE (one
  * batch per bus, heartbeat output, LED) -> latency accounting. Records for the
  * non-RT side (status, state transitions, refused requests) go through an
@@ -11,6 +12,14 @@
  *
  * The loop sees only ports (ps_can_port_t, ps_gpio_port_t), a clock and a
  * policy: it does not know whether it runs on hardware or the simulation.
+ *
+ * The state machine sees this tick's measurements and estimate, and the
+ * policy's lateness and target validity of its last run (one tick earlier at
+ * most: an invalid target is never sent, the servo layer damps that joint).
+ * Overruns: OVERRUN when control.overrun_limit ticks ended after their next
+ * deadline within control.overrun_window_s. TX_REFUSED when a bus refused
+ * frames in the last write. HOLD holds the position targets of the last
+ * valid policy step (the measured pose if there was none).
  *
  * Stale-data rule: a joint's reply is stale when older than
  * control.reply_timeout_s + rate_div servo periods (a joint commanded every
@@ -176,8 +185,14 @@ typedef struct {
     ps_targets_t targets;
     bool has_targets;
     float ramp_from_q_rad[PS_MAX_JOINTS];
-    bool is_entered[PS_MAX_JOINTS];              /**< ENTER sent since the last EXIT */
-    int64_t fault_grace_until_ns[PS_MAX_JOINTS]; /**< drive faults ignored until (ENTER) */
+    float safe_q_rad[PS_MAX_JOINTS]; /**< position targets of the last valid policy step */
+    float hold_q_rad[PS_MAX_JOINTS]; /**< pose held in HOLD (safe_q_rad at entry) */
+    bool is_policy_reset;            /**< RAMP entered this tick: reset, then step at once */
+    bool has_tx_refused;             /**< a bus refused frames in the last write */
+    int64_t overrun_t_ns[PS_LOOP_MAX_OVERRUN_LIMIT]; /**< deadlines of the last overruns */
+    uint32_t n_overrun_times;                        /**< entries written (ring index base) */
+    bool is_entered[PS_MAX_JOINTS];                  /**< ENTER sent since the last EXIT */
+    int64_t fault_grace_until_ns[PS_MAX_JOINTS];     /**< drive faults ignored until (ENTER) */
     bool has_policy_late;
     bool has_target_invalid;
     bool has_cmd_fault; /**< a command had to be replaced (TARGET_INVALID) */

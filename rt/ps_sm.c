@@ -30,10 +30,20 @@ static const ps_sm_edge_t EDGES[] = {
     {PS_SM_RAMP, PS_SM_C_REQ_STOP, 0u, PS_SM_DAMPING},
     {PS_SM_RAMP, PS_SM_C_RAMP_DONE, HARD | SOFT | PS_SM_C_REQ_STOP, PS_SM_ACTIVE},
 
-    /* ACTIVE: controller in charge. */
+    /* ACTIVE: controller in charge. A fall damps; the other soft faults
+     * hold the last safe pose while the drives still take commands. */
     {PS_SM_ACTIVE, HARD, 0u, PS_SM_ESTOP},
-    {PS_SM_ACTIVE, SOFT, 0u, PS_SM_DAMPING},
+    {PS_SM_ACTIVE, PS_SM_C_FALL, 0u, PS_SM_DAMPING},
+    {PS_SM_ACTIVE, PS_SM_C_HOLD_FAULTS, 0u, PS_SM_HOLD},
     {PS_SM_ACTIVE, PS_SM_C_REQ_STOP, 0u, PS_SM_DAMPING},
+
+    /* HOLD: stiff at the last safe pose. The fault that led here may persist
+     * (it does not re-trigger anything); a fall, the operator's stop or the
+     * end of hold_s damps; a start with every fault gone resumes. */
+    {PS_SM_HOLD, HARD, 0u, PS_SM_ESTOP},
+    {PS_SM_HOLD, PS_SM_C_FALL | PS_SM_C_HOLD_DONE, 0u, PS_SM_DAMPING},
+    {PS_SM_HOLD, PS_SM_C_REQ_STOP, 0u, PS_SM_DAMPING},
+    {PS_SM_HOLD, PS_SM_C_REQ_START, PS_SM_C_RESUME_BLOCKERS, PS_SM_RAMP},
 
     /* DAMPING: brake until time is up or the robot is still. Soft faults
      * change nothing (already damping); STANDBY tolerates them too. */
@@ -51,19 +61,19 @@ static const ps_sm_edge_t EDGES[] = {
 
 static const char *const STATE_NAMES[] = {
     [PS_SM_STANDBY] = "STANDBY", [PS_SM_RAMP] = "RAMP",   [PS_SM_ACTIVE] = "ACTIVE",
-    [PS_SM_DAMPING] = "DAMPING", [PS_SM_ESTOP] = "ESTOP",
+    [PS_SM_DAMPING] = "DAMPING", [PS_SM_ESTOP] = "ESTOP", [PS_SM_HOLD] = "HOLD",
 };
 static_assert(sizeof STATE_NAMES / sizeof STATE_NAMES[0] == PS_SM_STATE_COUNT,
               "one name per state");
 
 static const char *const COND_NAMES[] = {
-    "REQ_START",      "REQ_STOP",  "REQ_RESET",   "REQ_ESTOP", "ESTOP_INPUT",
-    "RAMP_DONE",      "DAMP_DONE", "REPLY_STALE", "IMU_STALE", "POLICY_LATE",
-    "TARGET_INVALID", "FALL",      "DRIVE_FAULT", "BUS_OFF",
+    "REQ_START",   "REQ_STOP",    "REQ_RESET", "REQ_ESTOP",   "ESTOP_INPUT",    "RAMP_DONE",
+    "DAMP_DONE",   "REPLY_STALE", "IMU_STALE", "POLICY_LATE", "TARGET_INVALID", "FALL",
+    "DRIVE_FAULT", "BUS_OFF",     "OVERRUN",   "TX_REFUSED",  "HOLD_DONE",
 };
 static_assert(sizeof COND_NAMES / sizeof COND_NAMES[0] == PS_SM_COND_COUNT,
               "one name per condition bit");
-static_assert(PS_SM_C_BUS_OFF == 1u << (PS_SM_COND_COUNT - 1u), "BUS_OFF is the last bit");
+static_assert(PS_SM_C_HOLD_DONE == 1u << (PS_SM_COND_COUNT - 1u), "HOLD_DONE is the last bit");
 
 /* Refusal sentences for a blocked START or RESET, checked in this order (the
  * most actionable reason first). Every blocker bit has one; the tests check
@@ -80,6 +90,13 @@ static const blocker_reason_t START_REASONS[] = {
     {PS_SM_C_DRIVE_FAULT, "start refused: drive fault"},
     {PS_SM_C_REPLY_STALE, "start refused: actuator replies stale"},
     {PS_SM_C_IMU_STALE, "start refused: IMU data stale"},
+    /* only block a resume from HOLD (PS_SM_C_RESUME_BLOCKERS) */
+    {PS_SM_C_FALL, "start refused: robot fallen"},
+    {PS_SM_C_POLICY_LATE, "start refused: policy still late"},
+    {PS_SM_C_TARGET_INVALID, "start refused: targets still invalid"},
+    {PS_SM_C_OVERRUN, "start refused: loop still overrunning"},
+    {PS_SM_C_TX_REFUSED, "start refused: bus still refusing frames"},
+    {PS_SM_C_HOLD_DONE, "start refused: hold time over, damping"},
 };
 static const blocker_reason_t RESET_REASONS[] = {
     {PS_SM_C_ESTOP_INPUT, "reset refused: e-stop input still pressed"},
@@ -148,9 +165,11 @@ int ps_sm_check_request(ps_sm_state_t state, uint32_t request, uint32_t cond,
     case PS_SM_C_REQ_START:
         if (state == PS_SM_ESTOP)
             return refuse(out_reason, "start refused: e-stop latched, reset first");
-        if (state != PS_SM_STANDBY)
-            return refuse(out_reason, "start refused: only allowed from STANDBY");
-        why = blocked_by(START_REASONS, sizeof START_REASONS / sizeof START_REASONS[0], cond);
+        if (state != PS_SM_STANDBY && state != PS_SM_HOLD)
+            return refuse(out_reason, "start refused: only allowed from STANDBY or HOLD");
+        why = blocked_by(
+            START_REASONS, sizeof START_REASONS / sizeof START_REASONS[0],
+            cond & (state == PS_SM_HOLD ? PS_SM_C_RESUME_BLOCKERS : PS_SM_C_START_BLOCKERS));
         return why != NULL ? refuse(out_reason, why) : 0;
     case PS_SM_C_REQ_STOP:
         if (state == PS_SM_STANDBY)
@@ -159,7 +178,7 @@ int ps_sm_check_request(ps_sm_state_t state, uint32_t request, uint32_t cond,
             return refuse(out_reason, "stop refused: already DAMPING");
         if (state == PS_SM_ESTOP)
             return refuse(out_reason, "stop refused: e-stop latched");
-        return 0; /* RAMP, ACTIVE; with a hard fault present it ends in ESTOP instead */
+        return 0; /* RAMP, ACTIVE, HOLD; with a hard fault present it ends in ESTOP instead */
     case PS_SM_C_REQ_RESET:
         if (state != PS_SM_ESTOP)
             return refuse(out_reason, "reset refused: not in ESTOP");

@@ -1,11 +1,14 @@
 /*
  * ps_sm: the safety state machine, as a table.
  *
- * States: STANDBY (drives limp, enable on), RAMP (blend from the measured
+ * States: STANDBY (drives limp, heartbeat on), RAMP (blend from the measured
  * pose to the controller's targets over control.ramp_s), ACTIVE (controller
- * in charge), DAMPING (zero stiffness, configured damping, until the time
- * runs out or the robot is still), ESTOP (latched; enable output off; only an
- * explicit reset, with the e-stop input released, leaves it).
+ * in charge), HOLD (the controller's output or data cannot be trusted but the
+ * drives still take commands: the last safe pose is held stiffly for up to
+ * control.hold_s, until the operator stops or restarts), DAMPING (zero
+ * stiffness, configured damping, until the time runs out or the robot is
+ * still), ESTOP (latched; heartbeat stopped; only an explicit reset, with the
+ * e-stop input released, leaves it).
  *
  * Each tick the loop gathers a condition bitmask (operator requests, watchdog
  * findings, timers) and calls ps_sm_next(), which is pure: the first edge of
@@ -13,12 +16,15 @@
  * blocker bits do not wins; no match means stay. Entry actions are the loop's
  * business, run after the transition.
  *
- * Watchdog rule (docs/safety.md): a fault that means the *controller's output*
- * cannot be trusted while the hardware still can (stale actuator reply, stale
- * IMU, missed policy deadline, NaN or out-of-range target, fall detected)
- * leads to DAMPING, so the drives still brake the robot down; a fault that
- * means the *hardware* cannot be trusted (e-stop input, bus off, driver fault
- * or over-temperature) leads to ESTOP.
+ * Watchdog rule (docs/safety.md, one row per fault): a fault that means the
+ * *controller's output or its data* cannot be trusted while the drives still
+ * take commands (stale actuator reply, stale IMU, missed policy deadline,
+ * repeated overruns, NaN or out-of-range target, frames the bus refused)
+ * leads from ACTIVE to HOLD, then to DAMPING when the hold ends; a fall
+ * leads to DAMPING at once (holding a robot on the floor stiffly helps
+ * nobody); a fault that means the *hardware* cannot be trusted (e-stop
+ * input, bus off, drive fault or over-temperature) leads to ESTOP. In RAMP
+ * every soft fault damps.
  *
  * Threads: pure functions, any thread. Allocation: none.
  */
@@ -33,6 +39,7 @@ typedef enum {
     PS_SM_ACTIVE,
     PS_SM_DAMPING,
     PS_SM_ESTOP,
+    PS_SM_HOLD, /**< last, so the older states keep their numbers in logs */
     PS_SM_STATE_COUNT
 } ps_sm_state_t;
 
@@ -52,11 +59,16 @@ typedef enum {
     PS_SM_C_FALL = 1u << 11,           /**< estimator says fallen */
     PS_SM_C_DRIVE_FAULT = 1u << 12,    /**< driver fault bits or over-temperature */
     PS_SM_C_BUS_OFF = 1u << 13,        /**< a CAN controller went bus-off */
+    PS_SM_C_OVERRUN = 1u << 14,        /**< overrun_limit overruns within overrun_window_s */
+    PS_SM_C_TX_REFUSED = 1u << 15,     /**< a bus refused frames this loop wanted to send */
+    PS_SM_C_HOLD_DONE = 1u << 16,      /**< hold_s elapsed in HOLD */
 } ps_sm_cond_t;
 
-#define PS_SM_C_SOFT_FAULTS                                                                        \
+/** Soft faults where the drives still take commands: ACTIVE holds. */
+#define PS_SM_C_HOLD_FAULTS                                                                        \
     (PS_SM_C_REPLY_STALE | PS_SM_C_IMU_STALE | PS_SM_C_POLICY_LATE | PS_SM_C_TARGET_INVALID |      \
-     PS_SM_C_FALL)
+     PS_SM_C_OVERRUN | PS_SM_C_TX_REFUSED)
+#define PS_SM_C_SOFT_FAULTS (PS_SM_C_HOLD_FAULTS | PS_SM_C_FALL)
 #define PS_SM_C_HARD_FAULTS                                                                        \
     (PS_SM_C_REQ_ESTOP | PS_SM_C_ESTOP_INPUT | PS_SM_C_DRIVE_FAULT | PS_SM_C_BUS_OFF)
 #define PS_SM_C_REQUESTS                                                                           \
@@ -64,14 +76,18 @@ typedef enum {
 
 /** Number of condition bits (bit 0 .. PS_SM_COND_COUNT - 1); ps_sm_cond_name
  *  has one name per bit. */
-#define PS_SM_COND_COUNT 14u
+#define PS_SM_COND_COUNT 17u
 #define PS_SM_C_ALL      ((1u << PS_SM_COND_COUNT) - 1u)
 
 /** What blocks STANDBY -> RAMP: every hard fault, and the soft faults that
  *  make *starting* unsafe (no fresh actuator or IMU data to ramp from). The
- *  other soft faults (POLICY_LATE, TARGET_INVALID, FALL) do not block a start:
- *  if they persist, RAMP drops to DAMPING on its first tick. */
+ *  other soft faults (POLICY_LATE, TARGET_INVALID, FALL, ...) do not block a
+ *  start: if they persist, RAMP drops to DAMPING on its first tick. */
 #define PS_SM_C_START_BLOCKERS (PS_SM_C_HARD_FAULTS | PS_SM_C_REPLY_STALE | PS_SM_C_IMU_STALE)
+/** What blocks HOLD -> RAMP (the operator resumes after a fault): the start
+ *  blockers, every soft fault still present, and the hold's end (the robot
+ *  is being damped in that tick). */
+#define PS_SM_C_RESUME_BLOCKERS (PS_SM_C_START_BLOCKERS | PS_SM_C_SOFT_FAULTS | PS_SM_C_HOLD_DONE)
 /** What blocks ESTOP -> STANDBY: e-stop input still pressed, bus still off,
  *  e-stop requested again. Not a drive fault: drives clear a latched fault
  *  only when they are enabled again (ENTER), which happens in STANDBY; a
@@ -103,8 +119,9 @@ int ps_sm_find_edge(ps_sm_state_t state, uint32_t cond);
 /** Would an operator request (one REQ_* bit) be accepted now, given the
  *  other conditions (e.g. e-stop input still pressed blocks a reset)?
  *  Accepted means ps_sm_next(state, cond | request) takes the request's edge:
- *  START from STANDBY unless PS_SM_C_START_BLOCKERS; STOP from RAMP/ACTIVE;
- *  RESET from ESTOP unless PS_SM_C_RESET_BLOCKERS; ESTOP from every state.
+ *  START from STANDBY unless PS_SM_C_START_BLOCKERS, from HOLD unless
+ *  PS_SM_C_RESUME_BLOCKERS; STOP from RAMP/ACTIVE/HOLD; RESET from ESTOP
+ *  unless PS_SM_C_RESET_BLOCKERS; ESTOP from every state.
  *  @pre out_reason may be NULL
  *  @post *out_reason set to a static sentence ("start refused: ...") when
  *        refused (also for -EINVAL); untouched when accepted

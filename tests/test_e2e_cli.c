@@ -509,6 +509,8 @@ static const sig_case_t SIG_CASES[] = {
      "state RAMP -> DAMPING (REQ_STOP)", "-> ACTIVE"},
     {"ACTIVE", "scenarios/stand.yaml", "state RAMP -> ACTIVE", 0.1, "STANDBY",
      "state ACTIVE -> DAMPING (REQ_STOP)", NULL},
+    {"HOLD", "tests/data/scenarios/sig-hold.yaml", "state ACTIVE -> HOLD", 0.1, "STANDBY",
+     "state HOLD -> DAMPING (REQ_STOP)", "HOLD -> RAMP"},
     {"DAMPING", "tests/data/scenarios/sig-damping.yaml", "state ACTIVE -> DAMPING", 0.02, "STANDBY",
      "state DAMPING -> STANDBY", NULL},
     {"ESTOP", "tests/data/scenarios/sig-estop.yaml", "-> ESTOP", 0.2, "ESTOP", NULL,

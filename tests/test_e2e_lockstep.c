@@ -394,10 +394,12 @@ static unsigned count_refused(uint32_t request)
     return n;
 }
 
-/* A joint that stops answering is a stale reply: DAMPING, caused by
- * REPLY_STALE (the transition record's conditions), then STANDBY; the loop
- * thread allocates, frees, faults and locks nothing on the way. */
-static void test_lockstep_dropped_replies_damping_cause_reply_stale(void **state)
+/* A joint that stops answering for 50 ms while the others still do: HOLD,
+ * caused by REPLY_STALE (the transition record's conditions), and the robot
+ * stays on its feet (before, every soft fault ended limp and this robot was
+ * on the floor); the loop thread allocates, frees, faults and locks nothing
+ * on the way. */
+static void test_lockstep_dropped_replies_hold_reply_stale_robot_stands(void **state)
 {
     (void)state;
     start_guarded("scenarios/fault-drop.yaml");
@@ -405,30 +407,40 @@ static void test_lockstep_dropped_replies_damping_cause_reply_stale(void **state
     assert_int_equal(app.loop.state, PS_SM_ACTIVE);
     ps_guard_counts_t c;
     step_guarded_until(4.1, &c);
-    assert_int_equal(app.loop.state, PS_SM_DAMPING);
-    step_guarded_until(7.0, &c);
-    assert_no_alloc_lock_fault(&c, "fault-drop 4.1..7 s");
-    const ps_loop_rec_t *t = find_transition(PS_SM_ACTIVE, PS_SM_DAMPING);
+    assert_int_equal(app.loop.state, PS_SM_HOLD);
+    step_guarded_until(9.0, &c);
+    assert_no_alloc_lock_fault(&c, "fault-drop 4.1..9 s");
+    assert_int_equal(app.loop.state, PS_SM_HOLD);
+    const ps_loop_rec_t *t = find_transition(PS_SM_ACTIVE, PS_SM_HOLD);
     assert_non_null(t);
     if ((t->cond & PS_SM_C_REPLY_STALE) == 0)
-        fail_msg("ACTIVE -> DAMPING with cond 0x%x, not REPLY_STALE", t->cond);
+        fail_msg("ACTIVE -> HOLD with cond 0x%x, not REPLY_STALE", t->cond);
     assert_int_equal(t->cond & (PS_SM_C_REQ_STOP | PS_SM_C_FALL), 0);
-    assert_non_null(find_transition(PS_SM_DAMPING, PS_SM_STANDBY));
-    assert_int_equal(app.loop.state, PS_SM_STANDBY);
+    assert_null(find_transition(PS_SM_ACTIVE, PS_SM_DAMPING));
+    ps_sim_truth_t truth;
+    ps_sim_get_truth(app.sim, &truth);
+    assert_false(truth.is_fallen);
+    assert_true(truth.first_fall_t_s < 0);
+    print_message("fault-drop: lowest CoM while in charge %.3f m\n", truth.min_com_height_active_m);
+    assert_true(truth.min_com_height_active_m > 0.6); /* stance 0.65 m, fall below 0.39 m */
 }
 
-/* The same fault from its start, guarded throughout: the first time the
- * stale-reply and damping paths run they take nothing either. */
+/* The same fault from its start, guarded throughout, with the operator
+ * stopping the held robot: HOLD, DAMPING, STANDBY; the first time the
+ * stale-reply, hold and damping paths run they take nothing either. */
 static void test_lockstep_dropped_replies_guarded_from_start_no_alloc_no_lock(void **state)
 {
     (void)state;
-    start_guarded("scenarios/fault-drop.yaml");
+    start_guarded("tests/data/scenarios/fault-drop-stop.yaml");
     step_until(0.1);
     ps_guard_counts_t c;
-    step_guarded_until(7.0, &c);
-    assert_no_alloc_lock_fault(&c, "fault-drop 0.1..7 s");
+    step_guarded_until(9.0, &c);
+    assert_no_alloc_lock_fault(&c, "fault-drop-stop 0.1..9 s");
     assert_non_null(find_transition(PS_SM_STANDBY, PS_SM_RAMP));
-    assert_non_null(find_transition(PS_SM_ACTIVE, PS_SM_DAMPING));
+    assert_non_null(find_transition(PS_SM_ACTIVE, PS_SM_HOLD));
+    const ps_loop_rec_t *t = find_transition(PS_SM_HOLD, PS_SM_DAMPING);
+    assert_non_null(t);
+    assert_true((t->cond & PS_SM_C_REQ_STOP) != 0u);
     assert_non_null(find_transition(PS_SM_DAMPING, PS_SM_STANDBY));
 }
 
@@ -549,7 +561,7 @@ int main(void)
         cmocka_unit_test_teardown(test_lockstep_stand_10s_no_fall_no_alloc_no_fault, teardown),
         cmocka_unit_test_teardown(test_lockstep_same_seed_identical_truth, teardown),
         cmocka_unit_test_teardown(test_lockstep_estop_latches_until_reset, teardown),
-        cmocka_unit_test_teardown(test_lockstep_dropped_replies_damping_cause_reply_stale,
+        cmocka_unit_test_teardown(test_lockstep_dropped_replies_hold_reply_stale_robot_stands,
                                   teardown),
         cmocka_unit_test_teardown(test_lockstep_dropped_replies_guarded_from_start_no_alloc_no_lock,
                                   teardown),

@@ -64,6 +64,13 @@ typedef struct {
     bool is_ctrl_c_in_damping;      /* the operator presses Ctrl-C once while braking */
     bool is_fault_cleared_by_enter; /* drives clear a latched fault on ENTER, like real ones */
     bool is_reply_late;             /* replies arrive two ticks after their command */
+    float policy_offset_rad;        /* added to the stance in every target */
+    int64_t read_extra_ns;          /* time each read of bus 0 takes (forces overruns) */
+    unsigned n_policy_resets;
+    unsigned n_steps_after_reset; /* policy steps since the last reset */
+    int state_at_first_step;      /* loop state at the first step after a reset */
+    ps_loop_rec_t recs[256];      /* TRANSITION and REFUSED records drained from the ring */
+    unsigned n_recs;
     ps_ring_t ring;
     ps_loop_rec_t ring_storage[256];
     ps_loop_t loop;
@@ -125,6 +132,8 @@ static int fake_recv(void *ctx, ps_can_frame_t *out, size_t max)
 {
     fake_bus_t *b = ctx;
     size_t n = 0;
+    if (b->bus_idx == 0)
+        ps_clock_fake_advance(&fx->clock, fx->read_extra_ns);
     if (b->is_babbling) {
         for (; n < max; n++) {
             memset(&out[n], 0, sizeof(out[n]));
@@ -195,7 +204,8 @@ static int fake_policy_step(void *ctx, const ps_meas_t *m, const ps_estimate_t *
     (void)e;
     out->n_joints = fx->robot.n_joints;
     for (uint32_t j = 0; j < fx->robot.n_joints; j++) {
-        out->q_rad[j] = isnan(fx->policy_value) ? NAN : fx->robot.servo[j].stance_rad;
+        out->q_rad[j] =
+            isnan(fx->policy_value) ? NAN : fx->robot.servo[j].stance_rad + fx->policy_offset_rad;
         out->qd_rad_s[j] = 0;
         out->tau_ff_nm[j] = 0;
     }
@@ -203,6 +213,8 @@ static int fake_policy_step(void *ctx, const ps_meas_t *m, const ps_estimate_t *
         ps_loop_request_stop(&fx->loop);
         fx->is_ctrl_c_in_damping = false;
     }
+    if (fx->n_steps_after_reset++ == 0)
+        fx->state_at_first_step = (int)fx->loop.state;
     ps_clock_fake_advance(&fx->clock, fx->policy_extra_ns);
     if (!fx->is_policy_preempted)
         ps_clock_fake_advance(&fx->cpu_clock, fx->policy_extra_ns);
@@ -211,6 +223,8 @@ static int fake_policy_step(void *ctx, const ps_meas_t *m, const ps_estimate_t *
 static void fake_policy_reset(void *ctx)
 {
     (void)ctx;
+    fx->n_policy_resets++;
+    fx->n_steps_after_reset = 0;
 }
 static const ps_policy_ops_t FAKE_POLICY = {
     .name = "fake", .step = fake_policy_step, .reset = fake_policy_reset};
@@ -261,24 +275,53 @@ static void clear_sent(void)
         fx->buses[b].n_sent = 0;
 }
 
+/* Keep the ring's transitions and refusals (status records dropped), so a
+ * long run does not lose them to a full ring. */
+static void drain_records(void)
+{
+    ps_loop_rec_t rec;
+    while (ps_ring_pop(&fx->ring, &rec) == 0)
+        if (rec.kind != PS_REC_STATUS && fx->n_recs < sizeof fx->recs / sizeof fx->recs[0])
+            fx->recs[fx->n_recs++] = rec;
+}
+
 static void steps(unsigned n)
 {
     for (unsigned i = 0; i < n; i++) {
         clear_sent();
         assert_int_equal(ps_loop_step(&fx->loop), 0);
+        if (i % 64 == 63)
+            drain_records();
     }
+    drain_records();
 }
 
+/* The last refusal of this request since the last call, if any. */
 static bool find_refusal(uint32_t request, const char **out_reason)
 {
-    ps_loop_rec_t rec;
+    drain_records();
     bool is_found = false;
-    while (ps_ring_pop(&fx->ring, &rec) == 0)
-        if (rec.kind == PS_REC_REFUSED && rec.cond == request) {
-            *out_reason = rec.reason;
+    for (unsigned i = 0; i < fx->n_recs; i++) {
+        ps_loop_rec_t *rec = &fx->recs[i];
+        if (rec->kind == PS_REC_REFUSED && rec->cond == request) {
+            *out_reason = rec->reason;
             is_found = true;
+            rec->kind = 0; /* seen */
         }
+    }
     return is_found;
+}
+
+/* The last from -> to transition so far. */
+static const ps_loop_rec_t *find_transition_rec(ps_sm_state_t from, ps_sm_state_t to)
+{
+    drain_records();
+    const ps_loop_rec_t *found = NULL;
+    for (unsigned i = 0; i < fx->n_recs; i++)
+        if (fx->recs[i].kind == PS_REC_TRANSITION && fx->recs[i].from_state == from &&
+            fx->recs[i].state == to)
+            found = &fx->recs[i];
+    return found;
 }
 
 /* Bring the robot to ACTIVE: replies fresh, START, ramp. */
@@ -382,7 +425,40 @@ static void test_loop_start_without_replies_refused(void **state)
     assert_int_equal(fx->loop.counters.n_refused, 1);
 }
 
-static void test_loop_stale_reply_in_active_damps(void **state)
+/* Steps until joint j's next command of this tick is seen (at most its rate_div). */
+static bool next_command(uint32_t j, ps_mit_cmd_t *cmd)
+{
+    for (uint32_t t = 0; t < fx->robot.act[j].rate_div; t++) {
+        steps(1);
+        if (last_command(j, cmd))
+            return true;
+    }
+    return false;
+}
+
+/* HOLD: stiff at q_rad with the configured gains. */
+static void assert_holding(uint32_t j, float q_rad)
+{
+    ps_mit_cmd_t cmd;
+    assert_true(next_command(j, &cmd));
+    const ps_servo_joint_cfg_t *sj = &fx->robot.servo[j];
+    assert_float_equal(cmd.kp_nm_rad, sj->kp_nm_rad, fx->robot.act[j].wire.kp_max_nm_rad / 4095.0f);
+    assert_float_equal(cmd.kd_nm_s_rad, sj->kd_nm_s_rad, 0.01);
+    assert_float_equal(cmd.p_rad, q_rad, 0.001);
+    assert_float_equal(cmd.t_ff_nm, 0.0f, 0.01);
+}
+
+static void assert_damping_limp(uint32_t j)
+{
+    ps_mit_cmd_t cmd;
+    assert_true(next_command(j, &cmd));
+    assert_float_equal(cmd.kp_nm_rad, 0.0f, 1e-6);
+    assert_float_equal(cmd.kd_nm_s_rad, fx->robot.servo_common.damping_kd_nm_s_rad, 0.01);
+}
+
+/* A drive that stops answering while the others still do: HOLD (stiff at the
+ * last valid targets), caused by REPLY_STALE; after hold_s, DAMPING. */
+static void test_loop_stale_reply_in_active_holds_then_damps(void **state)
 {
     (void)state;
     go_active();
@@ -392,46 +468,139 @@ static void test_loop_stale_reply_in_active_damps(void **state)
     steps(timeout_ticks - 1);
     assert_int_equal(fx->loop.state, PS_SM_ACTIVE);
     steps(3);
+    assert_int_equal(fx->loop.state, PS_SM_HOLD);
+    const ps_loop_rec_t *rec = find_transition_rec(PS_SM_ACTIVE, PS_SM_HOLD);
+    assert_non_null(rec);
+    assert_true((rec->cond & PS_SM_C_REPLY_STALE) != 0u);
+    assert_holding(0, fx->robot.servo[0].stance_rad);
+    steps((unsigned)(fx->robot.control.hold_s * 1000) - 10);
+    assert_int_equal(fx->loop.state, PS_SM_HOLD); /* the mute drive changes nothing here */
+    steps(20);
     assert_int_equal(fx->loop.state, PS_SM_DAMPING);
-    ps_mit_cmd_t cmd;
-    bool has_cmd = false;
-    for (uint32_t t = 0; t < fx->robot.act[0].rate_div && !has_cmd; t++) {
-        steps(1);
-        has_cmd = last_command(0, &cmd);
-    }
-    assert_true(has_cmd);
-    assert_float_equal(cmd.kp_nm_rad, 0.0f, 1e-6);
-    assert_float_equal(cmd.kd_nm_s_rad, fx->robot.servo_common.damping_kd_nm_s_rad, 0.01);
+    rec = find_transition_rec(PS_SM_HOLD, PS_SM_DAMPING);
+    assert_non_null(rec);
+    assert_true((rec->cond & PS_SM_C_HOLD_DONE) != 0u);
+    assert_damping_limp(0);
 }
 
-static void test_loop_stale_imu_in_active_damps(void **state)
+static void test_loop_stale_imu_in_active_holds(void **state)
 {
     (void)state;
     go_active();
     fx->is_imu_mute = true;
     steps((unsigned)(fx->robot.control.imu_timeout_s * 1000) + fx->robot.imu.rate_div + 2);
-    assert_int_equal(fx->loop.state, PS_SM_DAMPING);
+    assert_int_equal(fx->loop.state, PS_SM_HOLD);
 }
 
-static void test_loop_nan_target_damps(void **state)
+/* A NaN target is never sent; the robot holds the last valid targets. */
+static void test_loop_nan_target_holds_last_valid_targets(void **state)
 {
     (void)state;
+    fx->policy_offset_rad = 0.02f;
     go_active();
     fx->policy_value = NAN;
-    steps(fx->loop.policy_div + 1);
-    assert_int_equal(fx->loop.state, PS_SM_DAMPING);
+    steps(fx->loop.policy_div + 2);
+    assert_int_equal(fx->loop.state, PS_SM_HOLD);
     assert_true(fx->loop.counters.n_target_invalid > 0);
     assert_int_equal(fx->loop.counters.n_cmd_replaced, 0);
+    assert_holding(0, fx->robot.servo[0].stance_rad + 0.02f);
 }
 
-static void test_loop_policy_late_damps(void **state)
+static void test_loop_policy_late_holds(void **state)
 {
     (void)state;
     go_active();
     fx->policy_extra_ns = ps_s_to_ns(fx->robot.control.policy_deadline_s) + 1000;
     steps(fx->loop.policy_div + 1);
-    assert_int_equal(fx->loop.state, PS_SM_DAMPING);
+    assert_int_equal(fx->loop.state, PS_SM_HOLD);
     assert_int_equal(fx->loop.counters.n_policy_late, 1);
+}
+
+/* overrun_limit overruns within overrun_window_s: OVERRUN, HOLD. Fewer, or
+ * as many spread wider than the window, do not. */
+static void test_loop_repeated_overruns_hold(void **state)
+{
+    (void)state;
+    go_active();
+    const ps_control_cfg_t *c = &fx->robot.control;
+    const unsigned window_ticks = (unsigned)(c->overrun_window_s * 1000);
+    /* limit - 1 overruns in a row: nothing */
+    fx->read_extra_ns = PERIOD_NS + PERIOD_NS / 2;
+    steps(c->overrun_limit - 1);
+    fx->read_extra_ns = 0;
+    steps(5);
+    assert_int_equal(fx->loop.state, PS_SM_ACTIVE);
+    /* one more after the window has passed: still limit - 1 within it */
+    steps(window_ticks);
+    fx->read_extra_ns = PERIOD_NS + PERIOD_NS / 2;
+    steps(1);
+    fx->read_extra_ns = 0;
+    steps(5);
+    assert_int_equal(fx->loop.state, PS_SM_ACTIVE);
+    /* limit within the window: HOLD, caused by OVERRUN */
+    fx->read_extra_ns = PERIOD_NS + PERIOD_NS / 2;
+    steps(c->overrun_limit);
+    fx->read_extra_ns = 0;
+    steps(2);
+    assert_int_equal(fx->loop.state, PS_SM_HOLD);
+    const ps_loop_rec_t *rec = find_transition_rec(PS_SM_ACTIVE, PS_SM_HOLD);
+    assert_non_null(rec);
+    assert_true((rec->cond & PS_SM_C_OVERRUN) != 0u);
+    assert_int_equal(fx->loop.counters.n_policy_late, 0);
+}
+
+/* Frames a bus would not queue are a condition: HOLD, caused by TX_REFUSED. */
+static void test_loop_tx_refused_in_active_holds(void **state)
+{
+    (void)state;
+    go_active();
+    fx->buses[1].n_refuse_batches = 1;
+    steps(3);
+    assert_int_equal(fx->loop.state, PS_SM_HOLD);
+    const ps_loop_rec_t *rec = find_transition_rec(PS_SM_ACTIVE, PS_SM_HOLD);
+    assert_non_null(rec);
+    assert_true((rec->cond & PS_SM_C_TX_REFUSED) != 0u);
+    assert_true(fx->loop.counters.n_tx_refused > 0);
+}
+
+/* After a transient fault the operator resumes: START from HOLD ramps back
+ * to ACTIVE; while the fault is still there it is refused. */
+static void test_loop_hold_start_resumes_when_fault_gone(void **state)
+{
+    (void)state;
+    go_active();
+    fx->is_imu_mute = true;
+    steps((unsigned)(fx->robot.control.imu_timeout_s * 1000) + fx->robot.imu.rate_div + 2);
+    assert_int_equal(fx->loop.state, PS_SM_HOLD);
+    ps_loop_request(&fx->loop, PS_SM_C_REQ_START);
+    steps(1);
+    assert_int_equal(fx->loop.state, PS_SM_HOLD);
+    const char *reason = NULL;
+    assert_true(find_refusal(PS_SM_C_REQ_START, &reason));
+    assert_string_equal(reason, "start refused: IMU data stale");
+    fx->is_imu_mute = false;
+    steps(3);
+    ps_loop_request(&fx->loop, PS_SM_C_REQ_START);
+    steps(1);
+    assert_int_equal(fx->loop.state, PS_SM_RAMP);
+    steps((unsigned)(fx->robot.control.ramp_s * 1000) + 1);
+    assert_int_equal(fx->loop.state, PS_SM_ACTIVE);
+}
+
+/* Entering RAMP resets the policy before that tick's step, and the step runs
+ * on that tick even off the policy's decimation grid. */
+static void test_loop_ramp_entry_resets_policy_before_step(void **state)
+{
+    (void)state;
+    steps(27); /* replies fresh (go_active waits 20), and off the policy grid (div 20) */
+    const uint64_t runs = fx->loop.counters.n_policy_runs;
+    ps_loop_request(&fx->loop, PS_SM_C_REQ_START);
+    steps(1);
+    assert_int_equal(fx->loop.state, PS_SM_RAMP);
+    assert_int_equal(fx->n_policy_resets, 1);
+    assert_int_equal(fx->loop.counters.n_policy_runs, runs + 1);
+    assert_int_equal(fx->n_steps_after_reset, 1);
+    assert_int_equal(fx->state_at_first_step, PS_SM_RAMP);
 }
 
 /* With a separate deadline clock (CPU time in lockstep): a policy that was
@@ -645,7 +814,7 @@ static void test_loop_saturated_imu_sample_rejected(void **state)
     fx->imu_status = PS_IMU_STATUS_GYRO_SAT;
     steps(timeout_ticks);
     assert_true(fx->loop.counters.n_imu_rejected > 0);
-    assert_int_equal(fx->loop.state, PS_SM_DAMPING); /* no valid IMU: stale */
+    assert_int_equal(fx->loop.state, PS_SM_HOLD); /* no valid IMU: stale */
 }
 
 static void test_loop_frozen_imu_seq_goes_stale(void **state)
@@ -655,7 +824,7 @@ static void test_loop_frozen_imu_seq_goes_stale(void **state)
     fx->is_imu_frozen = true;
     steps((unsigned)(fx->robot.control.imu_timeout_s * 1000) + fx->robot.imu.rate_div + 2);
     assert_true(fx->loop.counters.n_imu_repeated > 0);
-    assert_int_equal(fx->loop.state, PS_SM_DAMPING);
+    assert_int_equal(fx->loop.state, PS_SM_HOLD);
 }
 
 static void test_loop_init_rejects_unsafe_tables(void **state)
@@ -799,10 +968,14 @@ int main(void)
         T(test_loop_policy_runs_at_policy_rate),
         T(test_loop_start_then_ramp_reaches_active_with_gains),
         T(test_loop_start_without_replies_refused),
-        T(test_loop_stale_reply_in_active_damps),
-        T(test_loop_stale_imu_in_active_damps),
-        T(test_loop_nan_target_damps),
-        T(test_loop_policy_late_damps),
+        T(test_loop_stale_reply_in_active_holds_then_damps),
+        T(test_loop_repeated_overruns_hold),
+        T(test_loop_tx_refused_in_active_holds),
+        T(test_loop_hold_start_resumes_when_fault_gone),
+        T(test_loop_ramp_entry_resets_policy_before_step),
+        T(test_loop_stale_imu_in_active_holds),
+        T(test_loop_nan_target_holds_last_valid_targets),
+        T(test_loop_policy_late_holds),
         T(test_loop_policy_deadline_on_deadline_clock),
         T(test_loop_estop_input_latches_estop_sends_exit),
         T(test_loop_gpio_error_counts_as_estop),

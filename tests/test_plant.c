@@ -97,7 +97,8 @@ static void build_robot(ps_robot_cfg_t *r)
     memset(r, 0, sizeof(*r));
     (void)snprintf(r->name, sizeof(r->name), "ps1");
     (void)snprintf(r->model, sizeof(r->model), "../sim/models/ps1.xml");
-    r->control = (ps_control_cfg_t){1000, 50, 1.0f, 2.0f, 0.05f, 0.01f, 0.005f, 0.0005f, 5, 1.0f, 10.0f};
+    r->control =
+        (ps_control_cfg_t){1000, 50, 1.0f, 2.0f, 0.05f, 0.01f, 0.005f, 0.0005f, 5, 1.0f, 10.0f};
     r->servo_common.damping_kd_nm_s_rad = 2.0f;
     r->imu = (ps_imu_cfg_t){3, 0x080, 1};
     r->kin = KIN;

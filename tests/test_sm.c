@@ -31,31 +31,39 @@ enum {
     FALL = 1u << 11,
     DRIVE_FAULT = 1u << 12,
     BUS_OFF = 1u << 13,
-    N_BITS = 14,
+    OVERRUN = 1u << 14,
+    TX_REFUSED = 1u << 15,
+    HOLD_DONE = 1u << 16,
+    N_BITS = 17,
 };
 #define T_HARD (REQ_ESTOP | ESTOP_IN | DRIVE_FAULT | BUS_OFF)
 /* A drive fault does not block a reset: the drive is re-enabled in STANDBY. */
 #define T_RESET_BLOCK (REQ_ESTOP | ESTOP_IN | BUS_OFF)
-#define T_SOFT        (REPLY_STALE | IMU_STALE | POLICY_LATE | TARGET_INVALID | FALL)
+/* Soft faults with the drives still taking commands: ACTIVE holds on these. */
+#define T_HOLDF (REPLY_STALE | IMU_STALE | POLICY_LATE | TARGET_INVALID | OVERRUN | TX_REFUSED)
+#define T_SOFT  (T_HOLDF | FALL)
 
 enum {
     SB = PS_SM_STANDBY,
     RA = PS_SM_RAMP,
     AC = PS_SM_ACTIVE,
     DA = PS_SM_DAMPING,
-    ES = PS_SM_ESTOP
+    ES = PS_SM_ESTOP,
+    HO = PS_SM_HOLD
 };
-#define N_STATES 5
+#define N_STATES 6
 
 /* Expected next state for each state and a single condition bit (column 0:
  * no condition at all). Written by hand from the rules. */
 static const int EXPECT_SINGLE[N_STATES][1 + N_BITS] = {
-    /*        none START STOP RESET REQ_E E_IN RDONE DDONE REPLY IMU  PLATE TINV FALL DRV  BUS */
-    [SB] = {SB, RA, SB, SB, ES, ES, SB, SB, SB, SB, SB, SB, SB, ES, ES},
-    [RA] = {RA, RA, DA, RA, ES, ES, AC, RA, DA, DA, DA, DA, DA, ES, ES},
-    [AC] = {AC, AC, DA, AC, ES, ES, AC, AC, DA, DA, DA, DA, DA, ES, ES},
-    [DA] = {DA, DA, DA, DA, ES, ES, DA, SB, DA, DA, DA, DA, DA, ES, ES},
-    [ES] = {ES, ES, ES, SB, ES, ES, ES, ES, ES, ES, ES, ES, ES, ES, ES},
+    /*      none START STOP RESET REQ_E E_IN RDONE DDONE REPLY IMU PLATE TINV FALL DRV BUS
+     *      OVERRUN TX_REF HDONE */
+    [SB] = {SB, RA, SB, SB, ES, ES, SB, SB, SB, SB, SB, SB, SB, ES, ES, SB, SB, SB},
+    [RA] = {RA, RA, DA, RA, ES, ES, AC, RA, DA, DA, DA, DA, DA, ES, ES, DA, DA, RA},
+    [AC] = {AC, AC, DA, AC, ES, ES, AC, AC, HO, HO, HO, HO, DA, ES, ES, HO, HO, AC},
+    [DA] = {DA, DA, DA, DA, ES, ES, DA, SB, DA, DA, DA, DA, DA, ES, ES, DA, DA, DA},
+    [ES] = {ES, ES, ES, SB, ES, ES, ES, ES, ES, ES, ES, ES, ES, ES, ES, ES, ES, ES},
+    [HO] = {HO, RA, DA, HO, ES, ES, HO, HO, HO, HO, HO, HO, DA, ES, ES, HO, HO, DA},
 };
 
 /* Hand-picked combinations: blockers, priorities, latching. */
@@ -87,6 +95,17 @@ static const combo_t COMBOS[] = {
     /* priority: hard beats soft beats stop */
     {AC, STOP | REPLY_STALE | ESTOP_IN, ES},
     {AC, STOP | FALL, DA},
+    {AC, FALL | OVERRUN, DA}, /* a fall damps even with a hold fault present */
+    {AC, STOP | POLICY_LATE, HO},
+    /* HOLD: the fault that led here changes nothing; a fall, a stop or the
+     * end of the hold damps; a start resumes only with every fault gone */
+    {HO, REPLY_STALE | IMU_STALE | OVERRUN, HO},
+    {HO, START | REPLY_STALE, HO},
+    {HO, START | POLICY_LATE, HO},
+    {HO, START | FALL, DA},
+    {HO, START | HOLD_DONE, DA},
+    {HO, START | RAMP_DONE, RA},
+    {HO, HOLD_DONE | DRIVE_FAULT, ES},
     {RA, STOP | IMU_STALE | DRIVE_FAULT, ES},
     {DA, DAMP_DONE | BUS_OFF, ES},
     {DA, DAMP_DONE | REPLY_STALE, SB},
@@ -123,7 +142,19 @@ static int ref_next(int s, uint32_t c)
     case AC:
         if (hard)
             return ES;
-        return (soft || (c & STOP)) ? DA : AC;
+        if (c & FALL)
+            return DA;
+        if (c & T_HOLDF)
+            return HO;
+        return (c & STOP) ? DA : AC;
+    case HO:
+        if (hard)
+            return ES;
+        if (c & (FALL | HOLD_DONE | STOP))
+            return DA;
+        if ((c & START) && !(c & T_SOFT))
+            return RA;
+        return HO;
     case DA:
         if (hard)
             return ES;
@@ -183,7 +214,7 @@ static void test_ps_sm_next_unknown_bits_ignored(void **state)
 {
     (void)state;
     for (int s = 0; s < N_STATES; s++)
-        assert_int_equal(ps_sm_next((ps_sm_state_t)s, 0xFFFFC000u), s);
+        assert_int_equal(ps_sm_next((ps_sm_state_t)s, 0xFFFE0000u), s);
 }
 
 static void test_ps_sm_next_invalid_state_estop(void **state)
@@ -219,6 +250,7 @@ static void test_ps_sm_next_hard_fault_from_every_state_estop(void **state)
 {
     (void)state;
     const uint32_t hard_bits[] = {REQ_ESTOP, ESTOP_IN, DRIVE_FAULT, BUS_OFF};
+    assert_int_equal(N_STATES, PS_SM_STATE_COUNT);
     for (int s = 0; s < N_STATES; s++)
         for (size_t h = 0; h < 4; h++)
             /* with every other bit set as well: hard always wins */
@@ -238,11 +270,12 @@ static void test_ps_sm_find_edge_priority_hard_soft_stop(void **state)
     assert_int_equal(e[idx].to, PS_SM_ESTOP);
     assert_true((e[idx].trigger & BUS_OFF) != 0u);
 
-    /* soft + stop: the soft-fault edge, not the stop edge, is the cause */
+    /* soft + stop: the soft-fault edge, not the stop edge, is the cause
+     * (RAMP damps on it, ACTIVE holds) */
     for (int s = RA; s <= AC; s++) {
         idx = ps_sm_find_edge((ps_sm_state_t)s, STOP | IMU_STALE);
         assert_true(idx >= 0);
-        assert_int_equal(e[idx].to, PS_SM_DAMPING);
+        assert_int_equal(e[idx].to, s == RA ? PS_SM_DAMPING : PS_SM_HOLD);
         assert_true((e[idx].trigger & IMU_STALE) != 0u);
         assert_true((e[idx].trigger & STOP) == 0u);
         /* stop alone: the stop edge */
@@ -300,6 +333,8 @@ static void test_ps_sm_fault_masks_match_spec(void **state)
     assert_int_equal(PS_SM_C_SOFT_FAULTS, T_SOFT);
     assert_int_equal(PS_SM_C_REQUESTS, START | STOP | RESET | REQ_ESTOP);
     assert_int_equal(PS_SM_C_START_BLOCKERS, T_HARD | REPLY_STALE | IMU_STALE);
+    assert_int_equal(PS_SM_C_HOLD_FAULTS, T_HOLDF);
+    assert_int_equal(PS_SM_C_RESUME_BLOCKERS, T_HARD | T_SOFT | HOLD_DONE);
     assert_int_equal(PS_SM_C_RESET_BLOCKERS, T_RESET_BLOCK);
     assert_int_equal(PS_SM_C_ALL, (1u << N_BITS) - 1u);
 }
@@ -327,15 +362,27 @@ static const req_case_t REQ_CASES[] = {
     {SB, START, REPLY_STALE, ILL, "start refused: actuator replies stale"},
     {SB, START, IMU_STALE, ILL, "start refused: IMU data stale"},
     {SB, START, IMU_STALE | ESTOP_IN, ILL, "start refused: e-stop input pressed"},
-    {RA, START, 0u, ILL, "start refused: only allowed from STANDBY"},
-    {AC, START, 0u, ILL, "start refused: only allowed from STANDBY"},
-    {DA, START, 0u, ILL, "start refused: only allowed from STANDBY"},
+    {RA, START, 0u, ILL, "start refused: only allowed from STANDBY or HOLD"},
+    {AC, START, 0u, ILL, "start refused: only allowed from STANDBY or HOLD"},
+    {DA, START, 0u, ILL, "start refused: only allowed from STANDBY or HOLD"},
+    {HO, START, 0u, 0, NULL},
+    {HO, START, RAMP_DONE, 0, NULL},
+    {HO, START, HOLD_DONE, ILL, "start refused: hold time over, damping"},
+    {HO, START, REPLY_STALE, ILL, "start refused: actuator replies stale"},
+    {HO, START, POLICY_LATE, ILL, "start refused: policy still late"},
+    {HO, START, TARGET_INVALID, ILL, "start refused: targets still invalid"},
+    {HO, START, OVERRUN, ILL, "start refused: loop still overrunning"},
+    {HO, START, TX_REFUSED, ILL, "start refused: bus still refusing frames"},
+    {HO, START, FALL, ILL, "start refused: robot fallen"},
+    {SB, START, OVERRUN | TX_REFUSED, 0, NULL}, /* not start blockers in STANDBY */
     {ES, START, 0u, ILL, "start refused: e-stop latched, reset first"},
     /* STOP */
     {SB, STOP, 0u, ILL, "stop refused: nothing to stop in STANDBY"},
     {RA, STOP, 0u, 0, NULL},
     {AC, STOP, 0u, 0, NULL},
     {AC, STOP, REPLY_STALE | BUS_OFF, 0, NULL},
+    {HO, STOP, 0u, 0, NULL},
+    {HO, STOP, POLICY_LATE, 0, NULL},
     {DA, STOP, 0u, ILL, "stop refused: already DAMPING"},
     {ES, STOP, 0u, ILL, "stop refused: e-stop latched"},
     /* RESET */
@@ -343,6 +390,7 @@ static const req_case_t REQ_CASES[] = {
     {RA, RESET, 0u, ILL, "reset refused: not in ESTOP"},
     {AC, RESET, 0u, ILL, "reset refused: not in ESTOP"},
     {DA, RESET, 0u, ILL, "reset refused: not in ESTOP"},
+    {HO, RESET, 0u, ILL, "reset refused: not in ESTOP"},
     {ES, RESET, 0u, 0, NULL},
     {ES, RESET, REPLY_STALE | IMU_STALE | FALL | POLICY_LATE | TARGET_INVALID, 0, NULL},
     {ES, RESET, ESTOP_IN, ILL, "reset refused: e-stop input still pressed"},
@@ -355,6 +403,7 @@ static const req_case_t REQ_CASES[] = {
     {RA, REQ_ESTOP, 0u, 0, NULL},
     {AC, REQ_ESTOP, T_SOFT, 0, NULL},
     {DA, REQ_ESTOP, 0u, 0, NULL},
+    {HO, REQ_ESTOP, T_SOFT, 0, NULL},
     {ES, REQ_ESTOP, ESTOP_IN, 0, NULL},
     {99, REQ_ESTOP, 0u, 0, NULL},
     {99, START, 0u, ILL, "request refused: unknown state"},
@@ -401,12 +450,15 @@ static void test_ps_sm_check_request_agrees_with_next(void **state)
                 const ps_sm_state_t without = ps_sm_next((ps_sm_state_t)s, c);
                 int want_ok;
                 if (reqs[r] == START)
-                    want_ok = s == SB && nx == PS_SM_RAMP;
+                    want_ok = (s == SB || s == HO) && nx == PS_SM_RAMP;
                 else if (reqs[r] == RESET)
                     want_ok = s == ES && nx == PS_SM_STANDBY;
                 else if (reqs[r] == STOP)
-                    /* legal from RAMP/ACTIVE; the result is DAMPING or worse */
-                    want_ok = (s == RA || s == AC) && (nx == PS_SM_DAMPING || nx == PS_SM_ESTOP);
+                    /* legal from RAMP/ACTIVE/HOLD; the result is DAMPING or worse, or
+                     * HOLD when a hold fault in ACTIVE wins over the stop */
+                    want_ok =
+                        (s == RA || s == AC || s == HO) &&
+                        (nx == PS_SM_DAMPING || nx == PS_SM_ESTOP || (s == AC && nx == PS_SM_HOLD));
                 else
                     want_ok = nx == PS_SM_ESTOP;
                 if ((rc == 0) != want_ok)
@@ -455,6 +507,7 @@ static void test_ps_sm_state_name_each_state_named(void **state)
     assert_string_equal(ps_sm_state_name(PS_SM_ACTIVE), "ACTIVE");
     assert_string_equal(ps_sm_state_name(PS_SM_DAMPING), "DAMPING");
     assert_string_equal(ps_sm_state_name(PS_SM_ESTOP), "ESTOP");
+    assert_string_equal(ps_sm_state_name(PS_SM_HOLD), "HOLD");
     assert_string_equal(ps_sm_state_name(PS_SM_STATE_COUNT), "?");
     assert_string_equal(ps_sm_state_name((ps_sm_state_t)-1), "?");
 }
@@ -463,16 +516,16 @@ static void test_ps_sm_cond_name_each_bit_named(void **state)
 {
     (void)state;
     static const char *const want[N_BITS] = {
-        "REQ_START",      "REQ_STOP",  "REQ_RESET",   "REQ_ESTOP", "ESTOP_INPUT",
-        "RAMP_DONE",      "DAMP_DONE", "REPLY_STALE", "IMU_STALE", "POLICY_LATE",
-        "TARGET_INVALID", "FALL",      "DRIVE_FAULT", "BUS_OFF",
+        "REQ_START",   "REQ_STOP",    "REQ_RESET", "REQ_ESTOP",   "ESTOP_INPUT",    "RAMP_DONE",
+        "DAMP_DONE",   "REPLY_STALE", "IMU_STALE", "POLICY_LATE", "TARGET_INVALID", "FALL",
+        "DRIVE_FAULT", "BUS_OFF",     "OVERRUN",   "TX_REFUSED",  "HOLD_DONE",
     };
     for (unsigned b = 0; b < N_BITS; b++)
         assert_string_equal(ps_sm_cond_name(1u << b), want[b]);
     /* lowest set bit wins */
     assert_string_equal(ps_sm_cond_name(BUS_OFF | REPLY_STALE), "REPLY_STALE");
     assert_string_equal(ps_sm_cond_name(0u), "?");
-    assert_string_equal(ps_sm_cond_name(1u << 14), "?");
+    assert_string_equal(ps_sm_cond_name(1u << 17), "?");
     assert_string_equal(ps_sm_cond_name(1u << 31), "?");
 }
 
