@@ -157,6 +157,47 @@ static void test_ps_servo_command_damping_kd_only(void **state)
     assert_cmd(&out, -0.3f, 0.0f, 0.0f, 0.0f, 0.0f);
 }
 
+/* HOLD: the hold pose with the configured gains, v = tau = 0, targets not
+ * read; the stance when no pose is given; torque-limited like TRACK. Joint:
+ * kp 80, kd 2, torque_max 12, stance 0.5, limits [-1, 2]. */
+static void test_ps_servo_command_hold_pose_stiff_torque_limited(void **state)
+{
+    fixture_t *f = *state;
+    float hold[PS_MAX_JOINTS] = {0};
+    hold[1] = 0.8f;
+    f->mode.hold_q_rad = hold;
+    ps_act_cmd_t out;
+    set_joint1(f, 0.75f, NAN, NAN, NAN); /* garbage targets: not read in HOLD */
+    assert_int_equal(run1(f, PS_SERVO_HOLD, &out), 0);
+    assert_cmd(&out, 0.8f, 0.0f, 80.0f, 2.0f, 0.0f);
+    assert_int_equal(ps_servo_command(&f->j, &f->c, &f->mode, 1u, NULL, &out), 0);
+    assert_cmd(&out, 0.8f, 0.0f, 80.0f, 2.0f, 0.0f);
+    /* far from the measurement: p pulled to q + 12 / 80 = 0.15 rad away */
+    f->meas_q[1] = 0.0f;
+    assert_int_equal(run1(f, PS_SERVO_HOLD, &out), 0);
+    assert_cmd(&out, 0.15f, 0.0f, 80.0f, 2.0f, 0.0f);
+    /* no pose, or a non-finite one: the stance */
+    f->meas_q[1] = 0.5f;
+    hold[1] = NAN;
+    assert_int_equal(run1(f, PS_SERVO_HOLD, &out), 0);
+    assert_cmd(&out, 0.5f, 0.0f, 80.0f, 2.0f, 0.0f);
+    f->mode.hold_q_rad = NULL;
+    assert_int_equal(run1(f, PS_SERVO_HOLD, &out), 0);
+    assert_cmd(&out, 0.5f, 0.0f, 80.0f, 2.0f, 0.0f);
+    /* a hold pose outside the limits is clamped into them */
+    hold[1] = 5.0f;
+    f->mode.hold_q_rad = hold;
+    f->meas_q[1] = 1.95f;
+    assert_int_equal(run1(f, PS_SERVO_HOLD, &out), 0);
+    assert_cmd(&out, 2.0f, 0.0f, 80.0f, 2.0f, 0.0f);
+    /* the measurement unusable: damping, and the error */
+    f->meas_q[1] = NAN;
+    assert_int_equal(run1(f, PS_SERVO_HOLD, &out), -PS_ERR_LIMIT);
+    assert_cmd(&out, 0.5f, 0.0f, 0.0f, 3.0f, 0.0f);
+    assert_string_equal(ps_servo_mode_name(PS_SERVO_HOLD), "hold");
+    assert_string_equal(ps_servo_mode_name(PS_SERVO_MODE_COUNT), "?");
+}
+
 static void test_ps_servo_command_active_targets_and_gains(void **state)
 {
     fixture_t *f = *state;
@@ -707,6 +748,8 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_ps_servo_command_estop_limp_clamped_into_limits, setup,
                                         teardown),
         cmocka_unit_test_setup_teardown(test_ps_servo_command_damping_kd_only, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_ps_servo_command_hold_pose_stiff_torque_limited, setup,
+                                        teardown),
         cmocka_unit_test_setup_teardown(test_ps_servo_command_active_targets_and_gains, setup,
                                         teardown),
         cmocka_unit_test_setup_teardown(test_ps_servo_command_active_velocity_clamped_both_sides,

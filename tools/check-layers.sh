@@ -1,0 +1,146 @@
+#!/usr/bin/env bash
+# check-layers.sh: the include layering of docs/architecture.md, checked on
+# every source and header under rt/, drivers/, policy/ and sim/ (tests/ may
+# include anything). Each file's project includes are followed transitively,
+# so a header that drags a forbidden one in counts too.
+#
+#   base     rt/ps_err, rt/ps_clock, rt/ps_ring, rt/ps_limits: nothing else
+#   drivers  base and drivers/
+#   policy   base, policy/, and of drivers/ only the neutral actuator types
+#            (ps_actuator.h and the ps_can.h frame it uses): no protocol
+#   sim      base, drivers/ and sim/ (no policy/, no application)
+#   app      every other file in rt/: base, drivers/, policy/ and rt/;
+#            sim/ only from the composition root (COMPOSITION_ROOT below)
+#
+# Output is cmocka-shaped (one "test" per file, plus a self-test that a
+# planted violation is caught) so tools/run-tests.sh counts it; exit 1 on a
+# violation. Usage: check-layers.sh [ROOT]   (default: the repository root)
+set -uo pipefail
+
+ROOT=${1:-$(cd "$(dirname "$0")/.." && pwd)}
+COMPOSITION_ROOT="rt/main.c rt/ps_app.c rt/ps_app.h rt/ps_config_sim.c rt/ps_config_sim.h"
+BASE="rt/ps_err.h rt/ps_err.c rt/ps_clock.h rt/ps_clock.c rt/ps_ring.h rt/ps_ring.c rt/ps_limits.h"
+POLICY_DRIVERS="drivers/ps_actuator.h drivers/ps_can.h"
+
+is_in() { local x=$1; shift; for y in "$@"; do [ "$x" = "$y" ] && return 0; done; return 1; }
+
+layer_of() {
+    local f=$1
+    if is_in "$f" $BASE; then echo base; return; fi
+    case $f in
+    drivers/*) echo drivers ;;
+    policy/*) echo policy ;;
+    sim/*) echo sim ;;
+    rt/*) echo app ;;
+    *) echo other ;;
+    esac
+}
+
+# Direct project includes of a file, as paths relative to ROOT.
+direct_includes() {
+    local f=$1 dir inc
+    dir=$(dirname "$f")
+    sed -n 's/^[[:space:]]*#[[:space:]]*include[[:space:]]*"\([^"]*\)".*/\1/p' "$ROOT/$f" |
+        while read -r inc; do
+            realpath -m --relative-to="$ROOT" "$ROOT/$dir/$inc"
+        done
+}
+
+# Transitive closure (files only under the four layer folders).
+closure() {
+    local -A seen=()
+    local stack=("$1") f inc
+    while [ ${#stack[@]} -gt 0 ]; do
+        f=${stack[-1]}
+        unset 'stack[-1]'
+        for inc in $(direct_includes "$f"); do
+            [ -n "${seen[$inc]:-}" ] && continue
+            seen[$inc]=1
+            [ -f "$ROOT/$inc" ] && stack+=("$inc")
+        done
+    done
+    printf '%s\n' "${!seen[@]}"
+}
+
+# Why file f may not include inc, or nothing when it may.
+violation() {
+    local f=$1 inc=$2 lf li
+    lf=$(layer_of "$f")
+    li=$(layer_of "$inc")
+    case $lf in
+    base) [ "$li" = base ] || echo "base includes $li" ;;
+    drivers) is_in "$li" base drivers || echo "drivers/ includes $li" ;;
+    policy)
+        if [ "$li" = drivers ]; then
+            is_in "$inc" $POLICY_DRIVERS || echo "policy/ includes a protocol or port header"
+        else
+            is_in "$li" base policy || echo "policy/ includes $li"
+        fi
+        ;;
+    sim) is_in "$li" base drivers sim || echo "sim/ includes $li" ;;
+    app)
+        if [ "$li" = sim ]; then
+            is_in "$f" $COMPOSITION_ROOT || echo "application code outside the composition root includes sim/"
+        else
+            is_in "$li" base drivers policy app || echo "rt/ includes $li"
+        fi
+        ;;
+    esac
+}
+
+check_tree() {
+    local n_files=0 n_bad=0 f inc why
+    FAILED=()
+    while read -r f; do
+        n_files=$((n_files + 1))
+        local bad=""
+        for inc in $(closure "$f"); do
+            why=$(violation "$f" "$inc")
+            [ -n "$why" ] && bad+="    $f -> $inc: $why"$'\n'
+        done
+        if [ -n "$bad" ]; then
+            n_bad=$((n_bad + 1))
+            FAILED+=("$f")
+            printf '[  ERROR   ] --- %s\n%s' "$f" "$bad"
+        fi
+    done < <(cd "$ROOT" && find rt drivers policy sim -name '*.[ch]' -o -name '*.cpp' | sort)
+    N_FILES=$n_files
+    N_BAD=$n_bad
+}
+
+# The check must be able to fail: plant policy/ -> a protocol header in a
+# copy of the tree and expect exactly that file to be reported.
+self_test() {
+    local tmp
+    tmp=$(mktemp -d)
+    cp -r "$ROOT/rt" "$ROOT/drivers" "$ROOT/policy" "$ROOT/sim" "$tmp/"
+    printf '#include "../drivers/ps_mit.h"\n' >"$tmp/policy/ps_planted_violation.h"
+    local out
+    out=$(bash "$0" "$tmp" --no-self-test 2>&1)
+    local rc=$?
+    rm -rf "$tmp"
+    [ $rc -ne 0 ] && grep -q 'policy/ps_planted_violation.h -> drivers/ps_mit.h' <<<"$out"
+}
+
+echo "[==========] Running include layering checks ($ROOT)"
+check_tree
+n_tests=$N_FILES
+n_failed=$N_BAD
+if [ "${2:-}" != "--no-self-test" ]; then
+    n_tests=$((n_tests + 1))
+    if self_test; then
+        echo "[       OK ] layering self-test: a planted policy/ -> ps_mit.h include is caught"
+    else
+        echo "[  FAILED  ] layering self-test: a planted violation was not caught"
+        n_failed=$((n_failed + 1))
+        FAILED+=("self-test")
+    fi
+fi
+echo "[==========] $n_tests test(s) run."
+echo "[  PASSED  ] $((n_tests - n_failed)) test(s)."
+if [ "$n_failed" -gt 0 ]; then
+    echo "[  FAILED  ] $n_failed test(s), listed below:"
+    for f in "${FAILED[@]}"; do echo "[  FAILED  ] $f"; done
+    exit 1
+fi
+exit 0
