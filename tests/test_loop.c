@@ -389,21 +389,38 @@ static void test_loop_policy_runs_at_policy_rate(void **state)
 
 /* ---- states and watchdogs ----------------------------------------------- */
 
+/* Steps until joint j's next command of this tick is seen (at most its rate_div). */
+static bool next_command(uint32_t j, ps_mit_cmd_t *cmd)
+{
+    for (uint32_t t = 0; t < fx->robot.act[j].rate_div; t++) {
+        steps(1);
+        if (last_command(j, cmd))
+            return true;
+    }
+    return false;
+}
+
 static void test_loop_start_then_ramp_reaches_active_with_gains(void **state)
 {
     (void)state;
     go_active();
     steps(20);
+    /* Every joint is commanded within its own rate_div ticks; each command
+     * must be seen (a joint that got none would pass a check that skips it). */
+    unsigned n_checked = 0;
     for (uint32_t j = 0; j < fx->robot.n_joints; j++) {
         ps_mit_cmd_t cmd;
-        if (!last_command(j, &cmd))
-            continue;
+        if (!next_command(j, &cmd))
+            fail_msg("joint %s: no command in %u ticks", fx->robot.joint_name[j],
+                     fx->robot.act[j].rate_div);
         const ps_act_cfg_t *jc = &fx->robot.act[j];
         const ps_servo_joint_cfg_t *jc_s = &fx->robot.servo[j];
         float kp_step = jc->wire.kp_max_nm_rad / 4095.0f;
         assert_float_equal(cmd.kp_nm_rad, jc_s->kp_nm_rad, kp_step);
         assert_float_equal(cmd.p_rad, jc_s->stance_rad, 0.01);
+        n_checked++;
     }
+    assert_int_equal(n_checked, fx->robot.n_joints);
     /* the heartbeat beats: a new level every tick */
     const uint64_t e0 = fx->n_hb_edges;
     steps(4);
@@ -423,17 +440,6 @@ static void test_loop_start_without_replies_refused(void **state)
     assert_true(find_refusal(PS_SM_C_REQ_START, &reason));
     assert_non_null(reason);
     assert_int_equal(fx->loop.counters.n_refused, 1);
-}
-
-/* Steps until joint j's next command of this tick is seen (at most its rate_div). */
-static bool next_command(uint32_t j, ps_mit_cmd_t *cmd)
-{
-    for (uint32_t t = 0; t < fx->robot.act[j].rate_div; t++) {
-        steps(1);
-        if (last_command(j, cmd))
-            return true;
-    }
-    return false;
 }
 
 /* HOLD: stiff at q_rad with the configured gains. */
