@@ -43,7 +43,7 @@
 /* Stale data is judged within a few command periods, never seconds: a
  * timeout above this many periods of the fastest joint (or of the IMU) is
  * refused. */
-#define MAX_TIMEOUT_PERIODS 5u
+#define MAX_TIMEOUT_PERIODS 10u
 
 /* ====================================================================== */
 /* node tree built with libyaml: positions for every value and every key  */

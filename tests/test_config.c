@@ -615,8 +615,8 @@ static void test_load_robot_reply_timeout_beyond_periods_rejected(void **state)
     fx_t *f = *state;
     edit(f, ROBOT_OK, "reply_timeout_s: 0.005", "reply_timeout_s: 0.5");
     want(f,
-         "%s:%d: control.reply_timeout_s: value 0.5 is more than 5 command periods of the fastest "
-         "joint (rate_div 1 at 1000 Hz): at most 0.005 s",
+         "%s:%d: control.reply_timeout_s: value 0.5 is more than 10 command periods of the fastest "
+         "joint (rate_div 1 at 1000 Hz): at most 0.01 s",
          f->path, line_of(f, "reply_timeout_s: 0.5"));
     expect_robot_error(f);
 }
@@ -624,11 +624,11 @@ static void test_load_robot_reply_timeout_beyond_periods_rejected(void **state)
 static void test_load_robot_imu_timeout_beyond_periods_rejected(void **state)
 {
     fx_t *f = *state;
-    edit(f, ROBOT_OK, "imu_timeout_s: 0.005", "imu_timeout_s: 0.0051");
+    edit(f, ROBOT_OK, "imu_timeout_s: 0.005", "imu_timeout_s: 0.0101");
     want(f,
-         "%s:%d: control.imu_timeout_s: value 0.0051 is more than 5 IMU sample periods (rate_div "
-         "1 at 1000 Hz): at most 0.005 s",
-         f->path, line_of(f, "imu_timeout_s: 0.0051"));
+         "%s:%d: control.imu_timeout_s: value 0.0101 is more than 10 IMU sample periods (rate_div "
+         "1 at 1000 Hz): at most 0.01 s",
+         f->path, line_of(f, "imu_timeout_s: 0.0101"));
     expect_robot_error(f);
 }
 
