@@ -127,6 +127,48 @@ static void test_send_batch_one_frame_arrives_after_frame_time(void **state)
     assert_int_equal(ps_can_recv_batch(&f->host, rx, 4), 0);
 }
 
+/* An FD bus: a 64-byte frame with bit rate switch takes 35 bits at 1 Mbit/s
+ * and 677 at 5 Mbit/s (tests/test_canbus.c), payload and 29-bit id intact;
+ * classical frames keep their timing. Without set_fd, FD frames are refused. */
+static void test_send_batch_fd_frame_data_phase_at_data_bitrate(void **state)
+{
+    fixture_t *f = *state;
+    ps_can_frame_t fd;
+    memset(&fd, 0, sizeof fd);
+    fd.id = 0x1234567;
+    fd.is_ext = 1;
+    fd.is_fd = 1;
+    fd.is_brs = 1;
+    fd.len = 64;
+    for (unsigned i = 0; i < 64; i++)
+        fd.data[i] = (uint8_t)(3 * i);
+    assert_int_equal(ps_can_send_batch(&f->host, &fd, 1), -EINVAL); /* classical bus */
+    assert_int_equal(ps_can_sim_set_fd(f->bus, 500000), -EINVAL);   /* slower than nominal */
+    assert_int_equal(ps_can_sim_set_fd(f->bus, 5000000), 0);
+    f->clk.now_ns = 0;
+    assert_int_equal(ps_can_send_batch(&f->host, &fd, 1), 1);
+    const ps_canbus_bus_cfg_t bus = {.bitrate = BITRATE, .is_fd = true, .data_bitrate = 5000000};
+    const ps_canbus_frame_shape_t shape = {
+        .len = 64, .is_ext = true, .is_fd = true, .is_brs = true};
+    const int64_t t_end = ps_canbus_frame_ns_max(&shape, &bus);
+    assert_true(t_end < 64 * 8 * 1000); /* far below 64 bytes at the nominal rate */
+    ps_can_frame_t rx[2];
+    f->clk.now_ns = t_end - 1;
+    assert_int_equal(ps_can_recv_batch(&f->dev, rx, 2), 0);
+    f->clk.now_ns = t_end;
+    assert_int_equal(ps_can_recv_batch(&f->dev, rx, 2), 1);
+    assert_int_equal(rx[0].id, 0x1234567);
+    assert_true(rx[0].is_ext && rx[0].is_fd && rx[0].is_brs);
+    assert_int_equal(rx[0].len, 64);
+    assert_memory_equal(rx[0].data, fd.data, 64);
+    /* a length no FD frame has, or BRS on a classical frame: refused */
+    fd.len = 13;
+    assert_int_equal(ps_can_send_batch(&f->host, &fd, 1), -EINVAL);
+    ps_can_frame_t brs = frame8(0x10, 0);
+    brs.is_brs = 1;
+    assert_int_equal(ps_can_send_batch(&f->host, &brs, 1), -EINVAL);
+}
+
 static void test_send_batch_later_send_time_shifts_arrival(void **state)
 {
     fixture_t *f = *state;
@@ -488,6 +530,8 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test_setup_teardown(test_send_batch_one_frame_arrives_after_frame_time, setup,
+                                        teardown),
+        cmocka_unit_test_setup_teardown(test_send_batch_fd_frame_data_phase_at_data_bitrate, setup,
                                         teardown),
         cmocka_unit_test_setup_teardown(test_send_batch_later_send_time_shifts_arrival, setup,
                                         teardown),

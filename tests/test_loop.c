@@ -883,6 +883,32 @@ static void test_loop_bad_sff_id_counted_not_indexed(void **state)
     assert_int_equal(fx->loop.counters.n_rx_bad, 1);
 }
 
+/* 29-bit and FD frames reach the loop; a 29-bit id with a reply's number is
+ * not that reply (MIT replies are 11-bit), a length no frame has is bad. */
+static void test_loop_ext_and_fd_frames_classified(void **state)
+{
+    (void)state;
+    fake_bus_t *b = &fx->buses[0];
+    ps_can_frame_t *f = &b->pending[b->n_pending++];
+    memset(f, 0, sizeof(*f));
+    f->id = 0x101; /* the number of joint 0's reply id, but 29-bit */
+    f->is_ext = 1;
+    f->len = 8;
+    f = &b->pending[b->n_pending++];
+    memset(f, 0, sizeof(*f));
+    f->id = 0x101;
+    f->is_fd = 1;
+    f->len = 64; /* an FD frame on the reply id: no MIT reply either */
+    f = &b->pending[b->n_pending++];
+    memset(f, 0, sizeof(*f));
+    f->id = 0x300;
+    f->is_fd = 1;
+    f->len = 13; /* no DLC gives 13 bytes */
+    steps(1);
+    assert_int_equal(fx->loop.counters.n_rx_unknown, 2);
+    assert_int_equal(fx->loop.counters.n_rx_bad, 1);
+}
+
 /* A latched drive fault e-stops; the reset is accepted (the drive is
  * re-enabled in STANDBY); a drive still faulted e-stops again. */
 static void test_loop_drive_fault_reset_then_back_to_estop_if_persists(void **state)
@@ -998,6 +1024,7 @@ int main(void)
         T(test_loop_init_rejects_unsafe_tables),
         T(test_loop_babbling_bus_read_capped),
         T(test_loop_bad_sff_id_counted_not_indexed),
+        T(test_loop_ext_and_fd_frames_classified),
         T(test_loop_drive_fault_reset_then_back_to_estop_if_persists),
         T(test_loop_latched_fault_cleared_by_enter_no_estop),
         T(test_loop_run_end_releases_drives),
