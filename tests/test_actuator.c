@@ -16,6 +16,7 @@
 #include "../drivers/ps_actuator.h"
 #include "../drivers/ps_mit.h"
 #include "../rt/ps_err.h"
+#include "fakes/ps_test_wire.h"
 
 /* AK-style wire: p +-12.5 rad, v +-45 rad/s, kp 0..500, kd 0..5, t +-18 Nm. */
 static ps_act_cfg_t mit_cfg(void)
@@ -25,16 +26,7 @@ static ps_act_cfg_t mit_cfg(void)
     a.protocol = PS_ACT_PROTO_MIT;
     a.can_id = 0x13;
     a.reply_id = 0x113;
-    a.wire = (ps_act_range_t){.p_min_rad = -12.5f,
-                              .p_max_rad = 12.5f,
-                              .v_min_rad_s = -45.0f,
-                              .v_max_rad_s = 45.0f,
-                              .kp_max_nm_rad = 500.0f,
-                              .kd_max_nm_s_rad = 5.0f,
-                              .t_min_nm = -18.0f,
-                              .t_max_nm = 18.0f,
-                              .i_min_a = -40.0f,
-                              .i_max_a = 40.0f};
+    a.wire = ps_test_wire_ak();
     a.gear_ratio = 1.0f;
     a.direction = 1.0f;
     a.kt_nm_a = 0.5f;

@@ -13,6 +13,7 @@
 #include "../drivers/ps_mit.h"
 #include "../rt/ps_clock.h"
 #include "../rt/ps_err.h"
+#include "fakes/ps_test_wire.h"
 #include "../sim/ps_devices.h"
 
 /* AK-style wire ranges; joint limits tighter than the wire, as in a robot file.
@@ -25,18 +26,7 @@ static ps_act_cfg_t joint_cfg(void)
     j.protocol = PS_ACT_PROTO_MIT;
     j.can_id = 0x13;
     j.reply_id = 0x113;
-    j.wire = (ps_act_range_t){
-        .p_min_rad = -12.5f,
-        .p_max_rad = 12.5f,
-        .v_min_rad_s = -45.0f,
-        .v_max_rad_s = 45.0f,
-        .kp_max_nm_rad = 500.0f,
-        .kd_max_nm_s_rad = 5.0f,
-        .t_min_nm = -18.0f,
-        .t_max_nm = 18.0f,
-        .i_min_a = -40.0f,
-        .i_max_a = 40.0f,
-    };
+    j.wire = ps_test_wire_ak();
     j.gear_ratio = 1.0f;
     j.direction = 1.0f;
     j.kt_nm_a = 0.5f;

@@ -257,21 +257,23 @@ static void test_ps_plant_create_missing_joint_config_error(void **st)
     assert_non_null(strstr(err, "l_tail"));
 }
 
-static void test_ps_plant_create_missing_actuator_config_error(void **st)
+/* A one-joint model written to path: the robot's joint "j" on a free body
+ * named root_body, with or without the joint's motor. Loading it with the
+ * one-joint robot must fail with a config error whose text has want. */
+static void expect_tiny_model_config_error(const char *path, const char *root_body, bool has_motor,
+                                           const char *want)
 {
-    (void)st;
-    /* a joint without a motor of the same name */
-    const char *path = "/tmp/test_plant_noact.xml";
     FILE *f = fopen(path, "w");
     assert_non_null(f);
-    fputs("<mujoco><worldbody><geom type='plane' size='1 1 .1'/>"
-          "<body name='pelvis' pos='0 0 1'><freejoint/><site name='imu'/>"
-          "<geom type='sphere' size='.1'/><body name='head'><geom type='sphere' size='.05'/>"
-          "</body><body name='foot'><joint name='j' axis='0 1 0'/>"
-          "<geom type='box' pos='0 0 -.5' size='.1 .1 .1'/></body></body></worldbody>"
-          "<sensor><gyro name='imu_gyro' site='imu'/>"
-          "<accelerometer name='imu_accel' site='imu'/></sensor></mujoco>",
-          f);
+    fprintf(f,
+            "<mujoco><worldbody><geom type='plane' size='1 1 .1'/>"
+            "<body name='%s' pos='0 0 1'><freejoint/><site name='imu'/>"
+            "<geom type='sphere' size='.1'/><body name='head'><geom type='sphere' size='.05'/>"
+            "</body><body name='foot'><joint name='j' axis='0 1 0'/>"
+            "<geom type='box' pos='0 0 -.5' size='.1 .1 .1'/></body></body></worldbody>"
+            "%s<sensor><gyro name='imu_gyro' site='imu'/>"
+            "<accelerometer name='imu_accel' site='imu'/></sensor></mujoco>",
+            root_body, has_motor ? "<actuator><motor name='j' joint='j'/></actuator>" : "");
     assert_int_equal(fclose(f), 0);
     ps_robot_cfg_t r;
     build_robot(&r);
@@ -281,8 +283,16 @@ static void test_ps_plant_create_missing_actuator_config_error(void **st)
     char err[PS_ERR_MSG_LEN] = "";
     assert_int_equal(plant_create(path, &r, &p, err, sizeof(err)), -PS_ERR_CONFIG);
     assert_null(p);
-    assert_non_null(strstr(err, "actuator 'j'"));
+    assert_non_null(strstr(err, want));
     (void)unlink(path);
+}
+
+static void test_ps_plant_create_missing_actuator_config_error(void **st)
+{
+    (void)st;
+    /* a joint without a motor of the same name */
+    expect_tiny_model_config_error("/tmp/test_plant_noact.xml", PS_PLANT_ROOT_BODY_NAME, false,
+                                   "actuator 'j'");
 }
 
 static void test_ps_plant_create_bad_path_plant_error(void **st)
@@ -596,29 +606,9 @@ static void test_ps_plant_get_truth_robot_on_floor_among_crates_fallen(void **st
 static void test_ps_plant_create_no_root_body_config_error(void **st)
 {
     (void)st;
-    const char *path = "/tmp/test_plant_noroot.xml";
-    FILE *f = fopen(path, "w");
-    assert_non_null(f);
-    fputs("<mujoco><worldbody><geom type='plane' size='1 1 .1'/>"
-          "<body name='base' pos='0 0 1'><freejoint/><site name='imu'/>"
-          "<geom type='sphere' size='.1'/><body name='head'><geom type='sphere' size='.05'/>"
-          "</body><body name='foot'><joint name='j' axis='0 1 0'/>"
-          "<geom type='box' pos='0 0 -.5' size='.1 .1 .1'/></body></body></worldbody>"
-          "<actuator><motor name='j' joint='j'/></actuator>"
-          "<sensor><gyro name='imu_gyro' site='imu'/>"
-          "<accelerometer name='imu_accel' site='imu'/></sensor></mujoco>",
-          f);
-    assert_int_equal(fclose(f), 0);
-    ps_robot_cfg_t r;
-    build_robot(&r);
-    r.n_joints = 1;
-    (void)snprintf(r.joint_name[0], sizeof(r.joint_name[0]), "j");
-    ps_plant_t *p = NULL;
-    char err[PS_ERR_MSG_LEN] = "";
-    assert_int_equal(plant_create(path, &r, &p, err, sizeof(err)), -PS_ERR_CONFIG);
-    assert_null(p);
-    assert_non_null(strstr(err, PS_PLANT_ROOT_BODY_NAME));
-    (void)unlink(path);
+    /* the free body is not called PS_PLANT_ROOT_BODY_NAME: no robot root */
+    expect_tiny_model_config_error("/tmp/test_plant_noroot.xml", "base", true,
+                                   PS_PLANT_ROOT_BODY_NAME);
 }
 
 /* ---- MuJoCo's warnings are plant errors ---------------------------------- */

@@ -17,6 +17,7 @@
 #include "../drivers/ps_actuator.h"
 #include "../policy/ps_servo.h"
 #include "../rt/ps_err.h"
+#include "fakes/ps_test_wire.h"
 
 #define TOL 1e-6f
 
@@ -34,16 +35,7 @@ static ps_servo_joint_cfg_t make_joint(void)
 {
     ps_servo_joint_cfg_t j;
     memset(&j, 0, sizeof j);
-    j.wire = (ps_act_range_t){.p_min_rad = -12.5f,
-                              .p_max_rad = 12.5f,
-                              .v_min_rad_s = -45.0f,
-                              .v_max_rad_s = 45.0f,
-                              .kp_max_nm_rad = 500.0f,
-                              .kd_max_nm_s_rad = 5.0f,
-                              .t_min_nm = -18.0f,
-                              .t_max_nm = 18.0f,
-                              .i_min_a = -30.0f,
-                              .i_max_a = 30.0f};
+    j.wire = ps_test_wire_ak();
     j.lim.pos_min_rad = -1.0f;
     j.lim.pos_max_rad = 2.0f;
     j.lim.vel_max_rad_s = 10.0f;
