@@ -395,11 +395,11 @@ static uint32_t take_requests(ps_loop_t *loop, uint32_t cond)
 static void enter_state(ps_loop_t *loop, ps_sm_state_t to)
 {
     if (loop->state == PS_SM_ESTOP && to == PS_SM_STANDBY) {
-        /* Only replies after the drives' new ENTER count (docs/safety.md). */
+        /* Only replies after the drives' new enable count (docs/safety.md). */
         for (uint32_t j = 0; j < loop->meas.n_joints; j++) {
             loop->meas.joints[j].fault_bits = 0u;
             loop->meas.joints[j].t_ns = 0;
-            loop->fault_grace_until_ns[j] = INT64_MAX; /* until its ENTER is sent */
+            loop->fault_grace_until_ns[j] = INT64_MAX; /* until its enable is sent */
         }
     }
     loop->state = to;
@@ -608,7 +608,7 @@ static void stage_write(ps_loop_t *loop)
         loop->counters.n_tx_refused += loop->n_tx[b] - (uint32_t)n;
         if ((uint32_t)n < loop->n_tx[b])
             has_refused = true;
-        /* A refused ENTER/EXIT did not happen: send it again on the joint's
+        /* A refused enable/disable did not happen: send it again on the joint's
          * next due tick instead of believing the drive changed mode. */
         for (uint32_t i = (uint32_t)n; i < loop->n_tx[b]; i++) {
             int j = loop->tx_mode_joint[b][i];
@@ -786,7 +786,7 @@ int ps_loop_run(ps_loop_t *loop, int64_t start_ns, int64_t end_ns)
     }
     if (rc < 0) {
         /* The clock failed: no more paced ticks. One last tick, now, in
-         * e-stop, so the drives are told EXIT and the enable output drops. */
+         * e-stop, so the drives are disabled and the heartbeat stops. */
         ps_loop_request(loop, PS_SM_C_REQ_ESTOP);
         ps_loop_tick(loop, ps_clock_now_ns(loop->cfg.clock));
     }

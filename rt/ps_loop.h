@@ -191,8 +191,8 @@ typedef struct {
     bool has_tx_refused;             /**< a bus refused frames in the last write */
     int64_t overrun_t_ns[PS_LOOP_MAX_OVERRUN_LIMIT]; /**< deadlines of the last overruns */
     uint32_t n_overrun_times;                        /**< entries written (ring index base) */
-    bool is_entered[PS_MAX_JOINTS];                  /**< ENTER sent since the last EXIT */
-    int64_t fault_grace_until_ns[PS_MAX_JOINTS];     /**< drive faults ignored until (ENTER) */
+    bool is_entered[PS_MAX_JOINTS];                  /**< enable sent since the last disable */
+    int64_t fault_grace_until_ns[PS_MAX_JOINTS];     /**< drive faults ignored until (enable) */
     bool has_policy_late;
     bool has_target_invalid;
     bool has_cmd_fault; /**< a command had to be replaced (TARGET_INVALID) */
@@ -241,8 +241,9 @@ int ps_loop_step(ps_loop_t *loop);
 /** @return true once a stop was handled and the robot is in STANDBY or ESTOP  @rt RT-SAFE */
 bool ps_loop_is_stopped(const ps_loop_t *loop);
 
-/** Leave the drives safe at the end of a run: EXIT to every drive, enable
- *  output and LED off. The state is left as it is (STANDBY or ESTOP).
+/** Leave the drives safe at the end of a run: a disable request to every
+ *  drive (its protocol's frames), the heartbeat left still (the relay cuts
+ *  power) and the LED off. The state is left as it is (STANDBY or ESTOP).
  *  @rt RT-SAFE, loop thread, after the last tick */
 void ps_loop_release_drives(ps_loop_t *loop);
 
