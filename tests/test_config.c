@@ -1,5 +1,6 @@
 /*
- * Tests for rt/ps_config: the shipped boards and scenarios, the fixtures in
+ * Tests for rt/ps_config (rt/ps_config_board.c, ps_config_robot.c,
+ * ps_config_scenario.c, ps_config_common.c): the shipped boards and scenarios, the fixtures in
  * tests/data/config/, and rejection cases. Each rejection case copies a valid
  * fixture into a temp dir with one edit and checks the whole message; the
  * expected line number is measured in the edited text, not typed in.
@@ -18,6 +19,7 @@
 #include <unistd.h>
 
 #include "../rt/ps_config.h"
+#include "../rt/ps_config_sim.h"
 #include "../rt/ps_err.h"
 
 #define FIXTURES    "tests/data/config/"
@@ -34,6 +36,7 @@ typedef struct {
     char want[PS_ERR_MSG_LEN];
     ps_board_cfg_t board;
     ps_robot_cfg_t robot;
+    ps_sim_devices_cfg_t robot_sim;
     ps_scenario_cfg_t scenario;
 } fx_t;
 
@@ -279,8 +282,6 @@ static void test_load_robot_fixture_exact_values(void **state)
     assert_int_equal(r->imu.rate_div, 1);
     assert_true(r->kin.mass_kg == 32.0f);
     assert_true(r->kin.fall_com_height_m == 0.4f);
-    assert_true(r->sim.reply_latency_s == 0.00005f);
-    assert_true(r->sim.ambient_c == 25.0f);
 
     assert_int_equal(r->n_joints, 3);
     const ps_act_cfg_t *a0 = &r->act[0];
@@ -313,6 +314,27 @@ static void test_load_robot_fixture_exact_values(void **state)
         assert_true(r->act[i].wire.i_max_a == 40.0f);
     }
     assert_int_equal(r->act[2].bus_idx, 1);
+    /* where the fields other files refer to are */
+    assert_string_equal(r->src.path, ROBOT_OK);
+    assert_int_equal(r->src.imu_bus_line, 7);
+    assert_int_equal(r->src.joint_bus_line[0], 19);
+    assert_int_equal(r->src.joint_bus_line[2], 25);
+}
+
+static void test_load_robot_sim_fixture_same_robot_and_section(void **state)
+{
+    fx_t *f = *state;
+    ps_robot_cfg_t plain;
+    assert_int_equal(ps_config_load_robot(ROBOT_OK, &plain, f->err, sizeof(f->err)), 0);
+    assert_int_equal(
+        ps_config_load_robot_sim(ROBOT_OK, &f->robot, &f->robot_sim, f->err, sizeof(f->err)), 0);
+    assert_memory_equal(&plain, &f->robot, sizeof(plain));
+    assert_true(f->robot_sim.gyro_noise_rad_s == 0.002f);
+    assert_true(f->robot_sim.reply_latency_s == 0.00005f);
+    assert_true(f->robot_sim.thermal_tau_s == 60.0f);
+    assert_true(f->robot_sim.ambient_c == 25.0f);
+    assert_int_equal(ps_config_load_robot_sim(ROBOT_OK, &f->robot, NULL, f->err, sizeof(f->err)),
+                     -EINVAL);
 }
 
 static void test_load_robot_ps1_when_present_ok(void **state)
@@ -332,7 +354,9 @@ static void test_load_robot_ps1_when_present_ok(void **state)
     for (size_t i = 0; i < sizeof(SCENARIOS) / sizeof(SCENARIOS[0]); i++) {
         assert_int_equal(
             ps_config_load_scenario(SCENARIOS[i], &f->scenario, f->err, sizeof(f->err)), 0);
-        rc = ps_config_check_pair(&f->board, &f->robot, &f->scenario, f->err, sizeof(f->err));
+        rc = ps_config_check_pair(&f->board, &f->robot, f->err, sizeof(f->err));
+        if (rc == 0)
+            rc = ps_config_check_scenario(&f->robot, &f->scenario, f->err, sizeof(f->err));
         if (rc != 0)
             print_error("%s\n", f->err);
         assert_int_equal(rc, 0);
@@ -359,7 +383,8 @@ static void test_load_null_args_einval(void **state)
     assert_int_equal(ps_config_load_board(BOARD_OK, NULL, f->err, sizeof(f->err)), -EINVAL);
     assert_int_equal(ps_config_load_robot(NULL, &f->robot, f->err, sizeof(f->err)), -EINVAL);
     assert_int_equal(ps_config_load_scenario(SCENARIO_OK, NULL, f->err, sizeof(f->err)), -EINVAL);
-    assert_int_equal(ps_config_check_pair(NULL, &f->robot, NULL, f->err, sizeof(f->err)), -EINVAL);
+    assert_int_equal(ps_config_check_pair(NULL, &f->robot, f->err, sizeof(f->err)), -EINVAL);
+    assert_int_equal(ps_config_check_scenario(&f->robot, NULL, f->err, sizeof(f->err)), -EINVAL);
 }
 
 static void test_load_board_failure_out_untouched(void **state)
@@ -905,42 +930,79 @@ static void test_check_pair_consistent_ok(void **state)
 {
     fx_t *f = *state;
     load_pair(f);
-    assert_int_equal(
-        ps_config_check_pair(&f->board, &f->robot, &f->scenario, f->err, sizeof(f->err)), 0);
-    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, NULL, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_check_scenario(&f->robot, &f->scenario, f->err, sizeof(f->err)), 0);
 }
 
+/* Two files: the message names the robot file and the line of joints[2].bus. */
 static void test_check_pair_joint_bus_missing_rejected(void **state)
 {
     fx_t *f = *state;
-    load_pair(f);
-    f->robot.act[2].bus_idx = 2; /* board_ok has buses 0 and 1 */
-    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, NULL, f->err, sizeof(f->err)),
+    edit(f, ROBOT_OK, "{name: r_knee, bus: 1,", "{name: r_knee, bus: 2,");
+    assert_int_equal(ps_config_load_board(BOARD_OK, &f->board, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_load_robot(f->path, &f->robot, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, f->err, sizeof(f->err)),
                      -PS_ERR_CONFIG);
-    assert_string_equal(f->err, "robot tiny: joints[2].bus: bus 2 not on board bench (buses 0..1)");
+    want(f, "%s:%d: joints[2].bus: bus 2 not on board bench (buses 0..1)", f->path,
+         line_of(f, "bus: 2"));
+    assert_string_equal(f->err, f->want);
 }
 
 static void test_check_pair_imu_bus_missing_rejected(void **state)
 {
     fx_t *f = *state;
-    load_pair(f);
+    assert_int_equal(ps_config_load_board(BOARD_OK, &f->board, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_load_robot(ROBOT_OK, &f->robot, f->err, sizeof(f->err)), 0);
     f->board.n_buses = 1;
     f->robot.act[2].bus_idx = 0;
-    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, NULL, f->err, sizeof(f->err)),
+    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, f->err, sizeof(f->err)),
                      -PS_ERR_CONFIG);
-    assert_string_equal(f->err, "robot tiny: imu.bus: bus 1 not on board bench (buses 0..0)");
+    want(f, "%s:7: imu.bus: bus 1 not on board bench (buses 0..0)", ROBOT_OK);
+    assert_string_equal(f->err, f->want);
 }
 
-static void test_check_pair_drop_joint_unknown_rejected(void **state)
+/* A robot built in code has no file: the robot's name stands in. */
+static void test_check_pair_no_source_names_robot(void **state)
 {
     fx_t *f = *state;
     load_pair(f);
-    (void)snprintf(f->scenario.events[2].joint, PS_NAME_LEN, "%s", "r_ankle");
-    assert_int_equal(
-        ps_config_check_pair(&f->board, &f->robot, &f->scenario, f->err, sizeof(f->err)),
-        -PS_ERR_CONFIG);
+    memset(&f->robot.src, 0, sizeof(f->robot.src));
+    f->robot.act[2].bus_idx = 2;
+    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    assert_string_equal(f->err, "robot tiny: joints[2].bus: bus 2 not on board bench (buses 0..1)");
+}
+
+/* Two files: the message names the scenario file and the line of events[2].joint. */
+static void test_check_scenario_drop_joint_unknown_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, SCENARIO_OK, "joint: r_knee", "joint: r_ankle");
+    assert_int_equal(ps_config_load_robot(ROBOT_OK, &f->robot, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_load_scenario(f->path, &f->scenario, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_check_scenario(&f->robot, &f->scenario, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    want(f, "%s:%d: events[2].joint: no joint \"r_ankle\" in robot tiny", f->path,
+         line_of(f, "joint: r_ankle"));
+    assert_string_equal(f->err, f->want);
+
+    f->scenario.path[0] = '\0'; /* built in code: the scenario's name stands in */
+    assert_int_equal(ps_config_check_scenario(&f->robot, &f->scenario, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
     assert_string_equal(f->err,
                         "scenario mixed: events[2].joint: no joint \"r_ankle\" in robot tiny");
+}
+
+static void test_load_scenario_fixture_lines_recorded(void **state)
+{
+    fx_t *f = *state;
+    ps_scenario_cfg_t *s = &f->scenario;
+    assert_int_equal(ps_config_load_scenario(SCENARIO_OK, s, f->err, sizeof(f->err)), 0);
+    assert_string_equal(s->path, SCENARIO_OK);
+    assert_int_equal(s->events[0].joint_line, 0); /* start: no joint */
+    assert_int_equal(s->events[1].joint_line, 7);
+    assert_int_equal(s->events[2].joint_line, 8);
+    assert_int_equal(s->pushes[0].body_line, 10);
 }
 
 static void test_find_joint_name_index_or_enoent(void **state)
@@ -1030,7 +1092,10 @@ int main(void)
         T(test_check_pair_consistent_ok),
         T(test_check_pair_joint_bus_missing_rejected),
         T(test_check_pair_imu_bus_missing_rejected),
-        T(test_check_pair_drop_joint_unknown_rejected),
+        T(test_check_pair_no_source_names_robot),
+        T(test_check_scenario_drop_joint_unknown_rejected),
+        T(test_load_scenario_fixture_lines_recorded),
+        T(test_load_robot_sim_fixture_same_robot_and_section),
         T(test_find_joint_name_index_or_enoent),
         T(test_event_name_every_kind_named),
     };

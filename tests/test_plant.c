@@ -97,12 +97,11 @@ static void build_robot(ps_robot_cfg_t *r)
     memset(r, 0, sizeof(*r));
     (void)snprintf(r->name, sizeof(r->name), "ps1");
     (void)snprintf(r->model, sizeof(r->model), "../sim/models/ps1.xml");
-    r->control = (ps_control_cfg_t){1000, 50, 1.0f, 2.0f, 0.05f, 0.01f, 0.005f, 0.0005f, 5, 1.0f, 10.0f};
+    r->control =
+        (ps_control_cfg_t){1000, 50, 1.0f, 2.0f, 0.05f, 0.01f, 0.005f, 0.0005f, 5, 1.0f, 10.0f};
     r->servo_common.damping_kd_nm_s_rad = 2.0f;
     r->imu = (ps_imu_cfg_t){3, 0x080, 1};
     r->kin = KIN;
-    r->sim =
-        (ps_sim_devices_cfg_t){0.002f, 0.005f, 0.02f, 0.05f, 0.00005f, 1.5f, 60.0f, 0.2f, 25.0f};
     r->n_joints = (uint32_t)N_JOINTS;
     for (int i = 0; i < N_JOINTS; i++) {
         const joint_row_t *row = &JOINTS[i];
