@@ -5,17 +5,18 @@
  *
  * Pipeline per file:
  *   1. read the whole file once (errno of fopen is kept: -ENOENT for a missing
- *      file);
+ *      file; a directory says so);
  *   2. parse the buffer with libyaml's event API into a small node tree that
  *      keeps every node's line and column;
  *   3. load the same buffer with libcyaml into the file kind's "raw" structs;
  *      on failure, the node tree and the schema explain where and why;
  *   4. walk the tree with the schema for what libcyaml accepts too leniently:
- *      booleans other than true/false;
+ *      booleans other than true/false, integers written as "2.5" or "1e30";
  *   5. (per file kind) copy, apply defaults, ps_cfg_check_ranges, semantic rules.
  */
 #include "ps_config_common.h"
 
+#include <ctype.h>
 #include <errno.h>
 #include <inttypes.h>
 #include <math.h>
@@ -23,6 +24,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <yaml.h>
 
 #include "ps_err.h"
@@ -250,6 +252,7 @@ static int tree_build(ps_cfg_ytree_t *t, const unsigned char *buf, size_t len, s
                     n->key_line = pending_key_line;
                     pending_key = NULL;
                     if (type == PS_CFG_YN_SCALAR) {
+                        n->is_plain = ev.data.scalar.plain_implicit != 0;
                         n->value = dup_bytes(ev.data.scalar.value, ev.data.scalar.length);
                         if (n->value == NULL)
                             rc = -ENOMEM;
@@ -408,6 +411,118 @@ int ps_cfg_check_ranges(ps_cfg_ctx_t *c, const void *work)
     return 0;
 }
 
+/* The rule for a field path such as "joints[3].rate_div", or NULL. */
+static const ps_cfg_rule_t *rule_of(const ps_cfg_ctx_t *c, const char *field)
+{
+    for (size_t i = 0; i < c->n_rules; i++) {
+        const ps_cfg_rule_t *r = &c->rules[i];
+        if (r->arr_idx == 0) {
+            if (strcmp(r->key, field) == 0)
+                return r;
+            continue;
+        }
+        const char *name = c->arrays[r->arr_idx - 1u].name;
+        const size_t len = strlen(name);
+        if (strncmp(field, name, len) != 0 || field[len] != '[')
+            continue;
+        const char *p = field + len + 1;
+        while (*p >= '0' && *p <= '9')
+            p++;
+        if (p[0] == ']' && p[1] == '.' && strcmp(p + 2, r->key) == 0)
+            return r;
+    }
+    return NULL;
+}
+
+/* Integers as the docs allow them: an optional sign, then decimal digits
+ * without a leading zero, or 0x and hex digits. libcyaml 1.3.1 reads them
+ * with strtoll/strtoull and ignores what follows the digits, so "2.5" loads
+ * as 2, "1e30" and "0x1.8p1" as 1, and "010" is octal 8.
+ * @return true and *out_v when text is one */
+static bool parse_int_text(const char *text, long double *out_v)
+{
+    const char *p = text;
+    const bool is_neg = *p == '-';
+    if (*p == '-' || *p == '+')
+        p++;
+    unsigned base = 10;
+    if (p[0] == '0' && (p[1] == 'x' || p[1] == 'X')) {
+        base = 16;
+        p += 2;
+    } else if (p[0] == '0' && p[1] != '\0') {
+        return false;
+    }
+    if (*p == '\0')
+        return false;
+    long double v = 0.0L;
+    for (; *p != '\0'; p++) {
+        unsigned d;
+        if (*p >= '0' && *p <= '9')
+            d = (unsigned)(*p - '0');
+        else if (base == 16 && *p >= 'a' && *p <= 'f')
+            d = 10u + (unsigned)(*p - 'a');
+        else if (base == 16 && *p >= 'A' && *p <= 'F')
+            d = 10u + (unsigned)(*p - 'A');
+        else
+            return false;
+        v = v * base + d; /* exact up to 2^64: long double has a 64-bit mantissa */
+        if (v > 1e20L)
+            v = 1e20L; /* far outside every integer type we load */
+    }
+    *out_v = is_neg ? -v : v;
+    return true;
+}
+
+/* A float field: the whole scalar must be a number (libcyaml 1.3.1 reads
+ * "1.0abc" and "1_0" as 1). NaN and infinities parse and then fail every
+ * range. @return true when a message was written */
+static bool explain_float(ps_cfg_ctx_t *c, const ps_cfg_ynode_t *n, const char *field)
+{
+    char *end = NULL;
+    (void)strtod(n->value, &end);
+    if (end != n->value && end != NULL && *end == '\0' && !isspace((unsigned char)n->value[0]))
+        return false;
+    const ps_cfg_rule_t *rule = rule_of(c, field);
+    char range[80] = "", bounds[72];
+    if (rule != NULL) {
+        fmt_range(bounds, sizeof(bounds), rule);
+        (void)snprintf(range, sizeof(range), " in %s", bounds);
+    }
+    (void)ps_cfg_fail_at(c, n->line + 1u, field, "value %s is not a number%s", n->value, range);
+    return true;
+}
+
+/* An integer field: refuses a scalar that is not an integer, or one outside
+ * the member's type. The message gives the field's rule range when it has
+ * one, else the type's. @return true when a message was written */
+static bool explain_int(ps_cfg_ctx_t *c, const cyaml_schema_value_t *sv, const ps_cfg_ynode_t *n,
+                        const char *field)
+{
+    const bool is_signed = sv->type == CYAML_INT;
+    const unsigned bits = sv->data_size * 8u;
+    ps_cfg_rule_t type_rule = {
+        .type = is_signed ? PS_CFG_NUM_I32 : PS_CFG_NUM_U32,
+        .min = is_signed ? -ldexp(1.0, (int)bits - 1) : 0.0,
+        .max = is_signed ? ldexp(1.0, (int)bits - 1) - 1.0 : ldexp(1.0, (int)bits) - 1.0,
+    };
+    const ps_cfg_rule_t *rule = rule_of(c, field);
+    if (rule == NULL)
+        rule = &type_rule;
+    char range[80];
+    fmt_range(range, sizeof(range), rule);
+    long double v = 0.0L;
+    if (!parse_int_text(n->value, &v)) {
+        (void)ps_cfg_fail_at(c, n->line + 1u, field, "value %s is not an integer in %s", n->value,
+                             range);
+        return true;
+    }
+    if (v < (long double)type_rule.min || v > (long double)type_rule.max) {
+        (void)ps_cfg_fail_at(c, n->line + 1u, field, "value %s outside %s", n->value, range);
+        return true;
+    }
+    return false; /* in the type: the range rules check the rest */
+}
+
 /* ====================================================================== */
 /* libcyaml glue                                                          */
 /* ====================================================================== */
@@ -518,14 +633,35 @@ static bool explain_walk(ps_cfg_ctx_t *c, const cyaml_schema_value_t *sv, int no
          * the two YAML 1.2 spellings. */
         if (n->type != PS_CFG_YN_SCALAR)
             return false;
+        if (!n->is_plain && (strcmp(n->value, "true") == 0 || strcmp(n->value, "false") == 0)) {
+            /* "true" in quotes is a string in YAML, not a boolean */
+            (void)ps_cfg_fail_at(c, n->line + 1u, field,
+                                 "value \"%s\" is a quoted string (allowed: true, false)",
+                                 n->value);
+            return true;
+        }
         if (strcmp(n->value, "true") == 0 || strcmp(n->value, "false") == 0)
             return false;
         (void)ps_cfg_fail_at(c, n->line + 1u, field, "unknown value \"%s\" (allowed: true, false)",
                              n->value);
         return true;
+    case CYAML_INT:
+    case CYAML_UINT:
+        return n->type == PS_CFG_YN_SCALAR && explain_int(c, sv, n, field);
+    case CYAML_FLOAT:
+        return n->type == PS_CFG_YN_SCALAR && explain_float(c, n, field);
     case CYAML_STRING: {
         if (n->type != PS_CFG_YN_SCALAR)
             return false;
+        /* libcyaml 1.3.1 stores a YAML null (~, null) as that text */
+        static const char *const NULLS[] = {"~", "null", "Null", "NULL"};
+        for (size_t i = 0; n->is_plain && i < sizeof(NULLS) / sizeof(NULLS[0]); i++) {
+            if (strcmp(n->value, NULLS[i]) == 0) {
+                (void)ps_cfg_fail_at(c, n->line + 1u, field, "value %s is null, not a string",
+                                     n->value);
+                return true;
+            }
+        }
         const size_t len = strlen(n->value);
         if (len < sv->string.min || len > sv->string.max) {
             (void)ps_cfg_fail_at(c, n->line + 1u, field,
@@ -599,6 +735,12 @@ int ps_cfg_load_file(ps_cfg_ctx_t *c, const cyaml_schema_value_t *schema, void *
         const int e = errno;
         (void)ps_cfg_fail_at(c, 0, NULL, "cannot open: %s", strerror(e));
         return e == ENOENT ? -ENOENT : -PS_ERR_CONFIG;
+    }
+    /* fopen opens a directory for reading; fread then fails with EISDIR. */
+    struct stat st;
+    if (fstat(fileno(f), &st) == 0 && S_ISDIR(st.st_mode)) {
+        (void)fclose(f); /* read-only stream: nothing to flush */
+        return ps_cfg_fail_at(c, 0, NULL, "is a directory");
     }
     unsigned char *buf = malloc(MAX_FILE_BYTES + 1u);
     if (buf == NULL) {

@@ -3,7 +3,7 @@
  * shares (internal: included only by rt/ps_config_board.c, ps_config_robot.c
  * and ps_config_scenario.c). It reads a file once, builds a position tree for
  * messages, loads the same buffer with libcyaml, explains libcyaml's failures,
- * refuses what libcyaml accepts too leniently (booleans) and checks
+ * refuses what libcyaml accepts too leniently (booleans, integers) and checks
  * numeric fields against typed range tables.
  *
  * Why a position tree next to libcyaml: libcyaml 1.3.1 reports a position
@@ -51,6 +51,7 @@ typedef struct {
     char *key;       /**< key under which this node sits in its parent mapping */
     size_t key_line; /**< 0-based */
     char *value;     /**< scalars only */
+    bool is_plain;   /**< scalars only: written without quotes or tags */
 } ps_cfg_ynode_t;
 
 typedef struct {
