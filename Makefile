@@ -86,7 +86,7 @@ run: deps-build $(BUILD)/pushstep
 	$(BUILD)/pushstep --board sim $(ARGS)
 
 test: deps-build $(BUILD)/pushstep $(TEST_BINS)
-	@PUSHSTEP_BIN=$(BUILD)/pushstep bash tools/run-tests.sh $(TEST_BINS)
+	@PUSHSTEP_BIN=$(BUILD)/pushstep bash tools/run-tests.sh tools/check-layers.sh $(TEST_BINS)
 
 bench: deps-bench $(BUILD)/pushstep
 	@bash bench/run.sh

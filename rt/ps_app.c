@@ -43,14 +43,16 @@ static int load_configs(ps_app_t *app, const ps_app_opts_t *o, char *err, size_t
     resolve(dd, o->robot, "robots", "ps1", app->robot_path, sizeof(app->robot_path));
     int rc = ps_config_load_board(app->board_path, &app->board, err, len);
     if (rc == 0)
-        rc = ps_config_load_robot(app->robot_path, &app->robot, err, len);
+        rc = ps_config_load_robot_sim(app->robot_path, &app->robot, &app->robot_sim, err, len);
     if (rc == 0 && (o->scenario != NULL || app->board.kind == PS_BOARD_SIM)) {
         resolve(dd, o->scenario, "scenarios", "stand", app->scenario_path,
                 sizeof(app->scenario_path));
         rc = ps_config_load_scenario(app->scenario_path, &app->scenario, err, len);
     }
     if (rc == 0)
-        rc = ps_config_check_pair(&app->board, &app->robot, &app->scenario, err, len);
+        rc = ps_config_check_pair(&app->board, &app->robot, err, len);
+    if (rc == 0)
+        rc = ps_config_check_scenario(&app->robot, &app->scenario, err, len);
     if (rc < 0)
         return rc;
     if (o->is_lockstep && app->board.kind != PS_BOARD_SIM) {
@@ -138,7 +140,8 @@ void ps_app_sim_board(const ps_board_cfg_t *b, ps_sim_board_t *out)
     out->plant_cpu = b->rt.plant_cpu;
 }
 
-void ps_app_sim_robot(const ps_robot_cfg_t *r, ps_sim_robot_t *out)
+void ps_app_sim_robot(const ps_robot_cfg_t *r, const ps_sim_devices_cfg_t *devices,
+                      ps_sim_robot_t *out)
 {
     memset(out, 0, sizeof(*out));
     memcpy(out->name, r->name, sizeof(out->name));
@@ -150,7 +153,7 @@ void ps_app_sim_robot(const ps_robot_cfg_t *r, ps_sim_robot_t *out)
         out->stance_rad[j] = r->servo[j].stance_rad;
     }
     out->imu = r->imu;
-    out->devices = r->sim;
+    out->devices = *devices;
 }
 
 static void hook_setup_thread(void *ctx, unsigned priority, int cpu)
@@ -193,7 +196,7 @@ ps_sim_hooks_t ps_app_sim_hooks(ps_loop_t *loop)
 static int wire_sim(ps_app_t *app, ps_loop_cfg_t *lc, char *err, size_t len)
 {
     ps_app_sim_board(&app->board, &app->sim_board);
-    ps_app_sim_robot(&app->robot, &app->sim_robot);
+    ps_app_sim_robot(&app->robot, &app->robot_sim, &app->sim_robot);
     ps_sim_cfg_t sc = {
         .board = &app->sim_board,
         .robot = &app->sim_robot,

@@ -21,6 +21,7 @@
 #include "../policy/ps_stand.h"
 #include "../sim/ps_sim.h"
 #include "ps_config.h"
+#include "ps_config_sim.h"
 #include "ps_loop.h"
 #include "ps_ring.h"
 
@@ -43,6 +44,7 @@ typedef struct {
     bool is_lockstep;
     ps_board_cfg_t board;
     ps_robot_cfg_t robot;
+    ps_sim_devices_cfg_t robot_sim; /**< the robot file's `sim:` section */
     ps_scenario_cfg_t scenario;
     ps_canbus_plan_t plan;
     ps_sim_board_t sim_board;
@@ -74,9 +76,11 @@ int ps_app_plan_buses(const ps_board_cfg_t *b, const ps_robot_cfg_t *r, ps_canbu
                       char *err, size_t err_len);
 
 /** The board and robot as the simulation needs them (plant thread one
- *  priority below the loop).  @rt INIT */
+ *  priority below the loop; devices: the robot file's `sim:` section, from
+ *  ps_config_load_robot_sim).  @pre devices != NULL  @rt INIT */
 void ps_app_sim_board(const ps_board_cfg_t *b, ps_sim_board_t *out);
-void ps_app_sim_robot(const ps_robot_cfg_t *r, ps_sim_robot_t *out);
+void ps_app_sim_robot(const ps_robot_cfg_t *r, const ps_sim_devices_cfg_t *devices,
+                      ps_sim_robot_t *out);
 
 /** Hooks the simulation calls back into the application: RT setup of the
  *  plant thread, the allocation guard's pause, whether the loop is in charge

@@ -1,10 +1,13 @@
 /*
- * ps_config: board, robot and scenario configuration, loaded from YAML with
- * libcyaml into the fixed-size structs below and range-checked field by field.
+ * ps_config: board and robot configuration, loaded from YAML with libcyaml
+ * into the fixed-size structs below and range-checked field by field. What
+ * needs sim/ types (the scenario file, the robot file's `sim:` section) is in
+ * rt/ps_config_sim.h, for the composition root only.
  *
  * Every error message names the file, the line (where it can be found), the
  * field path, the value and the allowed range, e.g.
  *   boards/sim.yaml:7: buses[1].bitrate: value 2000000 outside [10000, 1000000]
+ * Checks between two files name the file and line of the offending field.
  *
  * Threads: INIT only (main thread). Allocation: libcyaml allocates while
  * loading; everything is copied into the caller's structs and freed before
@@ -13,9 +16,11 @@
 #ifndef PS_CONFIG_H
 #define PS_CONFIG_H
 
-/* The loader composes every module's own configuration struct from the files:
- * it is part of the composition root (with rt/ps_app.c and rt/main.c), the
- * only application code that includes sim/ (docs/architecture.md). */
+/* Layering: this header includes the base, drivers/, policy/ and rt/ only,
+ * never sim/, so application modules (rt/ps_loop.c, rt/ps_summary.c) may
+ * include it. The loader itself, which also fills sim's structs, is part of
+ * the composition root (docs/architecture.md). */
+#include <limits.h>
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -26,8 +31,6 @@
 #include "../drivers/ps_imu_msg.h"
 #include "../policy/ps_estimate.h"
 #include "../policy/ps_servo.h"
-#include "../sim/ps_devices.h"
-#include "../sim/ps_scenario.h"
 #include "ps_limits.h"
 #include "ps_loop.h"
 #include "ps_rtsetup.h"
@@ -51,6 +54,16 @@ struct ps_board_cfg {
 
 /* ---- robot file: robots/<name>.yaml ---------------------------------- */
 
+/** Where the robot file's fields are, for the checks against another file
+ *  (ps_config_check_pair). Lines are 1-based; 0 or an empty path: unknown
+ *  (a struct built in code). */
+typedef struct {
+    char path[PATH_MAX]; /**< the file as passed to the loader */
+    uint32_t joint_bus_line[PS_MAX_JOINTS];
+    uint32_t joint_protocol_line[PS_MAX_JOINTS];
+    uint32_t imu_bus_line;
+} ps_robot_src_t;
+
 /** A robot, as the modules consume it: one array per module, indexed by joint
  *  (the order of the robot file's joints). */
 struct ps_robot_cfg {
@@ -64,47 +77,42 @@ struct ps_robot_cfg {
     ps_servo_joint_cfg_t servo[PS_MAX_JOINTS];   /**< the servo layer's view */
     ps_imu_cfg_t imu;
     ps_kinematics_cfg_t kin;
-    ps_sim_devices_cfg_t sim;
+    ps_robot_src_t src; /**< for messages only */
+    /* The file's `sim:` section: ps_config_load_robot_sim (rt/ps_config_sim.h). */
 };
-
-/* ---- scenario file: scenarios/<name>.yaml (simulation only) ----------- */
-/* ps_scenario_cfg_t: sim/ps_scenario.h */
 
 /* ---- loading ---------------------------------------------------------- */
 
 /** Load and check a board file. @pre path != NULL
  *  @post *out fully written on success, untouched on failure; err (if not NULL)
  *        holds a one-line message "FILE[:LINE]: [FIELD: ]problem" on failure
+ *        ("FILE: is a directory" for a directory)
  *  @return 0 | -PS_ERR_CONFIG | -ENOENT | -EINVAL (NULL path/out) | -ENOMEM
  *  @rt INIT, main thread */
 int ps_config_load_board(const char *path, ps_board_cfg_t *out, char *err, size_t err_len);
 
 /** Load and check a robot file (joint map, ranges, gains, limits). Each
  *  joint's `driver` is resolved by name and its ranges copied into `wire`;
- *  `model` is stored as written (relative to the robot file; the caller resolves).
+ *  `model` is stored as written (relative to the robot file; the caller
+ *  resolves). The `sim:` section is checked but not returned (see
+ *  ps_config_load_robot_sim). out->src records path and lines.
  *  @pre path != NULL  @post as ps_config_load_board
  *  @return 0 | -PS_ERR_CONFIG | -ENOENT | -EINVAL | -ENOMEM  @rt INIT */
 int ps_config_load_robot(const char *path, ps_robot_cfg_t *out, char *err, size_t err_len);
 
-/** Load and check a scenario file. @pre path != NULL  @post as ps_config_load_board
- *  @return 0 | -PS_ERR_CONFIG | -ENOENT | -EINVAL | -ENOMEM  @rt INIT */
-int ps_config_load_scenario(const char *path, ps_scenario_cfg_t *out, char *err, size_t err_len);
-
-/** Cross-file checks: every joint's bus and the IMU's bus exist on the board,
- *  every drop_replies joint of the scenario is a joint of the robot. (Ids per
- *  bus and rates are already checked by ps_config_load_robot; push bodies name
- *  model bodies, which only the sim can check.)
- *  @pre b, r loaded; s may be NULL (no scenario)  @post err holds a message on failure
+/** Checks of a robot against a board: every joint's bus and the IMU's bus
+ *  exist on the board, and a protocol that needs CAN FD is on an FD bus. (Ids
+ *  per bus and rates are already checked by ps_config_load_robot.) A message
+ *  names the robot file and the line of the field (r->src), e.g.
+ *    robots/x.yaml:14: joints[2].bus: bus 2 not on board bench (buses 0..1)
+ *  or "robot NAME: ..." when r->src.path is empty.
+ *  @pre b, r loaded  @post err holds a message on failure
  *  @return 0 | -PS_ERR_CONFIG | -EINVAL (b or r NULL)  @rt INIT */
-int ps_config_check_pair(const ps_board_cfg_t *b, const ps_robot_cfg_t *r,
-                         const ps_scenario_cfg_t *s, char *err, size_t err_len);
+int ps_config_check_pair(const ps_board_cfg_t *b, const ps_robot_cfg_t *r, char *err,
+                         size_t err_len);
 
 /** @return joint index with that name, or -ENOENT (also for r or name NULL)
  *  @rt RT-SAFE O(n) */
 int ps_config_find_joint(const ps_robot_cfg_t *r, const char *name);
-
-/** Name of an event kind as written in scenario files, for logs; "unknown"
- *  outside the enum. @rt RT-SAFE */
-const char *ps_config_event_name(ps_event_kind_t k);
 
 #endif /* PS_CONFIG_H */

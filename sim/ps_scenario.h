@@ -9,6 +9,7 @@
 #ifndef PS_SCENARIO_H
 #define PS_SCENARIO_H
 
+#include <limits.h>
 #include <stdint.h>
 
 #include "../rt/ps_limits.h"
@@ -18,6 +19,7 @@ typedef struct {
     float duration_s;
     char body[PS_NAME_LEN]; /**< body of the model the force acts on */
     float force_n[3];       /**< world frame */
+    uint32_t body_line;     /**< line of `body` in the scenario file, 0: unknown */
 } ps_push_cfg_t;
 
 typedef enum {
@@ -36,6 +38,7 @@ typedef struct {
     ps_event_kind_t kind;
     char joint[PS_NAME_LEN]; /**< for DROP_REPLIES */
     float duration_s;
+    uint32_t joint_line; /**< line of `joint` in the scenario file, 0: unknown */
 } ps_event_cfg_t;
 
 typedef struct {
@@ -46,6 +49,7 @@ typedef struct {
     ps_push_cfg_t pushes[PS_MAX_PUSHES];
     uint32_t n_events;
     ps_event_cfg_t events[PS_MAX_EVENTS];
+    char path[PATH_MAX]; /**< file it was loaded from, for messages; "": unknown */
 } ps_scenario_cfg_t;
 
 #endif /* PS_SCENARIO_H */

@@ -368,9 +368,16 @@ static int setup_scenario(ps_sim_t *s, char *err, size_t err_len)
         const ps_push_cfg_t *pc = &sc->pushes[p];
         const int body = ps_plant_find_body(s->plant, pc->body);
         if (body < 0) {
-            ps_err_format(err, err_len,
-                          "scenario %s: pushes[%u].body: '%.*s' is not a body of the model",
-                          sc->name, p, (int)PS_NAME_LEN, pc->body);
+            /* The file and line where the loader recorded them, as for every
+             * other configuration error; else the scenario's name. */
+            if (sc->path[0] != '\0' && pc->body_line > 0)
+                ps_err_format(
+                    err, err_len, "%.*s:%u: pushes[%u].body: '%.*s' is not a body of the model",
+                    (int)sizeof(sc->path), sc->path, pc->body_line, p, (int)PS_NAME_LEN, pc->body);
+            else
+                ps_err_format(err, err_len,
+                              "scenario %s: pushes[%u].body: '%.*s' is not a body of the model",
+                              sc->name, p, (int)PS_NAME_LEN, pc->body);
             return -PS_ERR_CONFIG;
         }
         int slot = -1;
@@ -392,6 +399,13 @@ static int setup_scenario(ps_sim_t *s, char *err, size_t err_len)
         s->event_joint_idx[e] = -1;
         if (ev->kind == PS_EVENT_DROP_REPLIES) {
             const int j = find_joint(&s->robot, ev->joint);
+            if (j < 0 && sc->path[0] != '\0' && ev->joint_line > 0) {
+                ps_err_format(err, err_len,
+                              "%.*s:%u: events[%u].joint: '%.*s' is not a joint of %s",
+                              (int)sizeof(sc->path), sc->path, ev->joint_line, e, (int)PS_NAME_LEN,
+                              ev->joint, s->robot.name);
+                return -PS_ERR_CONFIG;
+            }
             if (j < 0) {
                 ps_err_format(err, err_len,
                               "scenario %s: events[%u].joint: '%.*s' is not a joint of %s",

@@ -1,5 +1,6 @@
 /*
- * Tests for rt/ps_config: the shipped boards and scenarios, the fixtures in
+ * Tests for rt/ps_config (rt/ps_config_board.c, ps_config_robot.c,
+ * ps_config_scenario.c, ps_config_common.c): the shipped boards and scenarios, the fixtures in
  * tests/data/config/, and rejection cases. Each rejection case copies a valid
  * fixture into a temp dir with one edit and checks the whole message; the
  * expected line number is measured in the edited text, not typed in.
@@ -18,6 +19,7 @@
 #include <unistd.h>
 
 #include "../rt/ps_config.h"
+#include "../rt/ps_config_sim.h"
 #include "../rt/ps_err.h"
 
 #define FIXTURES    "tests/data/config/"
@@ -34,6 +36,7 @@ typedef struct {
     char want[PS_ERR_MSG_LEN];
     ps_board_cfg_t board;
     ps_robot_cfg_t robot;
+    ps_sim_devices_cfg_t robot_sim;
     ps_scenario_cfg_t scenario;
 } fx_t;
 
@@ -279,8 +282,6 @@ static void test_load_robot_fixture_exact_values(void **state)
     assert_int_equal(r->imu.rate_div, 1);
     assert_true(r->kin.mass_kg == 32.0f);
     assert_true(r->kin.fall_com_height_m == 0.4f);
-    assert_true(r->sim.reply_latency_s == 0.00005f);
-    assert_true(r->sim.ambient_c == 25.0f);
 
     assert_int_equal(r->n_joints, 3);
     const ps_act_cfg_t *a0 = &r->act[0];
@@ -313,6 +314,27 @@ static void test_load_robot_fixture_exact_values(void **state)
         assert_true(r->act[i].wire.i_max_a == 40.0f);
     }
     assert_int_equal(r->act[2].bus_idx, 1);
+    /* where the fields other files refer to are */
+    assert_string_equal(r->src.path, ROBOT_OK);
+    assert_int_equal(r->src.imu_bus_line, 7);
+    assert_int_equal(r->src.joint_bus_line[0], 19);
+    assert_int_equal(r->src.joint_bus_line[2], 25);
+}
+
+static void test_load_robot_sim_fixture_same_robot_and_section(void **state)
+{
+    fx_t *f = *state;
+    ps_robot_cfg_t plain;
+    assert_int_equal(ps_config_load_robot(ROBOT_OK, &plain, f->err, sizeof(f->err)), 0);
+    assert_int_equal(
+        ps_config_load_robot_sim(ROBOT_OK, &f->robot, &f->robot_sim, f->err, sizeof(f->err)), 0);
+    assert_memory_equal(&plain, &f->robot, sizeof(plain));
+    assert_true(f->robot_sim.gyro_noise_rad_s == 0.002f);
+    assert_true(f->robot_sim.reply_latency_s == 0.00005f);
+    assert_true(f->robot_sim.thermal_tau_s == 60.0f);
+    assert_true(f->robot_sim.ambient_c == 25.0f);
+    assert_int_equal(ps_config_load_robot_sim(ROBOT_OK, &f->robot, NULL, f->err, sizeof(f->err)),
+                     -EINVAL);
 }
 
 static void test_load_robot_ps1_when_present_ok(void **state)
@@ -332,7 +354,9 @@ static void test_load_robot_ps1_when_present_ok(void **state)
     for (size_t i = 0; i < sizeof(SCENARIOS) / sizeof(SCENARIOS[0]); i++) {
         assert_int_equal(
             ps_config_load_scenario(SCENARIOS[i], &f->scenario, f->err, sizeof(f->err)), 0);
-        rc = ps_config_check_pair(&f->board, &f->robot, &f->scenario, f->err, sizeof(f->err));
+        rc = ps_config_check_pair(&f->board, &f->robot, f->err, sizeof(f->err));
+        if (rc == 0)
+            rc = ps_config_check_scenario(&f->robot, &f->scenario, f->err, sizeof(f->err));
         if (rc != 0)
             print_error("%s\n", f->err);
         assert_int_equal(rc, 0);
@@ -359,7 +383,8 @@ static void test_load_null_args_einval(void **state)
     assert_int_equal(ps_config_load_board(BOARD_OK, NULL, f->err, sizeof(f->err)), -EINVAL);
     assert_int_equal(ps_config_load_robot(NULL, &f->robot, f->err, sizeof(f->err)), -EINVAL);
     assert_int_equal(ps_config_load_scenario(SCENARIO_OK, NULL, f->err, sizeof(f->err)), -EINVAL);
-    assert_int_equal(ps_config_check_pair(NULL, &f->robot, NULL, f->err, sizeof(f->err)), -EINVAL);
+    assert_int_equal(ps_config_check_pair(NULL, &f->robot, f->err, sizeof(f->err)), -EINVAL);
+    assert_int_equal(ps_config_check_scenario(&f->robot, NULL, f->err, sizeof(f->err)), -EINVAL);
 }
 
 static void test_load_board_failure_out_untouched(void **state)
@@ -414,15 +439,10 @@ static void test_load_board_string_for_number_rejected(void **state)
 {
     fx_t *f = *state;
     edit(f, "boards/sim.yaml", "{ifname: can1, bitrate: 1000000}", "{ifname: can1, bitrate: fast}");
-    /* libcyaml's own text after file, line and field */
-    char prefix[256];
-    (void)snprintf(prefix, sizeof(prefix), "%s:%d: buses[1].bitrate: ", f->path,
-                   line_of(f, "bitrate: fast"));
-    assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)),
-                     -PS_ERR_CONFIG);
-    assert_memory_equal(f->err, prefix, strlen(prefix));
-    assert_non_null(strstr(f->err, "Invalid"));
-    assert_non_null(strstr(f->err, "'fast'"));
+    /* an integer field: the loader's own words, with the field's range */
+    want(f, "%s:%d: buses[1].bitrate: value fast is not an integer in [10000, 1000000]", f->path,
+         line_of(f, "bitrate: fast"));
+    expect_board_error(f);
 }
 
 static void test_load_board_bitrate_high_rejected(void **state)
@@ -558,14 +578,18 @@ static void test_load_board_gpio_line_reused_rejected(void **state)
 static void test_load_robot_string_for_number_rejected(void **state)
 {
     fx_t *f = *state;
-    edit(f, ROBOT_OK, "servo_hz: 1000", "servo_hz: fast");
+    edit(f, ROBOT_OK, "ramp_s: 1.0", "ramp_s: fast");
+    want(f, "%s:%d: control.ramp_s: value fast is not a number in [0.1, 10]", f->path,
+         line_of(f, "ramp_s"));
+    expect_robot_error(f);
+    /* a mapping where a number belongs keeps libcyaml's text */
+    edit(f, ROBOT_OK, "ramp_s: 1.0", "ramp_s: {a: 1}");
     char prefix[256];
-    (void)snprintf(prefix, sizeof(prefix), "%s:%d: control.servo_hz: ", f->path,
-                   line_of(f, "servo_hz"));
+    (void)snprintf(prefix, sizeof(prefix), "%s:%d: control.ramp_s: ", f->path,
+                   line_of(f, "ramp_s"));
     assert_int_equal(ps_config_load_robot(f->path, &f->robot, f->err, sizeof(f->err)),
                      -PS_ERR_CONFIG);
     assert_memory_equal(f->err, prefix, strlen(prefix));
-    assert_non_null(strstr(f->err, "'fast'"));
 }
 
 static void test_load_robot_missing_field_rejected(void **state)
@@ -892,6 +916,175 @@ static void test_load_scenario_duration_high_rejected(void **state)
     expect_scenario_error(f);
 }
 
+/* ---- strict scalars: what libcyaml 1.3.1 alone would accept ------------- */
+
+/* Integers: libcyaml reads "2.5" as 2 and "1e30" or "0x1.8p1" as 1. */
+static void test_load_robot_integer_not_integer_rejected(void **state)
+{
+    fx_t *f = *state;
+    static const char *const BAD[] = {"2.5", "1e30", "0x1.8p1", "true", "010", "2x", "0x"};
+    for (size_t i = 0; i < sizeof(BAD) / sizeof(BAD[0]); i++) {
+        char to[64];
+        (void)snprintf(to, sizeof(to), "rate_div: %s}", BAD[i]);
+        edit(f, ROBOT_OK, "rate_div: 2}", to);
+        want(f, "%s:%d: joints[0].rate_div: value %s is not an integer in [1, 64]", f->path,
+             line_of(f, to), BAD[i]);
+        expect_robot_error(f);
+    }
+    /* hex and signs as documented still load */
+    edit(f, ROBOT_OK, "rate_div: 2}", "rate_div: +0x2}");
+    assert_int_equal(ps_config_load_robot(f->path, &f->robot, f->err, sizeof(f->err)), 0);
+    assert_int_equal(f->robot.act[0].rate_div, 2);
+}
+
+static void test_load_scenario_seed_beyond_uint32_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, SCENARIO_OK, "seed: 42", "seed: 1e30");
+    want(f, "%s:%d: seed: value 1e30 is not an integer in [0, 4294967295]", f->path,
+         line_of(f, "seed:"));
+    expect_scenario_error(f);
+    edit(f, SCENARIO_OK, "seed: 42", "seed: 4294967296");
+    want(f, "%s:%d: seed: value 4294967296 outside [0, 4294967295]", f->path, line_of(f, "seed:"));
+    expect_scenario_error(f);
+    edit(f, SCENARIO_OK, "seed: 42", "seed: -1");
+    want(f, "%s:%d: seed: value -1 outside [0, 4294967295]", f->path, line_of(f, "seed:"));
+    expect_scenario_error(f);
+    edit(f, SCENARIO_OK, "seed: 42", "seed: 4294967295");
+    assert_int_equal(ps_config_load_scenario(f->path, &f->scenario, f->err, sizeof(f->err)), 0);
+    assert_int_equal(f->scenario.seed, 4294967295u);
+}
+
+static void test_load_board_signed_integer_beyond_int32_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, BOARD_OK, "loop_cpu: -1", "loop_cpu: -2147483649");
+    want(f, "%s:%d: rt.loop_cpu: value -2147483649 outside [-1, 1023]", f->path,
+         line_of(f, "loop_cpu"));
+    expect_board_error(f);
+    edit(f, BOARD_OK, "loop_cpu: -1", "loop_cpu: -1.5");
+    want(f, "%s:%d: rt.loop_cpu: value -1.5 is not an integer in [-1, 1023]", f->path,
+         line_of(f, "loop_cpu"));
+    expect_board_error(f);
+}
+
+/* A field without a range rule gets its type's range. */
+static void test_load_board_optional_integer_not_integer_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, BOARD_OK, "{ifname: can0, bitrate: 500000}",
+         "{ifname: can0, bitrate: 500000, fd: true, data_bitrate: 2e6}");
+    want(f, "%s:%d: buses[0].data_bitrate: value 2e6 is not an integer in [0, 4294967295]", f->path,
+         line_of(f, "data_bitrate"));
+    expect_board_error(f);
+}
+
+/* Floats: libcyaml reads "1.0abc" and "1_0" as 1; NaN and inf fail every range. */
+static void test_load_robot_float_not_number_rejected(void **state)
+{
+    fx_t *f = *state;
+    static const char *const BAD[] = {"1.0abc", "1_0", ".inf", "' 1.0'"};
+    static const char *const SHOWN[] = {"1.0abc", "1_0", ".inf", " 1.0"};
+    for (size_t i = 0; i < sizeof(BAD) / sizeof(BAD[0]); i++) {
+        char to[64];
+        (void)snprintf(to, sizeof(to), "ramp_s: %s", BAD[i]);
+        edit(f, ROBOT_OK, "ramp_s: 1.0", to);
+        want(f, "%s:%d: control.ramp_s: value %s is not a number in [0.1, 10]", f->path,
+             line_of(f, to), SHOWN[i]);
+        expect_robot_error(f);
+    }
+    edit(f, ROBOT_OK, "ramp_s: 1.0", "ramp_s: nan");
+    want(f, "%s:%d: control.ramp_s: value nan outside [0.1, 10]", f->path, line_of(f, "ramp_s"));
+    expect_robot_error(f);
+    edit(f, SCENARIO_OK, "force_n: [10, -20.5, 0]", "force_n: [10, -20.5, 0x]");
+    want(f, "%s:%d: pushes[0].force_n[2]: value 0x is not a number in [-2000, 2000]", f->path,
+         line_of(f, "force_n"));
+    expect_scenario_error(f);
+}
+
+/* Booleans: only plain true/false; a quoted "true" is a string. */
+static void test_load_board_bool_quoted_or_word_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, BOARD_OK, "estop_active_low: false", "estop_active_low: \"false\"");
+    want(f,
+         "%s:%d: gpio.estop_active_low: value \"false\" is a quoted string (allowed: true, "
+         "false)",
+         f->path, line_of(f, "estop_active_low"));
+    expect_board_error(f);
+    edit(f, BOARD_OK, "estop_active_low: false", "estop_active_low: 0");
+    want(f, "%s:%d: gpio.estop_active_low: unknown value \"0\" (allowed: true, false)", f->path,
+         line_of(f, "estop_active_low"));
+    expect_board_error(f);
+}
+
+/* Enums: only their words, case-sensitive; no numbers. */
+static void test_load_board_enum_number_or_case_rejected(void **state)
+{
+    fx_t *f = *state;
+    static const char *const BAD[] = {"1", "Linux", "linux2"};
+    for (size_t i = 0; i < sizeof(BAD) / sizeof(BAD[0]); i++) {
+        char to[64];
+        (void)snprintf(to, sizeof(to), "kind: %s", BAD[i]);
+        edit(f, BOARD_OK, "kind: linux", to);
+        want(f, "%s:%d: kind: unknown value \"%s\" (allowed: sim, linux)", f->path, line_of(f, to),
+             BAD[i]);
+        expect_board_error(f);
+    }
+}
+
+/* Strings: a YAML null is not a name; lengths are checked. */
+static void test_load_board_string_null_or_long_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, BOARD_OK, "name: bench", "name: ~");
+    want(f, "%s:%d: name: value ~ is null, not a string", f->path, line_of(f, "name: ~"));
+    expect_board_error(f);
+    edit(f, BOARD_OK, "name: bench", "name: null");
+    want(f, "%s:%d: name: value null is null, not a string", f->path, line_of(f, "name: null"));
+    expect_board_error(f);
+    edit(f, BOARD_OK, "name: bench", "name: \"null\""); /* quoted: a string */
+    assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)), 0);
+    assert_string_equal(f->board.name, "null");
+    edit(f, BOARD_OK, "name: bench", "name: abcdefghijklmnopqrstuvwxyz012345");
+    want(f, "%s:%d: name: string \"abcdefghijklmnopqrstuvwxyz012345\" length 32 outside [1, 31]",
+         f->path, line_of(f, "name:"));
+    expect_board_error(f);
+}
+
+/* Lists: entry counts are checked, fixed-length lists exactly. */
+static void test_load_scenario_list_length_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, SCENARIO_OK, "force_n: [10, -20.5, 0]", "force_n: [10, -20.5, 0, 1]");
+    want(f, "%s:%d: pushes[0].force_n: 4 entries, need exactly 3", f->path, line_of(f, "force_n"));
+    expect_scenario_error(f);
+    edit(f, BOARD_OK, "buses:\n", "buses: []\nx_buses:\n");
+    want(f, "%s:%d: buses: 0 entries outside [1, 8]", f->path, line_of(f, "buses: []"));
+    expect_board_error(f);
+}
+
+/* ---- a directory where a file belongs ------------------------------------ */
+
+static void test_load_directory_says_so(void **state)
+{
+    fx_t *f = *state;
+    assert_int_equal(ps_config_load_board("boards/", &f->board, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    assert_string_equal(f->err, "boards/: is a directory");
+    assert_int_equal(ps_config_load_robot("robots", &f->robot, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    assert_string_equal(f->err, "robots: is a directory");
+    assert_int_equal(
+        ps_config_load_robot_sim("robots/", &f->robot, &f->robot_sim, f->err, sizeof(f->err)),
+        -PS_ERR_CONFIG);
+    assert_string_equal(f->err, "robots/: is a directory");
+    assert_int_equal(ps_config_load_scenario(f->dir, &f->scenario, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    want(f, "%s: is a directory", f->dir);
+    assert_string_equal(f->err, f->want);
+}
+
 /* ---- cross-file checks and look-ups ------------------------------------ */
 
 static void load_pair(fx_t *f)
@@ -905,42 +1098,79 @@ static void test_check_pair_consistent_ok(void **state)
 {
     fx_t *f = *state;
     load_pair(f);
-    assert_int_equal(
-        ps_config_check_pair(&f->board, &f->robot, &f->scenario, f->err, sizeof(f->err)), 0);
-    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, NULL, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_check_scenario(&f->robot, &f->scenario, f->err, sizeof(f->err)), 0);
 }
 
+/* Two files: the message names the robot file and the line of joints[2].bus. */
 static void test_check_pair_joint_bus_missing_rejected(void **state)
 {
     fx_t *f = *state;
-    load_pair(f);
-    f->robot.act[2].bus_idx = 2; /* board_ok has buses 0 and 1 */
-    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, NULL, f->err, sizeof(f->err)),
+    edit(f, ROBOT_OK, "{name: r_knee, bus: 1,", "{name: r_knee, bus: 2,");
+    assert_int_equal(ps_config_load_board(BOARD_OK, &f->board, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_load_robot(f->path, &f->robot, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, f->err, sizeof(f->err)),
                      -PS_ERR_CONFIG);
-    assert_string_equal(f->err, "robot tiny: joints[2].bus: bus 2 not on board bench (buses 0..1)");
+    want(f, "%s:%d: joints[2].bus: bus 2 not on board bench (buses 0..1)", f->path,
+         line_of(f, "bus: 2"));
+    assert_string_equal(f->err, f->want);
 }
 
 static void test_check_pair_imu_bus_missing_rejected(void **state)
 {
     fx_t *f = *state;
-    load_pair(f);
+    assert_int_equal(ps_config_load_board(BOARD_OK, &f->board, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_load_robot(ROBOT_OK, &f->robot, f->err, sizeof(f->err)), 0);
     f->board.n_buses = 1;
     f->robot.act[2].bus_idx = 0;
-    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, NULL, f->err, sizeof(f->err)),
+    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, f->err, sizeof(f->err)),
                      -PS_ERR_CONFIG);
-    assert_string_equal(f->err, "robot tiny: imu.bus: bus 1 not on board bench (buses 0..0)");
+    want(f, "%s:7: imu.bus: bus 1 not on board bench (buses 0..0)", ROBOT_OK);
+    assert_string_equal(f->err, f->want);
 }
 
-static void test_check_pair_drop_joint_unknown_rejected(void **state)
+/* A robot built in code has no file: the robot's name stands in. */
+static void test_check_pair_no_source_names_robot(void **state)
 {
     fx_t *f = *state;
     load_pair(f);
-    (void)snprintf(f->scenario.events[2].joint, PS_NAME_LEN, "%s", "r_ankle");
-    assert_int_equal(
-        ps_config_check_pair(&f->board, &f->robot, &f->scenario, f->err, sizeof(f->err)),
-        -PS_ERR_CONFIG);
+    memset(&f->robot.src, 0, sizeof(f->robot.src));
+    f->robot.act[2].bus_idx = 2;
+    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    assert_string_equal(f->err, "robot tiny: joints[2].bus: bus 2 not on board bench (buses 0..1)");
+}
+
+/* Two files: the message names the scenario file and the line of events[2].joint. */
+static void test_check_scenario_drop_joint_unknown_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, SCENARIO_OK, "joint: r_knee", "joint: r_ankle");
+    assert_int_equal(ps_config_load_robot(ROBOT_OK, &f->robot, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_load_scenario(f->path, &f->scenario, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_check_scenario(&f->robot, &f->scenario, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    want(f, "%s:%d: events[2].joint: no joint \"r_ankle\" in robot tiny", f->path,
+         line_of(f, "joint: r_ankle"));
+    assert_string_equal(f->err, f->want);
+
+    f->scenario.path[0] = '\0'; /* built in code: the scenario's name stands in */
+    assert_int_equal(ps_config_check_scenario(&f->robot, &f->scenario, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
     assert_string_equal(f->err,
                         "scenario mixed: events[2].joint: no joint \"r_ankle\" in robot tiny");
+}
+
+static void test_load_scenario_fixture_lines_recorded(void **state)
+{
+    fx_t *f = *state;
+    ps_scenario_cfg_t *s = &f->scenario;
+    assert_int_equal(ps_config_load_scenario(SCENARIO_OK, s, f->err, sizeof(f->err)), 0);
+    assert_string_equal(s->path, SCENARIO_OK);
+    assert_int_equal(s->events[0].joint_line, 0); /* start: no joint */
+    assert_int_equal(s->events[1].joint_line, 7);
+    assert_int_equal(s->events[2].joint_line, 8);
+    assert_int_equal(s->pushes[0].body_line, 10);
 }
 
 static void test_find_joint_name_index_or_enoent(void **state)
@@ -1027,10 +1257,23 @@ int main(void)
         T(test_load_scenario_force_too_large_rejected),
         T(test_load_scenario_drop_without_joint_rejected),
         T(test_load_scenario_duration_high_rejected),
+        T(test_load_robot_integer_not_integer_rejected),
+        T(test_load_scenario_seed_beyond_uint32_rejected),
+        T(test_load_board_signed_integer_beyond_int32_rejected),
+        T(test_load_board_optional_integer_not_integer_rejected),
+        T(test_load_robot_float_not_number_rejected),
+        T(test_load_board_bool_quoted_or_word_rejected),
+        T(test_load_board_enum_number_or_case_rejected),
+        T(test_load_board_string_null_or_long_rejected),
+        T(test_load_scenario_list_length_rejected),
+        T(test_load_directory_says_so),
         T(test_check_pair_consistent_ok),
         T(test_check_pair_joint_bus_missing_rejected),
         T(test_check_pair_imu_bus_missing_rejected),
-        T(test_check_pair_drop_joint_unknown_rejected),
+        T(test_check_pair_no_source_names_robot),
+        T(test_check_scenario_drop_joint_unknown_rejected),
+        T(test_load_scenario_fixture_lines_recorded),
+        T(test_load_robot_sim_fixture_same_robot_and_section),
         T(test_find_joint_name_index_or_enoent),
         T(test_event_name_every_kind_named),
     };

@@ -102,8 +102,6 @@ static void build_robot(ps_robot_cfg_t *r)
     r->servo_common.damping_kd_nm_s_rad = 2.0f;
     r->imu = (ps_imu_cfg_t){3, 0x080, 1};
     r->kin = KIN;
-    r->sim =
-        (ps_sim_devices_cfg_t){0.002f, 0.005f, 0.02f, 0.05f, 0.00005f, 1.5f, 60.0f, 0.2f, 25.0f};
     r->n_joints = (uint32_t)N_JOINTS;
     for (int i = 0; i < N_JOINTS; i++) {
         const joint_row_t *row = &JOINTS[i];

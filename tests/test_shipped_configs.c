@@ -16,6 +16,7 @@
 #include "../drivers/ps_canbus.h"
 #include "../rt/ps_app.h"
 #include "../rt/ps_config.h"
+#include "../rt/ps_config_sim.h"
 
 static void load_or_fail(const char *what, int rc, const char *err)
 {
@@ -46,8 +47,8 @@ static void test_shipped_boards_and_robots_fit_the_bus_budget(void **state)
             ps_board_cfg_t board;
             load_or_fail(boards.gl_pathv[b],
                          ps_config_load_board(boards.gl_pathv[b], &board, err, sizeof(err)), err);
-            load_or_fail(boards.gl_pathv[b],
-                         ps_config_check_pair(&board, &robot, NULL, err, sizeof(err)), err);
+            load_or_fail(boards.gl_pathv[b], ps_config_check_pair(&board, &robot, err, sizeof(err)),
+                         err);
             ps_canbus_plan_t plan;
             load_or_fail(boards.gl_pathv[b],
                          ps_app_plan_buses(&board, &robot, &plan, err, sizeof(err)), err);
@@ -75,8 +76,10 @@ static void test_shipped_scenarios_fit_the_default_robot(void **state)
         ps_scenario_cfg_t sc;
         load_or_fail(scenarios.gl_pathv[i],
                      ps_config_load_scenario(scenarios.gl_pathv[i], &sc, err, sizeof(err)), err);
-        load_or_fail(scenarios.gl_pathv[i],
-                     ps_config_check_pair(&board, &robot, &sc, err, sizeof(err)), err);
+        load_or_fail(scenarios.gl_pathv[i], ps_config_check_pair(&board, &robot, err, sizeof(err)),
+                     err);
+        load_or_fail(scenarios.gl_pathv[i], ps_config_check_scenario(&robot, &sc, err, sizeof(err)),
+                     err);
     }
     globfree(&scenarios);
 }

@@ -24,6 +24,7 @@
 #include "../rt/ps_app.h"
 #include "../rt/ps_clock.h"
 #include "../rt/ps_config.h"
+#include "../rt/ps_config_sim.h"
 #include "../rt/ps_err.h"
 #include "../rt/ps_sm.h"
 #include "../sim/ps_gpio_sim.h"
@@ -39,6 +40,7 @@ typedef struct {
     ps_robot_cfg_t robot;
     ps_sim_board_t sim_board; /* the two as the composition root hands them to the sim */
     ps_sim_robot_t sim_robot;
+    ps_sim_devices_cfg_t devices; /* the robot file's sim: section */
     ps_scenario_cfg_t sc;
     char model[2 * PS_PATH_LEN];
 } fixture_t;
@@ -49,7 +51,7 @@ static int setup(void **state)
     char err[PS_ERR_MSG_LEN];
     memset(&fx, 0, sizeof fx);
     if (ps_config_load_board(BOARD_PATH, &fx.board, err, sizeof err) != 0 ||
-        ps_config_load_robot(ROBOT_PATH, &fx.robot, err, sizeof err) != 0) {
+        ps_config_load_robot_sim(ROBOT_PATH, &fx.robot, &fx.devices, err, sizeof err) != 0) {
         fprintf(stderr, "setup: %s\n", err);
         return -1;
     }
@@ -74,7 +76,7 @@ static void add_event(ps_scenario_cfg_t *sc, float t_s, ps_event_kind_t kind)
 static ps_sim_cfg_t sim_cfg(fixture_t *fx, bool is_lockstep)
 {
     ps_app_sim_board(&fx->board, &fx->sim_board);
-    ps_app_sim_robot(&fx->robot, &fx->sim_robot);
+    ps_app_sim_robot(&fx->robot, &fx->devices, &fx->sim_robot);
     return (ps_sim_cfg_t){.board = &fx->sim_board,
                           .robot = &fx->sim_robot,
                           .scenario = &fx->sc,
@@ -277,6 +279,39 @@ static void test_create_unknown_push_body_config_error_names_it(void **state)
     assert_int_equal(ps_sim_create(&cfg, &sim, err, sizeof err), -PS_ERR_CONFIG);
     assert_null(sim);
     assert_non_null(strstr(err, "no_such_body"));
+}
+
+/* A push body the model lacks, loaded from a file: the message names the
+ * scenario file and the line of pushes[1].body, like every config error. */
+static void test_create_unknown_push_body_from_file_names_file_and_line(void **state)
+{
+    fixture_t *fx = *state;
+    char path[] = "/tmp/ps_test_sim_scenario.XXXXXX";
+    const int fd = mkstemp(path);
+    assert_true(fd >= 0);
+    static const char TEXT[] = "name: bad_body\n"
+                               "duration_s: 2\n"
+                               "seed: 1\n"
+                               "pushes:\n"
+                               "  - {t_s: 0.5, duration_s: 0.1, body: pelvis, force_n: [1, 0, 0]}\n"
+                               "  - t_s: 1.0\n"
+                               "    duration_s: 0.1\n"
+                               "    body: no_such_body\n"
+                               "    force_n: [0, 1, 0]\n";
+    assert_int_equal(write(fd, TEXT, sizeof TEXT - 1u), (ssize_t)(sizeof TEXT - 1u));
+    assert_int_equal(close(fd), 0);
+    char err[PS_ERR_MSG_LEN] = "";
+    const int rc = ps_config_load_scenario(path, &fx->sc, err, sizeof err);
+    (void)unlink(path);
+    assert_int_equal(rc, 0);
+    const ps_sim_cfg_t cfg = sim_cfg(fx, true);
+    ps_sim_t *sim = NULL;
+    assert_int_equal(ps_sim_create(&cfg, &sim, err, sizeof err), -PS_ERR_CONFIG);
+    assert_null(sim);
+    char want[PS_ERR_MSG_LEN];
+    (void)snprintf(want, sizeof want,
+                   "%s:8: pushes[1].body: 'no_such_body' is not a body of the model", path);
+    assert_string_equal(err, want);
 }
 
 static void test_create_unknown_drop_joint_config_error_names_it(void **state)
@@ -654,6 +689,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test_setup(test_create_unknown_push_body_config_error_names_it, setup),
+        cmocka_unit_test_setup(test_create_unknown_push_body_from_file_names_file_and_line, setup),
         cmocka_unit_test_setup(test_create_unknown_drop_joint_config_error_names_it, setup),
         cmocka_unit_test_setup(test_create_bad_model_path_plant_error, setup),
         cmocka_unit_test_setup(test_create_joint_bus_missing_config_error, setup),
