@@ -555,6 +555,34 @@ static void test_lockstep_slow_policy_overruns_counted(void **state)
     assert_int_equal(app.loop.pacer.n_overruns, n_after_slow); /* fast again: none more */
 }
 
+/* The case that used to stay ACTIVE: a 1.5 ms policy in a 1 ms loop (it
+ * overran every policy tick and passed ps1's old 2 ms deadline). Now the
+ * deadline fits in half a period, the first slow step is POLICY_LATE, and
+ * the robot holds its last safe pose instead of trusting late targets. */
+static void test_lockstep_slow_policy_in_active_holds_policy_late(void **state)
+{
+    (void)state;
+    static slow_policy_t sp;
+    start_app("scenarios/stand.yaml");
+    sp = (slow_policy_t){.inner = app.loop.cfg.policy};
+    app.loop.cfg.policy = (ps_policy_t){.ops = &SLOW_OPS, .ctx = &sp};
+    step_until(3.0);
+    assert_int_equal(app.loop.state, PS_SM_ACTIVE);
+    drain_ring();
+    n_recs = 0;
+    sp.is_slow = true;
+    step_until(3.1);
+    sp.is_slow = false;
+    collect_records();
+    assert_true(sp.n_slow_runs >= 1);
+    assert_int_equal(app.loop.state, PS_SM_HOLD);
+    const ps_loop_rec_t *t = find_transition(PS_SM_ACTIVE, PS_SM_HOLD);
+    assert_non_null(t);
+    if ((t->cond & PS_SM_C_POLICY_LATE) == 0)
+        fail_msg("ACTIVE -> HOLD with cond 0x%x, not POLICY_LATE", t->cond);
+    assert_true(app.loop.counters.n_policy_late >= 1);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -570,6 +598,7 @@ int main(void)
         cmocka_unit_test_teardown(test_lockstep_refused_requests_while_estop_pressed_guarded,
                                   teardown),
         cmocka_unit_test_teardown(test_lockstep_slow_policy_overruns_counted, teardown),
+        cmocka_unit_test_teardown(test_lockstep_slow_policy_in_active_holds_policy_late, teardown),
         cmocka_unit_test_teardown(test_lockstep_subtick_estop_press_reaches_estop, teardown),
     };
     return cmocka_run_group_tests_name("e2e_lockstep", tests, NULL, NULL);
