@@ -142,6 +142,20 @@ void ps_act_meas_to_motor(const ps_act_cfg_t *a, const ps_act_meas_t *j, ps_act_
     m->tau_nm = d * j->tau_nm / n;
 }
 
+/* A joint command at the edge of the joint-side wire range can land a few
+ * ulps outside the motor-side range after the conversion (kp / (N N) against
+ * (kp_max N) N, and so on). Such a value is put back on the edge; anything
+ * further out is left for the encoder to refuse. NaN stays NaN. */
+static float snap_into(float x, float lo, float hi)
+{
+    const float tol = 1e-5f * (hi - lo);
+    if (x < lo && x >= lo - tol)
+        return lo;
+    if (x > hi && x <= hi + tol)
+        return hi;
+    return x;
+}
+
 int ps_act_encode_command(const ps_act_cfg_t *a, const ps_act_cmd_t *joint, ps_can_frame_t *out,
                           size_t max)
 {
@@ -150,6 +164,12 @@ int ps_act_encode_command(const ps_act_cfg_t *a, const ps_act_cmd_t *joint, ps_c
         return -EINVAL;
     ps_act_cmd_t m;
     ps_act_cmd_to_motor(a, joint, &m);
+    const ps_act_range_t *w = &a->wire;
+    m.q_rad = snap_into(m.q_rad, w->p_min_rad, w->p_max_rad);
+    m.qd_rad_s = snap_into(m.qd_rad_s, w->v_min_rad_s, w->v_max_rad_s);
+    m.kp_nm_rad = snap_into(m.kp_nm_rad, 0.0f, w->kp_max_nm_rad);
+    m.kd_nm_s_rad = snap_into(m.kd_nm_s_rad, 0.0f, w->kd_max_nm_s_rad);
+    m.tau_ff_nm = snap_into(m.tau_ff_nm, w->t_min_nm, w->t_max_nm);
     return p->encode_cmd(a, &m, out, max);
 }
 

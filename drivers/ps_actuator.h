@@ -194,6 +194,9 @@ void ps_act_meas_to_motor(const ps_act_cfg_t *a, const ps_act_meas_t *joint,
                           ps_act_meas_t *out_motor);
 
 /** Encode a joint command for the wire: convert, then the protocol's encoder.
+ *  A field the conversion's rounding puts outside the wire range by at most
+ *  1e-5 of the range is put back on its edge, so every command inside
+ *  ps_act_joint_range encodes; anything further out is refused.
  *  @pre a checked  @return frames written | -PS_ERR_LIMIT | -ENOSPC | -EINVAL
  *  @rt RT-SAFE O(1) */
 int ps_act_encode_command(const ps_act_cfg_t *a, const ps_act_cmd_t *joint, ps_can_frame_t *out,

@@ -320,7 +320,7 @@ void ps_estimate_update(ps_estimator_t *e, const ps_meas_t *m)
      * not done, see docs/estimation.md). With a flat, massless foot the
      * moments about the ankle balance: tau_joint + r x F = 0, r = (px, py, -h)
      * from the ankle to the CoP, F = (0, 0, F_z). tau_joint is the actuator
-     * torque ON THE FOOT about +axis (MIT reply / MuJoCo qfrc_actuator sign).
+     * torque ON THE FOOT about +axis (the drive's reply / MuJoCo qfrc_actuator sign).
      *   y: tau_pitch + (r_z F_x - r_x F_z) = tau_pitch - px F_z = 0
      *      -> px = +tau_pitch / F_z  (toe pressed down = positive pitch torque)
      *   x: tau_roll + (r_y F_z - r_z F_y) = tau_roll + py F_z = 0

@@ -16,7 +16,7 @@
  *
  * Sign conventions, limits of the lumped model and the sources followed are in
  * docs/estimation.md. Joint torques are read as the actuator torque on the
- * child link about the joint's positive axis (MIT reply, MuJoCo
+ * child link about the joint's positive axis (the drive's reply, MuJoCo
  * qfrc_actuator); the signs above hold for that convention (derivation in
  * ps_estimate.c, checked against MuJoCo contact forces in docs/estimation.md).
  *

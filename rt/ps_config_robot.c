@@ -95,11 +95,16 @@ typedef struct {
     id_use_t id_uses[2u * PS_MAX_JOINTS + 2u]; /* command + reply per joint, IMU's two */
 } robot_work_t;
 
-static const cyaml_strval_t PROTOCOLS[] = {
-    {"mit", PS_ACT_PROTO_MIT},
-};
-static_assert(sizeof(PROTOCOLS) / sizeof(PROTOCOLS[0]) == PS_ACT_PROTO_COUNT,
-              "one YAML name per actuator protocol");
+/* The protocol words of the robot file are the protocols' own names
+ * (ps_act_proto_t.name): the loader names no protocol itself. Filled before
+ * each load (INIT, main thread; the same every time). */
+static cyaml_strval_t PROTOCOLS[PS_ACT_PROTO_COUNT];
+
+static void fill_protocol_names(void)
+{
+    for (unsigned i = 0; i < PS_ACT_PROTO_COUNT; i++)
+        PROTOCOLS[i] = (cyaml_strval_t){ps_act_proto_get((ps_act_proto_id_t)i)->name, (int64_t)i};
+}
 
 static const cyaml_schema_field_t CONTROL_FIELDS[] = {
     CYAML_FIELD_UINT("servo_hz", CYAML_FLAG_DEFAULT, control_file_t, servo_hz),
@@ -646,8 +651,18 @@ static void record_src(const ps_cfg_ctx_t *c, ps_robot_cfg_t *out)
 }
 
 /* One load of a robot file; out_sim (if not NULL) gets its `sim:` section. */
+static int load_robot_file(const char *path, ps_robot_cfg_t *out, ps_sim_devices_cfg_t *out_sim,
+                           char *err, size_t err_len);
+
 static int load_robot(const char *path, ps_robot_cfg_t *out, ps_sim_devices_cfg_t *out_sim,
                       char *err, size_t err_len)
+{
+    fill_protocol_names();
+    return load_robot_file(path, out, out_sim, err, err_len);
+}
+
+static int load_robot_file(const char *path, ps_robot_cfg_t *out, ps_sim_devices_cfg_t *out_sim,
+                           char *err, size_t err_len)
 {
     ps_cfg_ctx_t c;
     int rc = ps_cfg_ctx_open(&c, path, err, err_len, ROBOT_ARRAYS, ROBOT_RANGES,

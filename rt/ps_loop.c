@@ -254,7 +254,10 @@ static void stage_policy(ps_loop_t *loop, uint64_t tick)
         return;
     }
     loop->has_targets = true;
-    memcpy(loop->safe_q_rad, loop->targets.q_rad, sizeof(loop->safe_q_rad));
+    /* A late step's targets are tracked (the state machine reacts next tick)
+     * but are not the pose HOLD falls back to. */
+    if (!loop->has_policy_late)
+        memcpy(loop->safe_q_rad, loop->targets.q_rad, sizeof(loop->safe_q_rad));
 }
 
 /* ---- state machine ---------------------------------------------------- */
@@ -428,7 +431,7 @@ static void stage_state_machine(ps_loop_t *loop)
     if (is_estop_pressed)
         cond |= PS_SM_C_ESTOP_INPUT;
     cond |= take_requests(loop, cond);
-    if (loop->state != PS_SM_RAMP && loop->state != PS_SM_ACTIVE)
+    if (loop->state != PS_SM_RAMP && loop->state != PS_SM_ACTIVE && loop->state != PS_SM_HOLD)
         cond &= ~(uint32_t)PS_SM_C_FALL; /* a limp robot on the floor is not news */
     else if (cond & PS_SM_C_FALL)
         loop->counters.has_fallen = true;
@@ -449,19 +452,22 @@ static void stage_state_machine(ps_loop_t *loop)
 
 /* ---- SERVO and WRITE -------------------------------------------------- */
 
-/* mode_joint: the joint whose enable/disable this frame is, or -1 for a
- * command; stage_write undoes is_entered for mode frames a bus refused. The
- * tx buffer holds every joint's command frames (PS_LOOP_MAX_TX); a protocol
+/* mode_joint: the joint whose enable/disable these frames are, or -1 for a
+ * command; stage_write puts is_entered back to prev_entered when a bus
+ * refused any frame of the request (once per request, however many frames
+ * it had). n == 0 (a protocol that needs no frame for it) is done. The tx
+ * buffer holds every joint's command frames (PS_LOOP_MAX_TX); a protocol
  * error that leaves no room is counted, never overflows. */
 static bool queue_frames(ps_loop_t *loop, uint32_t bus_idx, const ps_can_frame_t *f, int n,
-                         int mode_joint)
+                         int mode_joint, bool prev_entered)
 {
-    if (n <= 0 || loop->n_tx[bus_idx] + (uint32_t)n > PS_LOOP_MAX_TX)
+    if (n < 0 || loop->n_tx[bus_idx] + (uint32_t)n > PS_LOOP_MAX_TX)
         return false;
     for (int k = 0; k < n; k++) {
         const uint32_t i = loop->n_tx[bus_idx]++;
         loop->tx_buf[bus_idx][i] = f[k];
         loop->tx_mode_joint[bus_idx][i] = (int8_t)mode_joint;
+        loop->tx_mode_prev[bus_idx][i] = prev_entered;
     }
     return true;
 }
@@ -488,7 +494,7 @@ static bool queue_mode_change(ps_loop_t *loop, uint32_t j)
     ps_can_frame_t f[PS_ACT_MAX_FRAMES];
     const int n = ps_act_encode_request(a, want_entered ? PS_ACT_REQ_ENABLE : PS_ACT_REQ_DISABLE, f,
                                         PS_ACT_MAX_FRAMES);
-    if (!queue_frames(loop, a->bus_idx, f, n, (int)j)) {
+    if (!queue_frames(loop, a->bus_idx, f, n, (int)j, loop->is_entered[j])) {
         loop->counters.n_cmd_replaced++; /* cannot be expressed: the config check forbids it */
         return false;
     }
@@ -513,7 +519,7 @@ static void disable_joint(ps_loop_t *loop, uint32_t j)
     const ps_act_cfg_t *a = &loop->cfg.robot->act[j];
     ps_can_frame_t f[PS_ACT_MAX_FRAMES];
     const int n = ps_act_encode_request(a, PS_ACT_REQ_DISABLE, f, PS_ACT_MAX_FRAMES);
-    if (queue_frames(loop, a->bus_idx, f, n, (int)j))
+    if (queue_frames(loop, a->bus_idx, f, n, (int)j, loop->is_entered[j]))
         loop->is_entered[j] = false;
 }
 
@@ -541,7 +547,7 @@ static void servo_joint(ps_loop_t *loop, uint32_t j, const ps_servo_mode_t *mode
             return;
         }
     }
-    (void)queue_frames(loop, a->bus_idx, f, n, -1); /* room for every joint: PS_LOOP_MAX_TX */
+    (void)queue_frames(loop, a->bus_idx, f, n, -1, false); /* room for every joint */
 }
 
 /* The servo mode of each safety state (the servo layer knows no states). */
@@ -613,7 +619,7 @@ static void stage_write(ps_loop_t *loop)
         for (uint32_t i = (uint32_t)n; i < loop->n_tx[b]; i++) {
             int j = loop->tx_mode_joint[b][i];
             if (j >= 0)
-                loop->is_entered[j] = !loop->is_entered[j];
+                loop->is_entered[j] = loop->tx_mode_prev[b][i];
         }
     }
     loop->has_tx_refused = has_refused; /* TX_REFUSED for the next tick's state machine */
@@ -761,7 +767,7 @@ void ps_loop_release_drives(ps_loop_t *loop)
     for (uint32_t j = 0; j < r->n_joints; j++) {
         ps_can_frame_t f[PS_ACT_MAX_FRAMES];
         const int n = ps_act_encode_request(&r->act[j], PS_ACT_REQ_DISABLE, f, PS_ACT_MAX_FRAMES);
-        if (!queue_frames(loop, r->act[j].bus_idx, f, n, -1))
+        if (!queue_frames(loop, r->act[j].bus_idx, f, n, -1, false))
             loop->counters.n_tx_refused++;
     }
     for (uint32_t b = 0; b < loop->cfg.board->n_buses; b++) {

@@ -14,8 +14,9 @@
  * policy: it does not know whether it runs on hardware or the simulation.
  *
  * The state machine sees this tick's measurements and estimate, and the
- * policy's lateness and target validity of its last run (one tick earlier at
- * most: an invalid target is never sent, the servo layer damps that joint).
+ * policy's lateness and target validity of its last run (up to servo_hz /
+ * policy_hz ticks earlier; an invalid target is never sent, the servo layer
+ * damps that joint meanwhile).
  * Overruns: OVERRUN when control.overrun_limit ticks ended after their next
  * deadline within control.overrun_window_s. TX_REFUSED when a bus refused
  * frames in the last write. HOLD holds the position targets of the last
@@ -71,7 +72,7 @@ typedef struct {
                                   a servo period (the policy runs inside one tick) */
     uint32_t overrun_limit;  /**< this many overruns within overrun_window_s: OVERRUN */
     float overrun_window_s;  /**< window of the overrun count */
-    float hold_s;            /**< longest HOLD before DAMPING; 0: soft faults damp at once */
+    float hold_s;            /**< longest HOLD before DAMPING; 0: one tick of HOLD */
 } ps_control_cfg_t;
 
 /** Largest control.overrun_limit: the loop keeps that many overrun times. */
@@ -206,6 +207,7 @@ typedef struct {
     ps_can_frame_t tx_buf[PS_MAX_BUSES][PS_LOOP_MAX_TX];
     int8_t tx_mode_joint[PS_MAX_BUSES][PS_LOOP_MAX_TX]; /**< per tx frame: enable/disable
                                                              joint, -1 */
+    bool tx_mode_prev[PS_MAX_BUSES][PS_LOOP_MAX_TX];    /**< is_entered before that request */
     uint32_t n_tx[PS_MAX_BUSES];
     int64_t t_deadline_ns; /**< deadline of the current tick */
     ps_perf_hist_t perf[PS_STAGE_COUNT];

@@ -45,8 +45,8 @@ typedef enum {
 
 /** Condition bits. Requests (REQ_*) come from the operator; the rest from the loop. */
 typedef enum {
-    PS_SM_C_REQ_START = 1u << 0,       /**< operator: STANDBY -> RAMP */
-    PS_SM_C_REQ_STOP = 1u << 1,        /**< operator: RAMP/ACTIVE -> DAMPING */
+    PS_SM_C_REQ_START = 1u << 0,       /**< operator: STANDBY or HOLD -> RAMP */
+    PS_SM_C_REQ_STOP = 1u << 1,        /**< operator: RAMP/ACTIVE/HOLD -> DAMPING */
     PS_SM_C_REQ_RESET = 1u << 2,       /**< operator: ESTOP -> STANDBY */
     PS_SM_C_REQ_ESTOP = 1u << 3,       /**< operator: software e-stop */
     PS_SM_C_ESTOP_INPUT = 1u << 4,     /**< e-stop GPIO reads pressed */
@@ -90,7 +90,7 @@ typedef enum {
 #define PS_SM_C_RESUME_BLOCKERS (PS_SM_C_START_BLOCKERS | PS_SM_C_SOFT_FAULTS | PS_SM_C_HOLD_DONE)
 /** What blocks ESTOP -> STANDBY: e-stop input still pressed, bus still off,
  *  e-stop requested again. Not a drive fault: drives clear a latched fault
- *  only when they are enabled again (ENTER), which happens in STANDBY; a
+ *  only when they are enabled again, which happens in STANDBY; a
  *  drive that is still faulted then sends the robot straight back to ESTOP,
  *  with its cause logged, instead of making the reset impossible. */
 #define PS_SM_C_RESET_BLOCKERS (PS_SM_C_REQ_ESTOP | PS_SM_C_ESTOP_INPUT | PS_SM_C_BUS_OFF)

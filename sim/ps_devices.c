@@ -91,7 +91,9 @@ static void handle_request(ps_devices_actuator_t *a, int req, const ps_can_frame
         a->is_motor_mode = false;
         a->has_cmd = false;
     } else if (req == PS_ACT_REQ_SET_ZERO) {
-        a->zero_offset_rad = q_rad;
+        /* The motor reads 0 here from now on: the host, which adds the
+         * configured zero offset, sees the joint at zero_offset_rad. */
+        a->zero_offset_rad = q_rad - (double)a->act.zero_offset_rad;
     }
 }
 

@@ -267,6 +267,46 @@ static void test_ps_act_joint_range_gear_direction_zero(void **state)
     assert_float_equal(j.t_max_nm, 20.0f, 1e-6f);
 }
 
+/* Every corner of the joint-side wire range encodes, whatever the gear
+ * ratio, direction and zero offset (the conversion's float rounding used to
+ * push some 1 ulp outside the motor-side range); just outside is refused. */
+static void test_ps_act_encode_command_joint_range_corners_encode(void **state)
+{
+    (void)state;
+    const float ratios[] = {1.0f, 3.3f, 6.0f, 7.3f, 9.0f, 10.0f, 13.7f, 36.0f};
+    const float zeros[] = {0.0f, 0.1f, -0.37f, 1.234f};
+    unsigned n_checked = 0;
+    for (size_t r = 0; r < sizeof ratios / sizeof ratios[0]; r++)
+        for (int d = -1; d <= 1; d += 2)
+            for (size_t z = 0; z < sizeof zeros / sizeof zeros[0]; z++) {
+                ps_act_cfg_t a = mit_cfg();
+                a.gear_ratio = ratios[r];
+                a.direction = (float)d;
+                a.zero_offset_rad = zeros[z];
+                ps_act_range_t j;
+                ps_act_joint_range(&a, &j);
+                for (unsigned c = 0; c < 32; c++) {
+                    const ps_act_cmd_t cmd = {
+                        .q_rad = (c & 1) ? j.p_max_rad : j.p_min_rad,
+                        .qd_rad_s = (c & 2) ? j.v_max_rad_s : j.v_min_rad_s,
+                        .kp_nm_rad = (c & 4) ? j.kp_max_nm_rad : 0.0f,
+                        .kd_nm_s_rad = (c & 8) ? j.kd_max_nm_s_rad : 0.0f,
+                        .tau_ff_nm = (c & 16) ? j.t_max_nm : j.t_min_nm,
+                    };
+                    ps_can_frame_t f[PS_ACT_MAX_FRAMES];
+                    if (ps_act_encode_command(&a, &cmd, f, PS_ACT_MAX_FRAMES) != 1)
+                        fail_msg("N %g d %d z %g corner %u refused", (double)ratios[r], d,
+                                 (double)zeros[z], c);
+                    n_checked++;
+                }
+                ps_act_cmd_t beyond = {.kp_nm_rad = j.kp_max_nm_rad * 1.001f};
+                ps_can_frame_t f[PS_ACT_MAX_FRAMES];
+                assert_int_equal(ps_act_encode_command(&a, &beyond, f, PS_ACT_MAX_FRAMES),
+                                 -PS_ERR_LIMIT);
+            }
+    assert_int_equal(n_checked, 8u * 2u * 4u * 32u);
+}
+
 static void test_ps_act_check_cfg_rejects_each_bad_field(void **state)
 {
     (void)state;
@@ -308,6 +348,7 @@ int main(void)
         cmocka_unit_test(test_ps_mit_fault_bits_every_code),
         cmocka_unit_test(test_ps_act_cmd_to_motor_gear_direction_zero),
         cmocka_unit_test(test_ps_act_joint_range_gear_direction_zero),
+        cmocka_unit_test(test_ps_act_encode_command_joint_range_corners_encode),
         cmocka_unit_test(test_ps_act_check_cfg_rejects_each_bad_field),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -575,6 +575,60 @@ static void test_handle_frame_geared_reversed_joint_obeys_joint_units(void **sta
     assert_float_equal(m.tau_nm, (float)tau, 2.0f * 80.0f / 4095.0f * 0.5f * 2.0f);
 }
 
+/* Set zero on a drive whose joint has a configured zero offset: from then on
+ * the motor reads 0 where the joint is, so the host (which adds the offset)
+ * sees the joint at zero_offset_rad there, like a real drive. */
+static void test_handle_frame_set_zero_with_zero_offset_reads_offset(void **state)
+{
+    fixture_t *fx = *state;
+    fx->j.gear_ratio = 2.0f;
+    fx->j.direction = -1.0f;
+    fx->j.zero_offset_rad = 0.1f;
+    ps_devices_init_actuator(&fx->a, &fx->j, &fx->lim, &fx->sim);
+    ps_can_frame_t f[PS_ACT_MAX_FRAMES], rep;
+    assert_int_equal(ps_act_encode_request(&fx->j, PS_ACT_REQ_SET_ZERO, f, PS_ACT_MAX_FRAMES), 1);
+    assert_int_equal(ps_devices_handle_frame(&fx->a, &f[0], 0.4, 0.0, &rep), 1);
+    ps_act_meas_t m = {0};
+    assert_int_equal(ps_act_decode_reply(&fx->j, &rep, &m), 0);
+    assert_float_equal(m.q_rad, 0.1f, 2.0f * 25.0f / 65535.0f);
+    /* and the motor-side zero moved with the joint: 0.1 rad further reads 0.2 */
+    assert_int_equal(ps_devices_handle_frame(&fx->a, &f[0], 0.4, 0.0, &rep), 1); /* idempotent */
+    const ps_act_cmd_t none = {.q_rad = 0.1f};
+    assert_int_equal(ps_act_encode_command(&fx->j, &none, f, PS_ACT_MAX_FRAMES), 1);
+    assert_int_equal(ps_devices_handle_frame(&fx->a, &f[0], 0.5, 0.0, &rep), 1);
+    assert_int_equal(ps_act_decode_reply(&fx->j, &rep, &m), 0);
+    assert_float_equal(m.q_rad, 0.2f, 2.0f * 25.0f / 65535.0f);
+}
+
+/* The winding loss follows the motor's current, joint torque / (N kt): with
+ * gear ratio 2 the same joint torque needs half the motor current, a quarter
+ * of the copper loss (kp is quantised on the motor side, so each run's own
+ * torque is used). */
+static void test_step_actuator_geared_copper_loss_quarter(void **state)
+{
+    fixture_t *fx = *state;
+    double rise[2], tau[2];
+    for (int k = 0; k < 2; k++) {
+        fx->j.gear_ratio = k == 0 ? 1.0f : 2.0f;
+        ps_devices_init_actuator(&fx->a, &fx->j, &fx->lim, &fx->sim);
+        enter(fx, 0);
+        /* kp 10 Nm/rad, 0.5 rad off: about 5 Nm at the joint */
+        const ps_act_cmd_t c = {.q_rad = 0.5f, .kp_nm_rad = 10.0f};
+        ps_can_frame_t f[PS_ACT_MAX_FRAMES], rep;
+        assert_int_equal(ps_act_encode_command(&fx->j, &c, f, PS_ACT_MAX_FRAMES), 1);
+        f[0].t_ns = 1000;
+        assert_int_equal(ps_devices_handle_frame(&fx->a, &f[0], 0.0, 0.0, &rep), 1);
+        const double t0 = fx->a.temp_c;
+        tau[k] = ps_devices_step_actuator(&fx->a, 0.0, 0.0, 2000, 1.0);
+        assert_true(fabs(tau[k] - 5.0) < 0.2);
+        rise[k] = fx->a.temp_c - t0;
+    }
+    assert_true(rise[0] > 0.0);
+    const double want = (tau[1] / 2.0) * (tau[1] / 2.0) / (tau[0] * tau[0]);
+    assert_float_equal(rise[1] / rise[0], want, 1e-6);
+    assert_float_equal(want, 0.25, 0.02);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -593,6 +647,8 @@ int main(void)
         cmocka_unit_test_setup(test_step_actuator_temp_follows_first_order_model, setup),
         cmocka_unit_test_setup(test_step_actuator_above_temp_max_faults_and_refuses_enter, setup),
         cmocka_unit_test_setup(test_handle_frame_geared_reversed_joint_obeys_joint_units, setup),
+        cmocka_unit_test_setup(test_handle_frame_set_zero_with_zero_offset_reads_offset, setup),
+        cmocka_unit_test_setup(test_step_actuator_geared_copper_loss_quarter, setup),
         cmocka_unit_test(test_tick_imu_rate_div_frames_ids_and_seq),
         cmocka_unit_test(test_tick_imu_noise_statistics_match_sigma_and_bias),
         cmocka_unit_test(test_tick_imu_same_seed_identical_other_seed_differs),

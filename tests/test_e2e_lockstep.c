@@ -262,6 +262,7 @@ static void test_lockstep_same_seed_identical_truth(void **state)
     assert_memory_equal(a.com_m, b.com_m, sizeof(a.com_m));
     assert_true(a.head_height_m == b.head_height_m);
     assert_int_equal(a.n_cmd_frames, b.n_cmd_frames);
+    assert_true(a.min_com_height_active_m == b.min_com_height_active_m); /* on simulated time */
 }
 
 /* E-stop: pressing latches ESTOP (drives told EXIT, enable off), releasing
@@ -280,8 +281,9 @@ static void test_lockstep_estop_latches_until_reset(void **state)
     uint64_t special_after = 0;
     for (uint32_t b = 0; b < app.board.n_buses; b++)
         special_after += checkers[b].n_special;
-    assert_int_equal(special_after - special_before, app.robot.n_joints); /* one EXIT each */
-    step_until(5.9); /* released at 5.0: still latched */
+    assert_int_equal(special_after - special_before,
+                     app.robot.n_joints); /* one disable each (MIT: EXIT) */
+    step_until(5.9);                      /* released at 5.0: still latched */
     assert_int_equal(app.loop.state, PS_SM_ESTOP);
     step_until(6.2); /* reset at 6.0 */
     assert_int_equal(app.loop.state, PS_SM_STANDBY);

@@ -65,6 +65,7 @@ typedef struct {
     bool is_fault_cleared_by_enter; /* drives clear a latched fault on ENTER, like real ones */
     bool is_reply_late;             /* replies arrive two ticks after their command */
     float policy_offset_rad;        /* added to the stance in every target */
+    bool is_imu_tipped;             /* the IMU reads gravity along x: the trunk lies flat */
     int64_t read_extra_ns;          /* time each read of bus 0 takes (forces overruns) */
     unsigned n_policy_resets;
     unsigned n_steps_after_reset; /* policy steps since the last reset */
@@ -143,7 +144,8 @@ static int fake_recv(void *ctx, ps_can_frame_t *out, size_t max)
         return (int)n;
     }
     if (b->bus_idx == fx->robot.imu.bus_idx && !fx->is_imu_mute && max >= 2) {
-        ps_imu_sample_t s = {.accel_body_m_s2 = {0, 0, 9.81f},
+        ps_imu_sample_t s = {.accel_body_m_s2 = {fx->is_imu_tipped ? -9.81f : 0.0f, 0,
+                                                 fx->is_imu_tipped ? 0.0f : 9.81f},
                              .seq = fx->is_imu_frozen ? fx->imu_seq : fx->imu_seq++,
                              .status = fx->imu_status};
         ps_imu_msg_encode(fx->robot.imu.base_id, &s, out);
@@ -467,6 +469,7 @@ static void assert_damping_limp(uint32_t j)
 static void test_loop_stale_reply_in_active_holds_then_damps(void **state)
 {
     (void)state;
+    fx->policy_offset_rad = 0.03f; /* targets off the stance and off the replies */
     go_active();
     fx->is_mute[3] = true;
     const ps_act_cfg_t *jc = &fx->robot.act[3];
@@ -478,7 +481,7 @@ static void test_loop_stale_reply_in_active_holds_then_damps(void **state)
     const ps_loop_rec_t *rec = find_transition_rec(PS_SM_ACTIVE, PS_SM_HOLD);
     assert_non_null(rec);
     assert_true((rec->cond & PS_SM_C_REPLY_STALE) != 0u);
-    assert_holding(0, fx->robot.servo[0].stance_rad);
+    assert_holding(0, fx->robot.servo[0].stance_rad + 0.03f);
     steps((unsigned)(fx->robot.control.hold_s * 1000) - 10);
     assert_int_equal(fx->loop.state, PS_SM_HOLD); /* the mute drive changes nothing here */
     steps(20);
@@ -512,14 +515,20 @@ static void test_loop_nan_target_holds_last_valid_targets(void **state)
     assert_holding(0, fx->robot.servo[0].stance_rad + 0.02f);
 }
 
-static void test_loop_policy_late_holds(void **state)
+/* A late step: HOLD, at the targets of the last step that was on time (the
+ * late one's are not trusted as the pose to hold). */
+static void test_loop_policy_late_holds_last_timely_targets(void **state)
 {
     (void)state;
+    fx->policy_offset_rad = 0.02f;
     go_active();
+    fx->policy_offset_rad = 0.05f; /* what the late step asks for */
     fx->policy_extra_ns = ps_s_to_ns(fx->robot.control.policy_deadline_s) + 1000;
     steps(fx->loop.policy_div + 1);
+    fx->policy_extra_ns = 0;
     assert_int_equal(fx->loop.state, PS_SM_HOLD);
     assert_int_equal(fx->loop.counters.n_policy_late, 1);
+    assert_holding(0, fx->robot.servo[0].stance_rad + 0.02f);
 }
 
 /* overrun_limit overruns within overrun_window_s: OVERRUN, HOLD. Fewer, or
@@ -553,6 +562,29 @@ static void test_loop_repeated_overruns_hold(void **state)
     assert_non_null(rec);
     assert_true((rec->cond & PS_SM_C_OVERRUN) != 0u);
     assert_int_equal(fx->loop.counters.n_policy_late, 0);
+}
+
+/* A fall while holding damps: stiff joints do not help a falling robot. */
+static void test_loop_fall_in_hold_damps(void **state)
+{
+    (void)state;
+    go_active();
+    fx->is_mute[3] = true;
+    steps(20);
+    assert_int_equal(fx->loop.state, PS_SM_HOLD);
+    fx->is_imu_tipped = true; /* the tilt estimate runs towards 90 degrees */
+    unsigned n = 0;
+    while (fx->loop.state == PS_SM_HOLD && n < 3000) {
+        steps(10);
+        n += 10;
+    }
+    assert_int_equal(fx->loop.state, PS_SM_DAMPING);
+    assert_true(n < 3000); /* well before hold_s (10 s) */
+    const ps_loop_rec_t *rec = find_transition_rec(PS_SM_HOLD, PS_SM_DAMPING);
+    assert_non_null(rec);
+    assert_true((rec->cond & PS_SM_C_FALL) != 0u);
+    assert_true(fx->loop.counters.has_fallen);
+    assert_damping_limp(0);
 }
 
 /* Frames a bus would not queue are a condition: HOLD, caused by TX_REFUSED. */
@@ -1003,11 +1035,12 @@ int main(void)
         T(test_loop_stale_reply_in_active_holds_then_damps),
         T(test_loop_repeated_overruns_hold),
         T(test_loop_tx_refused_in_active_holds),
+        T(test_loop_fall_in_hold_damps),
         T(test_loop_hold_start_resumes_when_fault_gone),
         T(test_loop_ramp_entry_resets_policy_before_step),
         T(test_loop_stale_imu_in_active_holds),
         T(test_loop_nan_target_holds_last_valid_targets),
-        T(test_loop_policy_late_holds),
+        T(test_loop_policy_late_holds_last_timely_targets),
         T(test_loop_policy_deadline_on_deadline_clock),
         T(test_loop_estop_input_latches_estop_sends_exit),
         T(test_loop_gpio_error_counts_as_estop),

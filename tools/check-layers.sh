@@ -9,8 +9,8 @@
 #   policy   base, policy/, and of drivers/ only the neutral actuator types
 #            (ps_actuator.h and the ps_can.h frame it uses): no protocol
 #   sim      base, drivers/ and sim/ (no policy/, no application)
-#   app      every other file in rt/: base, drivers/, policy/ and rt/;
-#            sim/ only from the composition root (COMPOSITION_ROOT below)
+#   app      every other file in rt/: base, drivers/ (no actuator protocol
+#            header), policy/ and rt/; sim/ only from the composition root
 #
 # Output is cmocka-shaped (one "test" per file, plus a self-test that a
 # planted violation is caught) so tools/run-tests.sh counts it; exit 1 on a
@@ -23,6 +23,9 @@ ROOT=${1:-$(cd "$(dirname "$0")/.." && pwd)}
 COMPOSITION_ROOT="rt/main.c rt/ps_app.c rt/ps_app.h rt/ps_config_sim.h rt/ps_config_robot.c rt/ps_config_scenario.c"
 BASE="rt/ps_err.h rt/ps_err.c rt/ps_clock.h rt/ps_clock.c rt/ps_ring.h rt/ps_ring.c rt/ps_limits.h"
 POLICY_DRIVERS="drivers/ps_actuator.h drivers/ps_can.h"
+# Actuator protocols: only drivers/ (the registry) and sim/ (the drives' side)
+# may name one; the loop, the servo and the loader go through ps_actuator.h.
+PROTOCOL_HEADERS="drivers/ps_mit.h"
 
 is_in() { local x=$1; shift; for y in "$@"; do [ "$x" = "$y" ] && return 0; done; return 1; }
 
@@ -83,6 +86,8 @@ violation() {
     app)
         if [ "$li" = sim ]; then
             is_in "$f" $COMPOSITION_ROOT || echo "application code outside the composition root includes sim/"
+        elif is_in "$inc" $PROTOCOL_HEADERS; then
+            echo "application code names an actuator protocol (use drivers/ps_actuator.h)"
         else
             is_in "$li" base drivers policy app || echo "rt/ includes $li"
         fi
