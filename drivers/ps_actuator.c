@@ -9,9 +9,11 @@
 
 #include "../rt/ps_err.h"
 #include "ps_mit.h"
+#include "ps_robstride.h"
 
 static const ps_act_proto_t *const PROTOS[PS_ACT_PROTO_COUNT] = {
     [PS_ACT_PROTO_MIT] = &ps_mit_proto,
+    [PS_ACT_PROTO_ROBSTRIDE] = &ps_robstride_proto,
 };
 _Static_assert(sizeof(PROTOS) / sizeof(PROTOS[0]) == PS_ACT_PROTO_COUNT, "one table per protocol");
 

@@ -100,7 +100,8 @@ typedef struct {
 } ps_act_limits_t;
 
 typedef enum {
-    PS_ACT_PROTO_MIT = 0, /**< MIT mode (CubeMars AK, Damiao): drivers/ps_mit.h */
+    PS_ACT_PROTO_MIT = 0,   /**< MIT mode (CubeMars AK, Damiao): drivers/ps_mit.h */
+    PS_ACT_PROTO_ROBSTRIDE, /**< RobStride / Xiaomi CyberGear: drivers/ps_robstride.h */
     PS_ACT_PROTO_COUNT
 } ps_act_proto_id_t;
 
@@ -132,6 +133,8 @@ typedef struct {
     uint8_t n_cmd;               /**< frames per command cycle, 1..PS_ACT_MAX_FRAMES */
     uint8_t n_reply;             /**< reply frames per command cycle */
     uint32_t id_max;             /**< largest valid drive id (can_id and reply_id) */
+    bool is_reply_id_shared;     /**< reply_id is the host's id, the same for every drive
+                                      on a bus: only can_id must be unique there */
     uint32_t resolution_bits[5]; /**< bits of q, qd, kp, kd, tau_ff in a command */
 
     /** Host side. @return frames written (1..max) | -PS_ERR_LIMIT a field outside

@@ -422,9 +422,8 @@ static int check_joint_limits(ps_cfg_ctx_t *c, const robot_work_t *w, uint32_t i
     if (j->can_id > proto->id_max || j->reply_id > proto->id_max) {
         const bool is_cmd = j->can_id > proto->id_max;
         (void)snprintf(field, sizeof(field), "joints[%u].%s", i, is_cmd ? "can_id" : "reply_id");
-        return ps_cfg_fail_field(c, field, "value 0x%x above protocol %s's %u-bit maximum 0x%x",
-                                 is_cmd ? j->can_id : j->reply_id, proto->name, proto->id_bits,
-                                 proto->id_max);
+        return ps_cfg_fail_field(c, field, "value 0x%x above protocol %s's largest id 0x%x",
+                                 is_cmd ? j->can_id : j->reply_id, proto->name, proto->id_max);
     }
     ps_act_range_t wire_joint;
     ps_act_joint_range(&act, &wire_joint);
@@ -583,7 +582,9 @@ static int check_robot(ps_cfg_ctx_t *c, robot_work_t *w)
         char owner[PS_CFG_FIELD_PATH_LEN];
         (void)snprintf(owner, sizeof(owner), "joints[%u].can_id", i);
         rc = claim_id(c, uses, &n_uses, j->bus_idx, j->can_id, is_ext, owner, owner);
-        if (rc == 0) {
+        /* A host id shared by every drive (reply_id of such a protocol) is no
+         * identifier of its own: the drive id inside the frames tells them apart. */
+        if (rc == 0 && !ps_act_proto_get(j->protocol)->is_reply_id_shared) {
             (void)snprintf(owner, sizeof(owner), "joints[%u].reply_id", i);
             rc = claim_id(c, uses, &n_uses, j->bus_idx, j->reply_id, is_ext, owner, owner);
         }

@@ -670,9 +670,39 @@ static void test_load_robot_can_id_high_rejected(void **state)
 {
     fx_t *f = *state;
     edit(f, ROBOT_OK, "can_id: 0x01", "can_id: 0x800");
-    want(f, "%s:%d: joints[0].can_id: value 0x800 above protocol mit's 11-bit maximum 0x7ff",
-         f->path, line_of(f, "0x800"));
+    want(f, "%s:%d: joints[0].can_id: value 0x800 above protocol mit's largest id 0x7ff", f->path,
+         line_of(f, "0x800"));
     expect_robot_error(f);
+}
+
+/* RobStride drive ids are 8 bits; the host id (reply_id) is shared by every
+ * drive of a bus, the drive ids (can_id) must differ. */
+static void test_load_robot_robstride_ids_checked(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "can_id: 0x01, reply_id: 0x101, protocol: mit",
+         "can_id: 0x100, reply_id: 0xFD, protocol: robstride");
+    want(f, "%s:%d: joints[0].can_id: value 0x100 above protocol robstride's largest id 0xff",
+         f->path, line_of(f, "0x100"));
+    expect_robot_error(f);
+}
+
+static void test_load_robot_robstride_shared_host_id_ok(void **state)
+{
+    fx_t *f = *state;
+    (void)f;
+    ps_robot_cfg_t r;
+    char err[PS_ERR_MSG_LEN] = "";
+    const int rc = ps_config_load_robot("tests/data/robots/ps1-mixed.yaml", &r, err, sizeof err);
+    if (rc != 0)
+        fail_msg("%s", err);
+    unsigned n_on_bus0 = 0;
+    for (uint32_t j = 0; j < r.n_joints; j++)
+        if (r.act[j].protocol == PS_ACT_PROTO_ROBSTRIDE && r.act[j].bus_idx == 0) {
+            assert_int_equal(r.act[j].reply_id, 0xFD); /* one host id for all */
+            n_on_bus0++;
+        }
+    assert_int_equal(n_on_bus0, 4);
 }
 
 static void test_load_robot_can_id_beyond_29_bits_rejected(void **state)
@@ -831,8 +861,8 @@ static void test_load_robot_unknown_protocol_rejected(void **state)
 {
     fx_t *f = *state;
     edit(f, ROBOT_OK, "protocol: mit, driver: ak80-9", "protocol: canopen, driver: ak80-9");
-    want(f, "%s:%d: joints[0].protocol: unknown value \"canopen\" (allowed: mit)", f->path,
-         line_of(f, "canopen"));
+    want(f, "%s:%d: joints[0].protocol: unknown value \"canopen\" (allowed: mit, robstride)",
+         f->path, line_of(f, "canopen"));
     expect_robot_error(f);
 }
 
@@ -1231,6 +1261,8 @@ int main(void)
         T(test_load_robot_duplicate_can_id_rejected),
         T(test_load_robot_reply_id_on_imu_rejected),
         T(test_load_robot_can_id_high_rejected),
+        T(test_load_robot_robstride_ids_checked),
+        T(test_load_robot_robstride_shared_host_id_ok),
         T(test_load_robot_policy_deadline_beyond_half_period_rejected),
         T(test_load_robot_reply_timeout_beyond_periods_rejected),
         T(test_load_robot_imu_timeout_beyond_periods_rejected),
