@@ -143,7 +143,8 @@ static int rs_encode_request(const ps_act_cfg_t *a, ps_act_request_t req, ps_can
 static bool rs_match_reply(const ps_act_cfg_t *a, const ps_can_frame_t *f)
 {
     return f->is_ext && !f->is_fd && type_of(f->id) == PS_ROBSTRIDE_TYPE_FEEDBACK &&
-           ((f->id >> 8) & 0xffu) == (a->can_id & 0xffu) && (f->id & 0xffu) == (a->reply_id & 0xffu);
+           ((f->id >> 8) & 0xffu) == (a->can_id & 0xffu) &&
+           (f->id & 0xffu) == (a->reply_id & 0xffu);
 }
 
 static int rs_decode_reply(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_act_meas_t *out)
@@ -152,7 +153,8 @@ static int rs_decode_reply(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_ac
         return -PS_ERR_PROTOCOL;
     const ps_act_range_t *w = &a->wire;
     out->q_rad = ps_mit_uint_to_float(get_u16(&f->data[0]), w->p_min_rad, w->p_max_rad, BITS);
-    out->qd_rad_s = ps_mit_uint_to_float(get_u16(&f->data[2]), w->v_min_rad_s, w->v_max_rad_s, BITS);
+    out->qd_rad_s =
+        ps_mit_uint_to_float(get_u16(&f->data[2]), w->v_min_rad_s, w->v_max_rad_s, BITS);
     out->tau_nm = ps_mit_uint_to_float(get_u16(&f->data[4]), w->t_min_nm, w->t_max_nm, BITS);
     out->temp_c = (float)get_u16(&f->data[6]) / 10.0f;
     out->fault_bits = ps_robstride_fault_bits(f->id);
@@ -191,7 +193,8 @@ static int rs_decode_cmd(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_act_
     const ps_act_range_t *w = &a->wire;
     out->tau_ff_nm = ps_mit_uint_to_float((f->id >> 8) & 0xffffu, w->t_min_nm, w->t_max_nm, BITS);
     out->q_rad = ps_mit_uint_to_float(get_u16(&f->data[0]), w->p_min_rad, w->p_max_rad, BITS);
-    out->qd_rad_s = ps_mit_uint_to_float(get_u16(&f->data[2]), w->v_min_rad_s, w->v_max_rad_s, BITS);
+    out->qd_rad_s =
+        ps_mit_uint_to_float(get_u16(&f->data[2]), w->v_min_rad_s, w->v_max_rad_s, BITS);
     out->kp_nm_rad = ps_mit_uint_to_float(get_u16(&f->data[4]), 0.0f, w->kp_max_nm_rad, BITS);
     out->kd_nm_s_rad = ps_mit_uint_to_float(get_u16(&f->data[6]), 0.0f, w->kd_max_nm_s_rad, BITS);
     return 0;

@@ -84,6 +84,8 @@ enum { BA_BUSES = 1 };
 static const ps_cfg_rule_t BOARD_RANGES[] = {
     PS_CFG_RULE_F32(0, PS_CFG_RANGE_OPEN_MIN, "bus_budget", ps_board_cfg_t, bus_budget, 0.0, 1.0),
     PS_CFG_RULE_U32(BA_BUSES, 0, "bitrate", ps_canbus_bus_cfg_t, bitrate, 10000.0, 1000000.0),
+    PS_CFG_RULE_U32(BA_BUSES, 0, "data_bitrate", ps_canbus_bus_cfg_t, data_bitrate, 10000.0,
+                    8000000.0),
     PS_CFG_RULE_U32(0, 0, "gpio.estop_line", ps_board_cfg_t, gpio.estop_line, 0.0, MAX_GPIO_LINE),
     PS_CFG_RULE_U32(0, 0, "gpio.enable_line", ps_board_cfg_t, gpio.enable_line, 0.0, MAX_GPIO_LINE),
     PS_CFG_RULE_U32(0, 0, "gpio.led_line", ps_board_cfg_t, gpio.led_line, 0.0, MAX_GPIO_LINE),
@@ -151,6 +153,7 @@ int ps_config_load_board(const char *path, ps_board_cfg_t *out, char *err, size_
 
     ps_board_cfg_t b;
     memset(&b, 0, sizeof(b));
+    int dbr_without_fd = -1; /* a bus with data_bitrate written but no fd: true */
     if (rc == 0) {
         memcpy(b.name, raw->name, sizeof(b.name));
         b.kind = raw->kind;
@@ -163,12 +166,19 @@ int ps_config_load_board(const char *path, ps_board_cfg_t *out, char *err, size_
             b.buses[i].is_fd = r->is_fd != NULL && *r->is_fd;
             /* Without FD the data phase is the arbitration phase. */
             b.buses[i].data_bitrate = r->data_bitrate != NULL ? *r->data_bitrate : r->bitrate;
+            if (r->data_bitrate != NULL && !b.buses[i].is_fd && dbr_without_fd < 0)
+                dbr_without_fd = (int)i;
         }
         b.gpio = raw->gpio;
         b.rt = raw->rt;
     }
     if (raw != NULL)
         (void)cyaml_free(&c.cyaml, &BOARD_SCHEMA, raw, 0); /* only fails on a NULL schema */
+    if (rc == 0 && dbr_without_fd >= 0) {
+        char field[PS_CFG_FIELD_PATH_LEN];
+        (void)snprintf(field, sizeof(field), "buses[%d].data_bitrate", dbr_without_fd);
+        rc = ps_cfg_fail_field(&c, field, "a data bit rate needs a CAN FD bus (fd: true)");
+    }
     if (rc == 0)
         rc = check_board(&c, &b);
     if (rc == 0)

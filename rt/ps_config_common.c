@@ -18,7 +18,10 @@
 
 #include <ctype.h>
 #include <errno.h>
+#include <fcntl.h>
 #include <inttypes.h>
+#include <float.h>
+#include <unistd.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -180,6 +183,7 @@ static int tree_build(ps_cfg_ytree_t *t, const unsigned char *buf, size_t len, s
     size_t pending_key_line = 0;
     int rc = 0;
     bool is_done = false;
+    unsigned n_documents = 0;
 
     if (!yaml_parser_initialize(&parser))
         return -ENOMEM;
@@ -203,8 +207,19 @@ static int tree_build(ps_cfg_ytree_t *t, const unsigned char *buf, size_t len, s
             is_node = true;
             break;
         case YAML_ALIAS_EVENT:
-            type = PS_CFG_YN_ALIAS;
-            is_node = true;
+            /* libcyaml would take the anchor's text without the checks the
+             * tree's walk adds (a word where a boolean belongs, a fraction
+             * for an integer): refuse aliases instead of resolving them. */
+            *out_line = ev.start_mark.line + 1u;
+            *out_problem = "YAML aliases (*name) are not supported; write the value";
+            rc = -PS_ERR_CONFIG;
+            break;
+        case YAML_DOCUMENT_START_EVENT:
+            if (++n_documents > 1u) {
+                *out_line = ev.start_mark.line + 1u;
+                *out_problem = "one YAML document per file (a second one starts here)";
+                rc = -PS_ERR_CONFIG;
+            }
             break;
         case YAML_MAPPING_START_EVENT:
             type = PS_CFG_YN_MAP;
@@ -220,9 +235,8 @@ static int tree_build(ps_cfg_ytree_t *t, const unsigned char *buf, size_t len, s
             if (depth > 0 && t->nodes[stack[depth - 1]].type == PS_CFG_YN_MAP)
                 expect_key[depth - 1] = true;
             break;
-        case YAML_DOCUMENT_END_EVENT:
         case YAML_STREAM_END_EVENT:
-            is_done = true; /* like libcyaml, only the first document counts */
+            is_done = true;
             break;
         default:
             break;
@@ -478,18 +492,35 @@ static bool parse_int_text(const char *text, long double *out_v)
  * range. @return true when a message was written */
 static bool explain_float(ps_cfg_ctx_t *c, const ps_cfg_ynode_t *n, const char *field)
 {
-    char *end = NULL;
-    (void)strtod(n->value, &end);
-    if (end != n->value && end != NULL && *end == '\0' && !isspace((unsigned char)n->value[0]))
-        return false;
     const ps_cfg_rule_t *rule = rule_of(c, field);
     char range[80] = "", bounds[72];
     if (rule != NULL) {
         fmt_range(bounds, sizeof(bounds), rule);
         (void)snprintf(range, sizeof(range), " in %s", bounds);
     }
-    (void)ps_cfg_fail_at(c, n->line + 1u, field, "value %s is not a number%s", n->value, range);
-    return true;
+    if (!n->is_plain) {
+        (void)ps_cfg_fail_at(c, n->line + 1u, field,
+                             "value \"%s\" is quoted or tagged, not a number%s", n->value, range);
+        return true;
+    }
+    char *end = NULL;
+    errno = 0;
+    const double v = strtod(n->value, &end);
+    const bool is_hex = strpbrk(n->value, "xX") != NULL; /* strtod reads hex floats; we do not */
+    if (end == n->value || end == NULL || *end != '\0' || isspace((unsigned char)n->value[0]) ||
+        is_hex) {
+        (void)ps_cfg_fail_at(c, n->line + 1u, field, "value \"%s\" is not a number%s", n->value,
+                             range);
+        return true;
+    }
+    /* A written number that a float cannot hold (1e39) or that it would
+     * round to zero (1e-50): say so rather than load inf or 0. */
+    if (isfinite(v) && (errno == ERANGE || fabs(v) > FLT_MAX || (v != 0.0 && fabs(v) < FLT_MIN))) {
+        (void)ps_cfg_fail_at(c, n->line + 1u, field, "value %s is outside the float range%s",
+                             n->value, range);
+        return true;
+    }
+    return false;
 }
 
 /* An integer field: refuses a scalar that is not an integer, or one outside
@@ -510,10 +541,16 @@ static bool explain_int(ps_cfg_ctx_t *c, const cyaml_schema_value_t *sv, const p
         rule = &type_rule;
     char range[80];
     fmt_range(range, sizeof(range), rule);
+    if (!n->is_plain) {
+        (void)ps_cfg_fail_at(c, n->line + 1u, field,
+                             "value \"%s\" is quoted or tagged, not an integer in %s", n->value,
+                             range);
+        return true;
+    }
     long double v = 0.0L;
     if (!parse_int_text(n->value, &v)) {
-        (void)ps_cfg_fail_at(c, n->line + 1u, field, "value %s is not an integer in %s", n->value,
-                             range);
+        (void)ps_cfg_fail_at(c, n->line + 1u, field, "value \"%s\" is not an integer in %s",
+                             n->value, range);
         return true;
     }
     if (v < (long double)type_rule.min || v > (long double)type_rule.max) {
@@ -636,7 +673,7 @@ static bool explain_walk(ps_cfg_ctx_t *c, const cyaml_schema_value_t *sv, int no
         if (!n->is_plain && (strcmp(n->value, "true") == 0 || strcmp(n->value, "false") == 0)) {
             /* "true" in quotes is a string in YAML, not a boolean */
             (void)ps_cfg_fail_at(c, n->line + 1u, field,
-                                 "value \"%s\" is a quoted string (allowed: true, false)",
+                                 "value \"%s\" is quoted or tagged (allowed: true, false)",
                                  n->value);
             return true;
         }
@@ -730,26 +767,38 @@ static int explain_cyaml_error(ps_cfg_ctx_t *c, const cyaml_schema_value_t *sche
 
 int ps_cfg_load_file(ps_cfg_ctx_t *c, const cyaml_schema_value_t *schema, void **out_data)
 {
-    FILE *f = fopen(c->path, "rb");
-    if (f == NULL) {
+    /* O_NONBLOCK: a FIFO would otherwise wait for a writer forever (with
+     * SIGINT still held off during start-up); only regular files are read. */
+    const int fd = open(c->path, O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+    if (fd < 0) {
         const int e = errno;
         (void)ps_cfg_fail_at(c, 0, NULL, "cannot open: %s", strerror(e));
         return e == ENOENT ? -ENOENT : -PS_ERR_CONFIG;
     }
-    /* fopen opens a directory for reading; fread then fails with EISDIR. */
     struct stat st;
-    if (fstat(fileno(f), &st) == 0 && S_ISDIR(st.st_mode)) {
-        (void)fclose(f); /* read-only stream: nothing to flush */
-        return ps_cfg_fail_at(c, 0, NULL, "is a directory");
+    if (fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+        const bool is_dir = S_ISDIR(st.st_mode);
+        (void)close(fd); /* read-only: nothing to flush */
+        return ps_cfg_fail_at(c, 0, NULL, is_dir ? "is a directory" : "not a regular file");
     }
     unsigned char *buf = malloc(MAX_FILE_BYTES + 1u);
     if (buf == NULL) {
-        (void)fclose(f);
+        (void)close(fd);
         return -ENOMEM;
     }
-    const size_t len = fread(buf, 1, MAX_FILE_BYTES + 1u, f);
-    const int read_errno = ferror(f) != 0 ? errno : 0;
-    (void)fclose(f); /* read-only stream: nothing to flush */
+    size_t len = 0;
+    int read_errno = 0;
+    while (len <= MAX_FILE_BYTES) {
+        const ssize_t k = read(fd, buf + len, MAX_FILE_BYTES + 1u - len);
+        if (k < 0 && errno == EINTR)
+            continue;
+        if (k < 0)
+            read_errno = errno;
+        if (k <= 0)
+            break;
+        len += (size_t)k;
+    }
+    (void)close(fd); /* read-only: nothing to flush */
     int rc = 0;
     if (read_errno != 0) {
         rc = ps_cfg_fail_at(c, 0, NULL, "read error: %s", strerror(read_errno));

@@ -16,6 +16,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "../rt/ps_config.h"
@@ -92,6 +93,26 @@ static const char *edit(fx_t *f, const char *src, const char *from, const char *
     assert_int_equal(fwrite(f->text, 1, (size_t)n, fp), (size_t)n);
     assert_int_equal(fclose(fp), 0);
     return f->path;
+}
+
+/* A second replacement in the edited copy. */
+static void edit_again(fx_t *f, const char *from, const char *to)
+{
+    char src[sizeof(f->path)];
+    (void)snprintf(src, sizeof(src), "%s", f->path);
+    (void)edit(f, src, from, to);
+}
+
+/* Text appended to the edited copy. */
+static void append(fx_t *f, const char *text)
+{
+    const size_t n = strlen(f->text), k = strlen(text);
+    assert_true(n + k < sizeof(f->text));
+    memcpy(f->text + n, text, k + 1u);
+    FILE *fp = fopen(f->path, "wb");
+    assert_non_null(fp);
+    assert_int_equal(fwrite(f->text, 1, n + k, fp), n + k);
+    assert_int_equal(fclose(fp), 0);
 }
 
 /* 1-based line of the first occurrence of needle in the edited text. */
@@ -440,8 +461,8 @@ static void test_load_board_string_for_number_rejected(void **state)
     fx_t *f = *state;
     edit(f, "boards/sim.yaml", "{ifname: can1, bitrate: 1000000}", "{ifname: can1, bitrate: fast}");
     /* an integer field: the loader's own words, with the field's range */
-    want(f, "%s:%d: buses[1].bitrate: value fast is not an integer in [10000, 1000000]", f->path,
-         line_of(f, "bitrate: fast"));
+    want(f, "%s:%d: buses[1].bitrate: value \"fast\" is not an integer in [10000, 1000000]",
+         f->path, line_of(f, "bitrate: fast"));
     expect_board_error(f);
 }
 
@@ -579,7 +600,7 @@ static void test_load_robot_string_for_number_rejected(void **state)
 {
     fx_t *f = *state;
     edit(f, ROBOT_OK, "ramp_s: 1.0", "ramp_s: fast");
-    want(f, "%s:%d: control.ramp_s: value fast is not a number in [0.1, 10]", f->path,
+    want(f, "%s:%d: control.ramp_s: value \"fast\" is not a number in [0.1, 10]", f->path,
          line_of(f, "ramp_s"));
     expect_robot_error(f);
     /* a mapping where a number belongs keeps libcyaml's text */
@@ -957,7 +978,7 @@ static void test_load_robot_integer_not_integer_rejected(void **state)
         char to[64];
         (void)snprintf(to, sizeof(to), "rate_div: %s}", BAD[i]);
         edit(f, ROBOT_OK, "rate_div: 2}", to);
-        want(f, "%s:%d: joints[0].rate_div: value %s is not an integer in [1, 64]", f->path,
+        want(f, "%s:%d: joints[0].rate_div: value \"%s\" is not an integer in [1, 64]", f->path,
              line_of(f, to), BAD[i]);
         expect_robot_error(f);
     }
@@ -971,7 +992,7 @@ static void test_load_scenario_seed_beyond_uint32_rejected(void **state)
 {
     fx_t *f = *state;
     edit(f, SCENARIO_OK, "seed: 42", "seed: 1e30");
-    want(f, "%s:%d: seed: value 1e30 is not an integer in [0, 4294967295]", f->path,
+    want(f, "%s:%d: seed: value \"1e30\" is not an integer in [0, 4294967295]", f->path,
          line_of(f, "seed:"));
     expect_scenario_error(f);
     edit(f, SCENARIO_OK, "seed: 42", "seed: 4294967296");
@@ -993,7 +1014,7 @@ static void test_load_board_signed_integer_beyond_int32_rejected(void **state)
          line_of(f, "loop_cpu"));
     expect_board_error(f);
     edit(f, BOARD_OK, "loop_cpu: -1", "loop_cpu: -1.5");
-    want(f, "%s:%d: rt.loop_cpu: value -1.5 is not an integer in [-1, 1023]", f->path,
+    want(f, "%s:%d: rt.loop_cpu: value \"-1.5\" is not an integer in [-1, 1023]", f->path,
          line_of(f, "loop_cpu"));
     expect_board_error(f);
 }
@@ -1004,8 +1025,8 @@ static void test_load_board_optional_integer_not_integer_rejected(void **state)
     fx_t *f = *state;
     edit(f, BOARD_OK, "{ifname: can0, bitrate: 500000}",
          "{ifname: can0, bitrate: 500000, fd: true, data_bitrate: 2e6}");
-    want(f, "%s:%d: buses[0].data_bitrate: value 2e6 is not an integer in [0, 4294967295]", f->path,
-         line_of(f, "data_bitrate"));
+    want(f, "%s:%d: buses[0].data_bitrate: value \"2e6\" is not an integer in [10000, 8000000]",
+         f->path, line_of(f, "data_bitrate"));
     expect_board_error(f);
 }
 
@@ -1013,23 +1034,102 @@ static void test_load_board_optional_integer_not_integer_rejected(void **state)
 static void test_load_robot_float_not_number_rejected(void **state)
 {
     fx_t *f = *state;
-    static const char *const BAD[] = {"1.0abc", "1_0", ".inf", "' 1.0'"};
-    static const char *const SHOWN[] = {"1.0abc", "1_0", ".inf", " 1.0"};
+    static const char *const BAD[] = {"1.0abc", "1_0", ".inf", "0x1p-1"};
+    static const char *const SHOWN[] = {"1.0abc", "1_0", ".inf", "0x1p-1"};
     for (size_t i = 0; i < sizeof(BAD) / sizeof(BAD[0]); i++) {
         char to[64];
         (void)snprintf(to, sizeof(to), "ramp_s: %s", BAD[i]);
         edit(f, ROBOT_OK, "ramp_s: 1.0", to);
-        want(f, "%s:%d: control.ramp_s: value %s is not a number in [0.1, 10]", f->path,
+        want(f, "%s:%d: control.ramp_s: value \"%s\" is not a number in [0.1, 10]", f->path,
              line_of(f, to), SHOWN[i]);
         expect_robot_error(f);
     }
+    /* quoted or tagged: a string, not a number */
+    static const char *const QUOTED[] = {"' 1.0'", "\"1.0\"", "!!str 1.0"};
+    static const char *const QSHOWN[] = {" 1.0", "1.0", "1.0"};
+    for (size_t i = 0; i < sizeof(QUOTED) / sizeof(QUOTED[0]); i++) {
+        char to[64];
+        (void)snprintf(to, sizeof(to), "ramp_s: %s", QUOTED[i]);
+        edit(f, ROBOT_OK, "ramp_s: 1.0", to);
+        want(f,
+             "%s:%d: control.ramp_s: value \"%s\" is quoted or tagged, not a number in [0.1, 10]",
+             f->path, line_of(f, to), QSHOWN[i]);
+        expect_robot_error(f);
+    }
+    /* a number a float cannot hold, or would round to zero */
+    edit(f, ROBOT_OK, "ramp_s: 1.0", "ramp_s: 1e39");
+    want(f, "%s:%d: control.ramp_s: value 1e39 is outside the float range in [0.1, 10]", f->path,
+         line_of(f, "ramp_s"));
+    expect_robot_error(f);
+    edit(f, ROBOT_OK, "hold_s: 10.0", "hold_s: 1e-50");
+    want(f, "%s:%d: control.hold_s: value 1e-50 is outside the float range in [0, 60]", f->path,
+         line_of(f, "hold_s"));
+    expect_robot_error(f);
     edit(f, ROBOT_OK, "ramp_s: 1.0", "ramp_s: nan");
     want(f, "%s:%d: control.ramp_s: value nan outside [0.1, 10]", f->path, line_of(f, "ramp_s"));
     expect_robot_error(f);
     edit(f, SCENARIO_OK, "force_n: [10, -20.5, 0]", "force_n: [10, -20.5, 0x]");
-    want(f, "%s:%d: pushes[0].force_n[2]: value 0x is not a number in [-2000, 2000]", f->path,
+    want(f, "%s:%d: pushes[0].force_n[2]: value \"0x\" is not a number in [-2000, 2000]", f->path,
          line_of(f, "force_n"));
     expect_scenario_error(f);
+}
+
+/* Integers: a quoted or tagged number is a string (YAML's rule), refused. */
+static void test_load_board_quoted_integer_rejected(void **state)
+{
+    fx_t *f = *state;
+    static const char *const QUOTED[] = {"\"80\"", "'80'", "!!str 80", "!!float 80"};
+    for (size_t i = 0; i < sizeof(QUOTED) / sizeof(QUOTED[0]); i++) {
+        char to[64];
+        (void)snprintf(to, sizeof(to), "priority: %s", QUOTED[i]);
+        edit(f, BOARD_OK, "priority: 0", to);
+        want(f, "%s:%d: rt.priority: value \"80\" is quoted or tagged, not an integer in [0, 98]",
+             f->path, line_of(f, "priority"));
+        expect_board_error(f);
+    }
+}
+
+/* YAML aliases would carry a value past these checks (a word for a
+ * boolean, a fraction for an integer): refused where they are written. */
+static void test_load_board_alias_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, BOARD_OK, "name: bench", "name: &k bench");
+    edit_again(f, "loop_cpu: -1", "loop_cpu: *k");
+    want(f, "%s:%d: YAML syntax error: YAML aliases (*name) are not supported; write the value",
+         f->path, line_of(f, "*k"));
+    expect_board_error(f);
+}
+
+/* One document per file: a second one is refused, not ignored. */
+static void test_load_board_second_document_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, BOARD_OK, "name: bench", "name: bench");
+    append(f, "---\ngarbage: [unclosed\n");
+    want(f, "%s:%d: YAML syntax error: one YAML document per file (a second one starts here)",
+         f->path, line_of(f, "---"));
+    expect_board_error(f);
+}
+
+/* A FIFO (or any file that is not a regular one) is refused at once, never
+ * waited on; /dev/null likewise. */
+static void test_load_board_not_regular_file_rejected(void **state)
+{
+    fx_t *f = *state;
+    char fifo[PS_PATH_LEN];
+    (void)snprintf(fifo, sizeof(fifo), "%s/fifo.yaml", f->dir);
+    assert_int_equal(mkfifo(fifo, 0600), 0);
+    alarm(5); /* a blocking open would end the test binary, a failure */
+    assert_int_equal(ps_config_load_board(fifo, &f->board, f->err, sizeof(f->err)), -PS_ERR_CONFIG);
+    alarm(0);
+    char want_msg[PS_ERR_MSG_LEN];
+    (void)snprintf(want_msg, sizeof(want_msg), "%s: not a regular file", fifo);
+    assert_string_equal(f->err, want_msg);
+    (void)unlink(fifo);
+    assert_int_equal(ps_config_load_board("/dev/null", &f->board, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    assert_string_equal(f->err, "/dev/null: not a regular file");
 }
 
 /* Booleans: only plain true/false; a quoted "true" is a string. */
@@ -1038,7 +1138,7 @@ static void test_load_board_bool_quoted_or_word_rejected(void **state)
     fx_t *f = *state;
     edit(f, BOARD_OK, "estop_active_low: false", "estop_active_low: \"false\"");
     want(f,
-         "%s:%d: gpio.estop_active_low: value \"false\" is a quoted string (allowed: true, "
+         "%s:%d: gpio.estop_active_low: value \"false\" is quoted or tagged (allowed: true, "
          "false)",
          f->path, line_of(f, "estop_active_low"));
     expect_board_error(f);
@@ -1136,7 +1236,8 @@ static void test_check_pair_consistent_ok(void **state)
 static void test_check_pair_joint_bus_missing_rejected(void **state)
 {
     fx_t *f = *state;
-    edit(f, ROBOT_OK, "{name: r_knee, bus: 1,", "{name: r_knee, bus: 2,");
+    /* the bus on a line of its own: the message points at it, not at the entry */
+    edit(f, ROBOT_OK, "{name: r_knee, bus: 1,", "{name: r_knee,\n     bus: 2,");
     assert_int_equal(ps_config_load_board(BOARD_OK, &f->board, f->err, sizeof(f->err)), 0);
     assert_int_equal(ps_config_load_robot(f->path, &f->robot, f->err, sizeof(f->err)), 0);
     assert_int_equal(ps_config_check_pair(&f->board, &f->robot, f->err, sizeof(f->err)),
@@ -1295,6 +1396,10 @@ int main(void)
         T(test_load_board_optional_integer_not_integer_rejected),
         T(test_load_robot_float_not_number_rejected),
         T(test_load_board_bool_quoted_or_word_rejected),
+        T(test_load_board_quoted_integer_rejected),
+        T(test_load_board_alias_rejected),
+        T(test_load_board_second_document_rejected),
+        T(test_load_board_not_regular_file_rejected),
         T(test_load_board_enum_number_or_case_rejected),
         T(test_load_board_string_null_or_long_rejected),
         T(test_load_scenario_list_length_rejected),

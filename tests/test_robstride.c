@@ -90,8 +90,11 @@ static void test_ps_act_encode_command_robstride_hand_vector(void **state)
 {
     (void)state;
     const ps_act_cfg_t a = cybergear();
-    const ps_act_cmd_t cmd = {
-        .q_rad = PI_F, .qd_rad_s = -15.0f, .kp_nm_rad = 100.0f, .kd_nm_s_rad = 1.0f, .tau_ff_nm = 6.0f};
+    const ps_act_cmd_t cmd = {.q_rad = PI_F,
+                              .qd_rad_s = -15.0f,
+                              .kp_nm_rad = 100.0f,
+                              .kd_nm_s_rad = 1.0f,
+                              .tau_ff_nm = 6.0f};
     ps_can_frame_t f[PS_ACT_MAX_FRAMES];
     assert_int_equal(ps_act_encode_command(&a, &cmd, f, PS_ACT_MAX_FRAMES), 1);
     assert_int_equal(f[0].id, 0x01BFFF01);
