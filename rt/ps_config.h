@@ -59,9 +59,11 @@ struct ps_board_cfg {
  *  (a struct built in code). */
 typedef struct {
     char path[PATH_MAX]; /**< the file as passed to the loader */
+    uint32_t joint_name_line[PS_MAX_JOINTS];
     uint32_t joint_bus_line[PS_MAX_JOINTS];
     uint32_t joint_protocol_line[PS_MAX_JOINTS];
     uint32_t imu_bus_line;
+    uint32_t model_line;
 } ps_robot_src_t;
 
 /** A robot, as the modules consume it: one array per module, indexed by joint

@@ -643,12 +643,15 @@ static void record_src(const ps_cfg_ctx_t *c, ps_robot_cfg_t *out)
     (void)snprintf(src->path, sizeof(src->path), "%s", c->path); /* truncation is acceptable */
     char field[PS_CFG_FIELD_PATH_LEN];
     for (uint32_t i = 0; i < out->n_joints && i < PS_MAX_JOINTS; i++) {
+        (void)snprintf(field, sizeof(field), "joints[%u].name", i);
+        src->joint_name_line[i] = ps_cfg_line_of(c, field);
         (void)snprintf(field, sizeof(field), "joints[%u].bus", i);
         src->joint_bus_line[i] = ps_cfg_line_of(c, field);
         (void)snprintf(field, sizeof(field), "joints[%u].protocol", i);
         src->joint_protocol_line[i] = ps_cfg_line_of(c, field);
     }
     src->imu_bus_line = ps_cfg_line_of(c, "imu.bus");
+    src->model_line = ps_cfg_line_of(c, "model");
 }
 
 /* One load of a robot file; out_sim (if not NULL) gets its `sim:` section. */

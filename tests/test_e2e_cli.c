@@ -403,6 +403,59 @@ static void test_cli_bad_config_names_file_and_field(void **state)
     unlink(path);
 }
 
+/* A robot file whose joint the model lacks, and one whose model is missing:
+ * the error names the robot file, the line and the field, as every other
+ * two-file error does, and the run refuses with status 2. */
+static unsigned line_of(const char *file, const char *text)
+{
+    FILE *f = fopen(file, "r");
+    assert_non_null(f);
+    char buf[1024];
+    unsigned n = 0, found = 0;
+    while (found == 0 && fgets(buf, sizeof(buf), f) != NULL) {
+        n++;
+        if (strstr(buf, text) != NULL)
+            found = n;
+    }
+    fclose(f);
+    assert_true(found > 0);
+    return found;
+}
+
+static void robot_variant_refused(const char *sed_expr, unsigned line, const char *field,
+                                  const char *what)
+{
+    char cwd[512];
+    assert_non_null(getcwd(cwd, sizeof(cwd)));
+    char path[] = "/tmp/ps_cli_robot_XXXXXX.yaml";
+    int fd = mkstemps(path, 5);
+    assert_true(fd >= 0);
+    close(fd);
+    char cmd[2048];
+    snprintf(cmd, sizeof(cmd),
+             "sed -e 's|^model: \\.\\./|model: %s/|' -e '%s' robots/ps1.yaml > %s", cwd, sed_expr,
+             path);
+    assert_int_equal(system(cmd), 0);
+    char args[256];
+    snprintf(args, sizeof(args), "--robot %s --lockstep --duration 1", path);
+    assert_int_equal(run(args), 2);
+    char where[128];
+    snprintf(where, sizeof(where), "%s:%u: %s:", path, line, field);
+    if (strstr(out, where) == NULL || strstr(out, what) == NULL)
+        fail_msg("expected \"%s\" and \"%s\" in:\n%s", where, what, out);
+    unlink(path);
+}
+
+static void test_cli_robot_model_mismatch_names_robot_line(void **state)
+{
+    (void)state;
+    robot_variant_refused("s/name: waist_yaw,/name: waist_yawx,/",
+                          line_of("robots/ps1.yaml", "name: waist_yaw,"), "joints[12].name",
+                          "'waist_yawx' not found in the model");
+    robot_variant_refused("s|^model: .*|model: nope.xml|", line_of("robots/ps1.yaml", "model: "),
+                          "model", "nope.xml");
+}
+
 static void test_cli_linux_board_says_drivers_missing(void **state)
 {
     (void)state;
@@ -591,6 +644,7 @@ int main(void)
         cmocka_unit_test(test_cli_profile_without_rt_privileges_says_so),
         cmocka_unit_test(test_cli_bad_option_exit_2),
         cmocka_unit_test(test_cli_bad_config_names_file_and_field),
+        cmocka_unit_test(test_cli_robot_model_mismatch_names_robot_line),
         cmocka_unit_test(test_cli_linux_board_says_drivers_missing),
         cmocka_unit_test(test_cli_sigint_every_state_exits_promptly_status_0),
         cmocka_unit_test(test_cli_sigterm_every_state_exits_promptly_status_0),
