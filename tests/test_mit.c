@@ -10,21 +10,10 @@
 
 #include "../drivers/ps_mit.h"
 #include "../rt/ps_err.h"
+#include "fakes/ps_test_wire.h"
 
-/* AK-style ranges: p +-12.5 rad, v +-45 rad/s, kp 0..500, kd 0..5, t +-18 Nm,
- * i +-40 A. One LSB: p 25/65535 rad, v 90/4095 rad/s, t 36/4095 Nm. */
-static const ps_act_range_t RANGE = {
-    .p_min_rad = -12.5f,
-    .p_max_rad = 12.5f,
-    .v_min_rad_s = -45.0f,
-    .v_max_rad_s = 45.0f,
-    .kp_max_nm_rad = 500.0f,
-    .kd_max_nm_s_rad = 5.0f,
-    .t_min_nm = -18.0f,
-    .t_max_nm = 18.0f,
-    .i_min_a = -40.0f,
-    .i_max_a = 40.0f,
-};
+/* The AK-style ranges of tests/fakes/ps_test_wire.h. */
+static const ps_act_range_t RANGE = PS_TEST_WIRE_AK_INIT;
 
 static void assert_bytes(const uint8_t *got, const uint8_t *want)
 {
