@@ -13,6 +13,9 @@ CXX     ?= c++
 BUILD_PKGS := gcc libc6-dev make pkg-config libmujoco-dev libcyaml-dev libyaml-dev \
               libcmocka-dev libcjson-dev
 TOOL_PKGS  := g++ libgpiod-dev rt-tests can-utils
+# What `make test` needs beyond building: can-utils' log2long reads the
+# candump-format lines the runtime writes (tests/test_candump.c).
+TEST_PKGS  := can-utils
 # Extra packages `make bench` needs: load generator, plots, the analysis script.
 BENCH_PKGS := stress-ng gnuplot-nox python3
 
@@ -39,12 +42,13 @@ FAKE_OBJS    := $(call OBJ,$(FAKE_SRCS))
 FAKE_SANOBJS := $(call SANOBJ,$(FAKE_SRCS))
 TEST_BINS := $(addprefix $(BUILD)/tests/,$(SAN_TESTS) $(NOSAN_TESTS))
 
-.PHONY: all deps deps-build deps-bench run test clean format help bench
+.PHONY: all deps deps-build deps-test deps-bench run test clean format help bench
 all: $(BUILD)/pushstep
 
 help:
 	@echo "make deps    install missing Debian packages, build and target tools (as root;"
-	@echo "             idempotent); make run/test install only what building needs"
+	@echo "             idempotent); make run installs only what building needs,"
+	@echo "             make test that and can-utils"
 	@echo "make all     build $(BUILD)/pushstep (default)"
 	@echo "make run     deps + build + run against the simulated crowd, board sim"
 	@echo "             options pass through: make run ARGS=\"--duration 5 --lockstep\""
@@ -59,6 +63,9 @@ deps: deps-build
 
 deps-build:
 	@bash tools/deps.sh $(BUILD_PKGS)
+
+deps-test: deps-build
+	@bash tools/deps.sh $(TEST_PKGS)
 
 deps-bench: deps
 	@bash tools/deps.sh $(BENCH_PKGS)
@@ -85,7 +92,7 @@ $(addprefix $(BUILD)/tests/,$(NOSAN_TESTS)): $(BUILD)/tests/%: $(BUILD)/obj/test
 run: deps-build $(BUILD)/pushstep
 	$(BUILD)/pushstep --board sim $(ARGS)
 
-test: deps-build $(BUILD)/pushstep $(TEST_BINS)
+test: deps-test $(BUILD)/pushstep $(TEST_BINS)
 	@PUSHSTEP_BIN=$(BUILD)/pushstep bash tools/run-tests.sh tools/check-layers.sh $(TEST_BINS)
 
 bench: deps-bench $(BUILD)/pushstep
