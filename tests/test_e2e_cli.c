@@ -113,11 +113,16 @@ static void test_cli_lockstep_summary_json_has_the_figures(void **state)
     if (rc != 0)
         fail_msg("exit %d:\n%s", rc, out);
     assert_non_null(strstr(out, "state STANDBY -> RAMP"));
-    assert_non_null(strstr(out, "state ACTIVE -> DAMPING (REQ_STOP)"));
+    assert_non_null(strstr(out, "state ACTIVE -> DAMPING (REQ_STOP"));
     assert_non_null(strstr(out, "state DAMPING -> STANDBY"));
     cJSON *j = read_json(path);
     assert_true(num(j, "ticks") >= 6000);
-    assert_int_equal((int)num(j, "overruns"), 0);
+    /* Present and a count; not asserted zero: lockstep counts a tick's
+     * thread CPU time over the period, and a VM stall here once made one
+     * (the count itself is tested with a slow policy in test_e2e_lockstep;
+     * the machine's figure belongs to make bench). */
+    const double overruns = num(j, "overruns");
+    assert_true(overruns >= 0 && overruns == (double)(long)overruns);
     const cJSON *lat = obj(j, "latency");
     static const char *const STAGES[] = {"wake",  "read", "estimate",   "policy",     "servo",
                                          "write", "tick", "tick_plain", "tick_policy"};
@@ -562,11 +567,11 @@ static const sig_case_t SIG_CASES[] = {
     {"STANDBY", "tests/data/scenarios/sig-standby.yaml", "running in real time", 0.3, "STANDBY",
      NULL, "-> RAMP"},
     {"RAMP", "scenarios/stand.yaml", "state STANDBY -> RAMP", 0.1, "STANDBY",
-     "state RAMP -> DAMPING (REQ_STOP)", "-> ACTIVE"},
+     "state RAMP -> DAMPING (REQ_STOP", "-> ACTIVE"},
     {"ACTIVE", "scenarios/stand.yaml", "state RAMP -> ACTIVE", 0.1, "STANDBY",
-     "state ACTIVE -> DAMPING (REQ_STOP)", NULL},
+     "state ACTIVE -> DAMPING (REQ_STOP", NULL},
     {"HOLD", "tests/data/scenarios/sig-hold.yaml", "state ACTIVE -> HOLD", 0.1, "STANDBY",
-     "state HOLD -> DAMPING (REQ_STOP)", "HOLD -> RAMP"},
+     "state HOLD -> DAMPING (REQ_STOP", "HOLD -> RAMP"},
     {"DAMPING", "tests/data/scenarios/sig-damping.yaml", "state ACTIVE -> DAMPING", 0.02, "STANDBY",
      "state DAMPING -> STANDBY", NULL},
     {"ESTOP", "tests/data/scenarios/sig-estop.yaml", "-> ESTOP", 0.2, "ESTOP", NULL,
@@ -574,6 +579,11 @@ static const sig_case_t SIG_CASES[] = {
 };
 
 #define SIG_REPEATS 3
+
+/* A `must` line names the transition and that REQ_STOP (the signal) is among
+ * its causes, a '|' list in bit order (REQ_STOP before every fault): a VM
+ * stall may add OVERRUN beside it (seen here: "HOLD -> DAMPING
+ * (REQ_STOP|OVERRUN)"), which is not what these tests are about. */
 
 static void check_signal_in_every_state(int sig, const char *sig_name)
 {
