@@ -6,10 +6,10 @@
 
 #include "../rt/ps_err.h"
 
-#define CANDUMP_ERR_FLAG  0x20000000u /* SocketCAN's CAN_ERR_FLAG, as candump prints it */
-#define CANDUMP_FD_BRS    0x1u
-#define CANDUMP_FD_ESI    0x2u
-#define CANDUMP_FD_FDF    0x4u /* newer can-utils set it on every FD frame */
+#define CANDUMP_ERR_FLAG   0x20000000u /* SocketCAN's CAN_ERR_FLAG, as candump prints it */
+#define CANDUMP_FD_BRS     0x1u
+#define CANDUMP_FD_ESI     0x2u
+#define CANDUMP_FD_FDF     0x4u /* newer can-utils set it on every FD frame */
 #define CANDUMP_SFF_DIGITS 3u
 #define CANDUMP_EFF_DIGITS 8u
 #define CANDUMP_US_DIGITS  6u
@@ -148,7 +148,8 @@ static int read_time(line_reader_t *r, int64_t *t_ns)
     int rc = expect(r, '(', "'(' expected: a candump -L line starts with (SECONDS.MICROSECONDS)");
     if (rc == 0)
         rc = read_decimal(r, CANDUMP_S_DIGITS, &s, &n);
-    if (rc == 0 && s > (uint64_t)(INT64_MAX / 1000000000) - 1u)
+    const uint64_t s_max = (uint64_t)INT64_MAX / 1000000000u;
+    if (rc == 0 && s > s_max)
         return refuse(r, "timestamp beyond what int64_t nanoseconds hold");
     if (rc == 0)
         rc = expect(r, '.', "'.' expected in the timestamp");
@@ -156,6 +157,8 @@ static int read_time(line_reader_t *r, int64_t *t_ns)
         rc = read_decimal(r, CANDUMP_US_DIGITS, &us, &n);
     if (rc == 0 && n != CANDUMP_US_DIGITS)
         return refuse(r, "six microsecond digits expected in the timestamp");
+    if (rc == 0 && s == s_max && us * 1000u > (uint64_t)INT64_MAX % 1000000000u)
+        return refuse(r, "timestamp beyond what int64_t nanoseconds hold");
     if (rc == 0)
         rc = expect(r, ')', "')' expected after the timestamp");
     if (rc == 0)

@@ -86,6 +86,12 @@ static void test_format_longest_line_fits_line_max(void **state)
     /* one byte short of the line and its NUL: refused, not cut */
     assert_int_equal(ps_candump_format(&f, "abcdefghijklmno", line, (size_t)n), -ENOSPC);
     assert_int_equal(ps_candump_format(&f, "abcdefghijklmno", line, (size_t)n + 1), n);
+    /* and the latest time a line can carry reads back */
+    ps_can_frame_t back;
+    char ifname[PS_CANDUMP_IFNAME_MAX];
+    char err[PS_ERR_MSG_LEN] = "";
+    assert_int_equal(ps_candump_parse(line, &back, ifname, sizeof(ifname), err, sizeof(err)), 0);
+    assert_true(back.t_ns == INT64_MAX / 1000 * 1000);
 }
 
 static void test_format_refuses_invalid_frames_and_names(void **state)
@@ -199,6 +205,7 @@ static void test_parse_refusals_name_column_and_problem(void **state)
     assert_refused("(1.5) can0 123#00", "column 5:", "six microsecond digits");
     assert_refused("(12345678901.000000) can0 123#00", "column 12:", "too many digits");
     assert_refused("(9999999999.000000) can0 123#00", "column 12:", "int64_t");
+    assert_refused("(9223372036.854776) can0 123#00", "column 19:", "int64_t");
     assert_refused("(1.000000)can0 123#00", "column 11:", "space expected");
     assert_refused("(1.000000) abcdefghijklmnop 123#00", "column 27:", "longer than 15");
     assert_refused("(1.000000) can0 123#R", "column 21:", "remote frame");
