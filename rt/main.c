@@ -31,6 +31,9 @@
 #define RT_START_LEAD_NS  (20 * PS_NS_PER_MS)
 #define LOCKSTEP_START_NS PS_NS_PER_S /* t = 0 means "never" in measurements */
 #define TRUTH_POLL_NS     (10 * PS_NS_PER_MS)
+/* --candump: 2^16 frames (5.8 MB): the logger drains every 5 ms; a 1 kHz
+ * loop moves about 50 frames a tick, lockstep some 13 times as many. */
+#define PS_CANDUMP_RING_SLOTS (1u << 16)
 
 typedef struct {
     const char *board;
@@ -42,12 +45,13 @@ typedef struct {
     bool is_rt_required;
     bool is_quiet;
     const char *summary_path;
-    double start_after_s; /**< real boards: request START after this; < 0 never */
-    bool is_profile;      /**< `pushstep profile` */
-    const char *out_dir;  /**< profile output folder */
-    const char *stress;   /**< profile: stress-ng load, NULL none */
-    bool is_trace;        /**< trace_marker points */
-    unsigned hist_us;     /**< wake-up histogram buckets (cyclictest -h N) */
+    double start_after_s;     /**< real boards: request START after this; < 0 never */
+    bool is_profile;          /**< `pushstep profile` */
+    const char *out_dir;      /**< profile output folder */
+    const char *stress;       /**< profile: stress-ng load, NULL none */
+    bool is_trace;            /**< trace_marker points */
+    const char *candump_path; /**< --candump: every frame as a candump -L line */
+    unsigned hist_us;         /**< wake-up histogram buckets (cyclictest -h N) */
 } options_t;
 
 /* Everything the run owns; static because ps_app_t is large and must not
@@ -58,6 +62,9 @@ static struct {
     ps_app_t app;
     ps_logger_t logger;
     ps_trace_t trace;
+    ps_ring_t frame_ring;
+    ps_loop_frame_rec_t *frame_storage; /**< PS_CANDUMP_RING_SLOTS, --candump only */
+    ps_logger_frames_t frames;
     pid_t stress_pid;
     int cpu_latency_fd;
     int64_t start_ns, end_ns;
@@ -93,6 +100,9 @@ static const char USAGE[] =
     "  --start-after S       real boards: request START S seconds after start\n"
     "                        (on board sim the scenario's events do this)\n"
     "  --quiet               no status lines (transitions and the summary still print)\n"
+    "  --candump FILE        write every CAN frame the loop reads and sends as a\n"
+    "                        candump -L log line (canplayer, log2long read it);\n"
+    "                        times are the loop's clock (simulated in lockstep)\n"
     "  --trace               write trace points to ftrace's trace_marker (tick start,\n"
     "                        end, overruns, state changes) for trace-cmd/KernelShark\n"
     "  -h, --help            this text\n"
@@ -143,7 +153,8 @@ static int parse_options(int argc, char **argv, options_t *o)
         O_OUT,
         O_STRESS,
         O_TRACE,
-        O_HIST_US
+        O_HIST_US,
+        O_CANDUMP
     };
     static const struct option LONG[] = {
         {"board", required_argument, NULL, 'b'},
@@ -159,6 +170,7 @@ static int parse_options(int argc, char **argv, options_t *o)
         {"stress", required_argument, NULL, O_STRESS},
         {"trace", no_argument, NULL, O_TRACE},
         {"hist-us", required_argument, NULL, O_HIST_US},
+        {"candump", required_argument, NULL, O_CANDUMP},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
@@ -202,6 +214,9 @@ static int parse_options(int argc, char **argv, options_t *o)
             break;
         case O_QUIET:
             o->is_quiet = true;
+            break;
+        case O_CANDUMP:
+            o->candump_path = optarg;
             break;
         case O_OUT:
             o->out_dir = optarg;
@@ -378,6 +393,53 @@ static int64_t wall_ns(void)
     return (int64_t)ts.tv_sec * PS_NS_PER_S + ts.tv_nsec;
 }
 
+/* --candump: the file and the ring the loop fills, touched now so that the
+ * loop's first pushes do not fault pages in. */
+static int open_candump(char *err, size_t len)
+{
+    g.frames.out = fopen(g.opt.candump_path, "w");
+    if (g.frames.out == NULL) {
+        ps_err_format(err, len, "%s: %s", g.opt.candump_path, strerror(errno));
+        return -errno;
+    }
+    const size_t bytes = PS_CANDUMP_RING_SLOTS * sizeof(ps_loop_frame_rec_t);
+    g.frame_storage = malloc(bytes);
+    if (g.frame_storage == NULL) {
+        ps_err_format(err, len, "no memory for the frame ring (%zu bytes)", bytes);
+        (void)fclose(g.frames.out);
+        g.frames.out = NULL;
+        return -ENOMEM;
+    }
+    memset(g.frame_storage, 0, bytes);
+    g.frames.ring = &g.frame_ring;
+    return ps_ring_init(&g.frame_ring, g.frame_storage, PS_CANDUMP_RING_SLOTS,
+                        sizeof(ps_loop_frame_rec_t));
+}
+
+/* Report what the log holds and what it lost; -EIO when the file could not
+ * be written in full. */
+static int close_candump(void)
+{
+    if (g.frames.out == NULL)
+        return 0;
+    const uint64_t n_dropped = ps_ring_dropped(&g.frame_ring);
+    const bool is_bad = ferror(g.frames.out) != 0;
+    const bool is_closed = fclose(g.frames.out) == 0;
+    g.frames.out = NULL;
+    free(g.frame_storage);
+    g.frame_storage = NULL;
+    printf("candump: %llu frames to %s", (unsigned long long)g.frames.n_lines, g.opt.candump_path);
+    if (n_dropped > 0 || g.frames.n_refused > 0)
+        printf(" (WARNING: %llu frames lost: the ring was full; %llu refused)",
+               (unsigned long long)n_dropped, (unsigned long long)g.frames.n_refused);
+    printf("\n");
+    if (is_bad || !is_closed) {
+        fprintf(stderr, "pushstep: --candump: writing %s failed\n", g.opt.candump_path);
+        return -EIO;
+    }
+    return 0;
+}
+
 /* Wait for the loop thread to end. (The lowest CoM while the controller is in
  * charge is recorded by the plant on simulated time, ps_sim_truth_t.) */
 static void watch_truth(ps_summary_t *sum)
@@ -396,8 +458,9 @@ static int run_loop(ps_summary_t *sum)
     g.end_ns = duration_s > 0 ? g.start_ns + ps_s_to_ns(duration_s) : 0;
     if (g.opt.start_after_s >= 0)
         ps_app_request_start_at(&g.app, g.start_ns + ps_s_to_ns(g.opt.start_after_s));
-    int rc = ps_logger_start(&g.logger, &g.app.loop, &g.app.ring, stdout, g.start_ns,
-                             g.opt.is_quiet, g.app.board.rt.worker_cpu);
+    int rc =
+        ps_logger_start(&g.logger, &g.app.loop, &g.app.ring, stdout, g.start_ns, g.opt.is_quiet,
+                        g.app.board.rt.worker_cpu, g.frames.out != NULL ? &g.frames : NULL);
     if (rc < 0)
         return rc;
     rc = ps_sim_start(g.app.sim, g.start_ns);
@@ -546,6 +609,11 @@ int main(int argc, char **argv)
     if (parse_options(argc, argv, &g.opt) < 0)
         return 2;
     find_data_dir(g.data_dir, sizeof(g.data_dir));
+    char err[PS_ERR_MSG_LEN];
+    if (g.opt.candump_path != NULL && open_candump(err, sizeof(err)) < 0) {
+        fprintf(stderr, "pushstep: --candump: %s\n", err);
+        return 2;
+    }
     ps_app_opts_t ao = {
         .data_dir = g.data_dir,
         .board = g.opt.board,
@@ -554,8 +622,8 @@ int main(int argc, char **argv)
         .is_lockstep = g.opt.is_lockstep,
         .wake_hist_us = g.opt.hist_us,
         .trace = g.opt.is_trace ? &g.trace : NULL,
+        .frame_ring = g.frames.out != NULL ? &g.frame_ring : NULL,
     };
-    char err[PS_ERR_MSG_LEN];
     ps_trace_init(&g.trace);
     if (g.opt.is_trace && ps_trace_open(&g.trace, NULL, err, sizeof(err)) < 0) {
         fprintf(stderr, "pushstep: --trace: cannot open trace_marker: %s\n", err);
@@ -570,6 +638,9 @@ int main(int argc, char **argv)
         ps_trace_close(&g.trace);
         return 2;
     }
+    for (uint32_t b = 0; b < g.app.board.n_buses; b++)
+        g.frames.ifname[b] = g.app.board.buses[b].ifname;
+    g.frames.n_buses = g.app.board.n_buses;
     rc = setup_process_rt();
     if (rc == 0)
         rc = block_stop_signals(SIG_UNBLOCK); /* the loop exists: pending stops land */
@@ -627,6 +698,8 @@ int main(int argc, char **argv)
                 rc = sum.truth_plant_err;
         }
     }
+    if (close_candump() < 0 && rc == 0)
+        rc = -EIO;
     ps_trace_close(&g.trace);
     ps_app_deinit(&g.app);
     return rc < 0 ? 1 : 0;

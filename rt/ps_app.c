@@ -266,6 +266,7 @@ static int wire(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t len)
         .status_every = PS_APP_STATUS_EVERY,
         .wake_hist_us = opts->wake_hist_us,
         .trace = opts->trace,
+        .frame_ring = opts->frame_ring,
     };
     if (app->board.kind != PS_BOARD_SIM) {
         snprintf(err, len,

@@ -36,6 +36,7 @@ typedef struct {
     bool is_lockstep;
     uint32_t wake_hist_us; /**< 1-us wake-up histogram size; 0: 1000 */
     ps_trace_t *trace;     /**< trace_marker points for the loop; NULL: off */
+    ps_ring_t *frame_ring; /**< every frame the loop reads and sends; NULL: off */
 } ps_app_opts_t;
 
 typedef struct {

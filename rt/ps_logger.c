@@ -3,6 +3,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "../drivers/ps_candump.h"
 #include "ps_err.h"
 #include "ps_rtsetup.h"
 
@@ -105,11 +106,31 @@ static void handle_record(ps_logger_t *lg, const ps_loop_rec_t *rec)
     }
 }
 
+static void drain_frames(ps_logger_frames_t *fr)
+{
+    ps_loop_frame_rec_t rec;
+    char line[PS_CANDUMP_LINE_MAX];
+    while (ps_ring_pop(fr->ring, &rec) == 0) {
+        const int n =
+            rec.bus_idx < fr->n_buses
+                ? ps_candump_format(&rec.frame, fr->ifname[rec.bus_idx], line, sizeof(line))
+                : -EINVAL;
+        if (n < 0) {
+            fr->n_refused++;
+            continue;
+        }
+        (void)fwrite(line, 1, (size_t)n, fr->out);
+        fr->n_lines++;
+    }
+}
+
 static void drain(ps_logger_t *lg)
 {
     ps_loop_rec_t rec;
     while (ps_ring_pop(lg->ring, &rec) == 0)
         handle_record(lg, &rec);
+    if (lg->frames != NULL)
+        drain_frames(lg->frames);
 }
 
 static void *worker_main(void *arg)
@@ -127,7 +148,7 @@ static void *worker_main(void *arg)
 }
 
 int ps_logger_start(ps_logger_t *lg, const ps_loop_t *loop, ps_ring_t *ring, FILE *out,
-                    int64_t start_ns, bool is_quiet, int cpu)
+                    int64_t start_ns, bool is_quiet, int cpu, ps_logger_frames_t *frames)
 {
     memset(lg, 0, sizeof(*lg));
     lg->loop = loop;
@@ -137,6 +158,7 @@ int ps_logger_start(ps_logger_t *lg, const ps_loop_t *loop, ps_ring_t *ring, FIL
     lg->last_status_ns = start_ns;
     lg->last_wall_ns = wall_now_ns();
     lg->is_quiet = is_quiet;
+    lg->frames = frames;
     lg->cpu = cpu;
     ps_perf_reset(&lg->prev_tick);
     atomic_init(&lg->should_stop, false);

@@ -29,12 +29,24 @@ typedef struct {
     uint32_t cond;
 } ps_logger_transition_t;
 
+/** The candump log of the loop's frames (`--candump FILE`): the worker drains
+ *  the loop's frame ring into out as drivers/ps_candump lines. */
+typedef struct {
+    ps_ring_t *ring; /**< ps_loop_frame_rec_t records */
+    FILE *out;
+    const char *ifname[PS_MAX_BUSES]; /**< by bus index */
+    uint32_t n_buses;
+    uint64_t n_lines;   /**< written */
+    uint64_t n_refused; /**< records ps_candump_format refused (a bad bus index) */
+} ps_logger_frames_t;
+
 typedef struct {
     const ps_loop_t *loop;
     ps_ring_t *ring;
     FILE *out;
-    int64_t start_ns; /**< loop time origin */
-    bool is_quiet;    /**< no status lines (transitions still printed) */
+    int64_t start_ns;           /**< loop time origin */
+    bool is_quiet;              /**< no status lines (transitions still printed) */
+    ps_logger_frames_t *frames; /**< NULL: no candump log */
     int cpu;
     pthread_t thread;
     bool has_thread;
@@ -48,10 +60,11 @@ typedef struct {
     ps_logger_transition_t transitions[PS_LOGGER_MAX_TRANSITIONS];
 } ps_logger_t;
 
-/** @pre loop and ring outlive the logger  @post worker running
+/** @pre loop, ring and frames (NULL: no candump log) outlive the logger; the
+ *  worker owns frames' counters until ps_logger_stop  @post worker running
  *  @return 0 | -errno (thread creation)  @rt INIT, main thread */
 int ps_logger_start(ps_logger_t *lg, const ps_loop_t *loop, ps_ring_t *ring, FILE *out,
-                    int64_t start_ns, bool is_quiet, int cpu);
+                    int64_t start_ns, bool is_quiet, int cpu, ps_logger_frames_t *frames);
 
 /** Drain what is left and join the worker. Safe to call twice. @rt INIT */
 void ps_logger_stop(ps_logger_t *lg);

@@ -169,6 +169,21 @@ static void take_frame(ps_loop_t *loop, uint32_t bus_idx, const ps_can_frame_t *
     }
 }
 
+/* Copies frames to the candump ring; a full ring drops and counts
+ * (ps_ring_dropped), the tick never waits for the log. */
+static void tap_frames(ps_loop_t *loop, uint32_t bus_idx, const ps_can_frame_t *f, size_t n,
+                       bool is_tx)
+{
+    if (loop->cfg.frame_ring == NULL)
+        return;
+    for (size_t i = 0; i < n; i++) {
+        ps_loop_frame_rec_t rec = {.frame = f[i], .bus_idx = (uint8_t)bus_idx, .is_tx = is_tx};
+        if (is_tx)
+            rec.frame.t_ns = loop->t_deadline_ns;
+        (void)ps_ring_push(loop->cfg.frame_ring, &rec);
+    }
+}
+
 static void read_bus(ps_loop_t *loop, uint32_t bus_idx)
 {
     const ps_can_port_t *port = &loop->cfg.buses[bus_idx];
@@ -184,6 +199,7 @@ static void read_bus(ps_loop_t *loop, uint32_t bus_idx)
         }
         for (int i = 0; i < n; i++)
             take_frame(loop, bus_idx, &loop->rx_buf[i]);
+        tap_frames(loop, bus_idx, loop->rx_buf, (size_t)n, false);
         if ((size_t)n < cap)
             return;
     }
@@ -610,6 +626,7 @@ static void stage_write(ps_loop_t *loop)
             loop->counters.n_bus_errors++;
             n = 0;
         }
+        tap_frames(loop, b, loop->tx_buf[b], (size_t)n, true);
         loop->counters.n_tx_frames += (uint64_t)n;
         loop->counters.n_tx_refused += loop->n_tx[b] - (uint32_t)n;
         if ((uint32_t)n < loop->n_tx[b])
@@ -774,6 +791,8 @@ void ps_loop_release_drives(ps_loop_t *loop)
         int n = ps_can_send_batch(&loop->cfg.buses[b], loop->tx_buf[b], loop->n_tx[b]);
         if (n < 0 || (uint32_t)n < loop->n_tx[b])
             loop->counters.n_tx_refused += loop->n_tx[b] - (uint32_t)(n < 0 ? 0 : n);
+        if (n > 0)
+            tap_frames(loop, b, loop->tx_buf[b], (size_t)n, true);
     }
     for (uint32_t j = 0; j < r->n_joints; j++)
         loop->is_entered[j] = false;

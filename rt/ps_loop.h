@@ -121,7 +121,17 @@ typedef struct {
     uint32_t status_every; /**< ticks between status records (0: never) */
     uint32_t wake_hist_us; /**< 1-us wake-up histogram size (cyclictest -h N); 0: 1000 */
     ps_trace_t *trace;     /**< trace_marker points; NULL: off */
+    ps_ring_t *frame_ring; /**< every frame read and sent (ps_loop_frame_rec_t), for a
+                                candump log on the non-RT side; NULL: off */
 } ps_loop_cfg_t;
+
+/** One CAN frame as the loop read or sent it (cfg.frame_ring). frame.t_ns:
+ *  read, when it was complete on the wire; sent, the tick's deadline. */
+typedef struct {
+    ps_can_frame_t frame;
+    uint8_t bus_idx;
+    uint8_t is_tx; /**< 1: sent by the loop (and taken by the bus) */
+} ps_loop_frame_rec_t;
 
 typedef enum {
     PS_REC_STATUS = 1,

@@ -27,6 +27,9 @@
 
 #include <cmocka.h>
 
+#include "../drivers/ps_candump.h"
+#include "../rt/ps_limits.h"
+
 #define OUT_MAX (256 * 1024)
 
 static char out[OUT_MAX];
@@ -148,6 +151,81 @@ static void test_cli_lockstep_summary_json_has_the_figures(void **state)
     assert_string_equal(cJSON_GetStringValue(obj(j, "final_state")), "STANDBY");
     cJSON_Delete(j);
     unlink(path);
+}
+
+/* --candump: every frame the loop read and sent, as candump -L lines. Each
+ * line reads back (drivers/ps_candump), the lines of each bus are the frames
+ * its port put on and took off the wire (the summary's tx_frames and
+ * rx_frames), nothing was lost, the loop still allocated nothing, and
+ * can-utils' log2long reads every line. */
+static void test_cli_lockstep_candump_log_has_every_frame(void **state)
+{
+    (void)state;
+    char sum_path[32], log_path[32];
+    make_temp_file(sum_path, sizeof(sum_path));
+    make_temp_file(log_path, sizeof(log_path));
+    char args[256];
+    snprintf(args, sizeof(args), "--lockstep --duration 2 --quiet --summary %s --candump %s",
+             sum_path, log_path);
+    int rc = run(args);
+    if (rc != 0)
+        fail_msg("exit %d:\n%s", rc, out);
+    if (strstr(out, "candump: ") == NULL || strstr(out, "lost") != NULL)
+        fail_msg("want \"candump: N frames\" and nothing lost in:\n%s", out);
+    cJSON *j = read_json(sum_path);
+    const cJSON *buses = obj(j, "buses");
+    const int n_buses = cJSON_GetArraySize(buses);
+    assert_true(n_buses > 0 && n_buses <= 8);
+    unsigned long lines_of_bus[8] = {0};
+    unsigned long n_lines = 0;
+    FILE *f = fopen(log_path, "r");
+    assert_non_null(f);
+    char line[PS_CANDUMP_LINE_MAX + 8];
+    while (fgets(line, sizeof(line), f) != NULL) {
+        ps_can_frame_t fr;
+        char ifname[PS_CANDUMP_IFNAME_MAX];
+        char err[PS_ERR_MSG_LEN];
+        n_lines++;
+        if (ps_candump_parse(line, &fr, ifname, sizeof(ifname), err, sizeof(err)) != 0)
+            fail_msg("%s line %lu: %s: %s", log_path, n_lines, err, line);
+        /* lockstep time starts at 1 s; 2 s of run and at most 2 s of damping */
+        assert_true(fr.t_ns >= 1000000000LL && fr.t_ns <= 5100000000LL);
+        int b = 0;
+        while (b < n_buses &&
+               strcmp(cJSON_GetStringValue(obj(cJSON_GetArrayItem(buses, b), "name")), ifname))
+            b++;
+        if (b == n_buses)
+            fail_msg("line %lu: no bus \"%s\" in the summary", n_lines, ifname);
+        lines_of_bus[b]++;
+    }
+    fclose(f);
+    unsigned long n_wire = 0;
+    for (int b = 0; b < n_buses; b++) {
+        const cJSON *bus = cJSON_GetArrayItem(buses, b);
+        const unsigned long want = (unsigned long)(num(bus, "tx_frames") + num(bus, "rx_frames"));
+        if (lines_of_bus[b] != want || want == 0)
+            fail_msg("bus %d: %lu lines, the port moved %lu frames", b, lines_of_bus[b], want);
+        n_wire += want;
+    }
+    const cJSON *after = obj(j, "after_init");
+    assert_int_equal((int)num(after, "mallocs"), 0);
+    assert_int_equal((int)num(after, "page_faults"), 0);
+    assert_int_equal((int)num(after, "locks"), 0);
+    cJSON_Delete(j);
+    char want_line[96];
+    snprintf(want_line, sizeof(want_line), "candump: %lu frames to %s", n_wire, log_path);
+    if (strstr(out, want_line) == NULL)
+        fail_msg("want \"%s\" in:\n%s", want_line, out);
+    char cmd[128];
+    snprintf(cmd, sizeof(cmd), "log2long < %s | wc -l", log_path);
+    FILE *p = popen(cmd, "r");
+    assert_non_null(p);
+    unsigned long n_read = 0;
+    assert_int_equal(fscanf(p, "%lu", &n_read), 1);
+    assert_int_equal(pclose(p), 0);
+    assert_int_equal(n_read, n_lines);
+    unlink(sum_path);
+    unlink(log_path);
 }
 
 /* A shove the controller cannot take: the loop detects the fall and brakes,
@@ -645,6 +723,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_cli_help_documents_every_option),
         cmocka_unit_test(test_cli_lockstep_summary_json_has_the_figures),
+        cmocka_unit_test(test_cli_lockstep_candump_log_has_every_frame),
         cmocka_unit_test(test_cli_lockstep_shove_fall_detected_and_in_truth),
         cmocka_unit_test(test_cli_lockstep_same_scenario_twice_identical_summaries),
         cmocka_unit_test(test_cli_data_dir_from_environment),

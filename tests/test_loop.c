@@ -1023,9 +1023,65 @@ static void test_loop_run_clock_failure_estops(void **state)
     assert_int_equal(fx->n_hb_calls - c0, 2);
 }
 
+/* ---- the candump tap ---------------------------------------------------- */
+
+/* Every frame a bus took and every frame read reach the frame ring with its
+ * bus; sent frames carry the tick's deadline, refused ones are not there,
+ * and a full ring drops (counted) while the tick goes on. */
+static void test_loop_frame_ring_gets_sent_and_read_frames(void **state)
+{
+    (void)state;
+    static ps_loop_frame_rec_t storage[1024];
+    ps_ring_t ring;
+    assert_int_equal(ps_ring_init(&ring, storage, 1024, sizeof(storage[0])), 0);
+    steps(5);
+    fx->loop.cfg.frame_ring = &ring;
+    fx->buses[2].n_refuse_batches = 1;
+    clear_sent();
+    const uint64_t rx_before = fx->loop.counters.n_rx_frames;
+    const uint64_t refused_before = fx->loop.counters.n_tx_refused;
+    assert_int_equal(ps_loop_step(&fx->loop), 0);
+    assert_true(fx->loop.counters.n_tx_refused > refused_before);
+    const int64_t deadline_ns = fx->loop.t_deadline_ns;
+    size_t n_tx[PS_MAX_BUSES] = {0}, n_rx = 0;
+    ps_loop_frame_rec_t rec;
+    while (ps_ring_pop(&ring, &rec) == 0) {
+        assert_true(rec.bus_idx < fx->board.n_buses);
+        if (!rec.is_tx) {
+            n_rx++;
+            continue;
+        }
+        const fake_bus_t *b = &fx->buses[rec.bus_idx];
+        const size_t i = n_tx[rec.bus_idx]++;
+        assert_true(i < b->n_sent);
+        assert_int_equal(rec.frame.id, b->sent[i].id);
+        assert_int_equal(rec.frame.len, b->sent[i].len);
+        assert_memory_equal(rec.frame.data, b->sent[i].data, b->sent[i].len);
+        assert_true(rec.frame.t_ns == deadline_ns);
+    }
+    size_t n_sent_all = 0;
+    for (uint32_t b = 0; b < fx->board.n_buses; b++) {
+        assert_int_equal(n_tx[b], fx->buses[b].n_sent);
+        n_sent_all += fx->buses[b].n_sent;
+    }
+    assert_int_equal(fx->buses[2].n_sent, 0); /* refused: sent nothing, logged nothing */
+    assert_true(n_sent_all > 0);
+    assert_int_equal(n_rx, fx->loop.counters.n_rx_frames - rx_before);
+    assert_true(n_rx > 0);
+    assert_int_equal(ps_ring_dropped(&ring), 0);
+    /* nobody drains: the ring fills, the loop keeps its pace */
+    for (int i = 0; i < 200; i++)
+        assert_int_equal(ps_loop_step(&fx->loop), 0);
+    assert_true(ps_ring_dropped(&ring) > 0);
+    assert_int_equal(ps_ring_count(&ring), 1024);
+    fx->loop.cfg.frame_ring = NULL;
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
+        cmocka_unit_test_setup_teardown(test_loop_frame_ring_gets_sent_and_read_frames, setup,
+                                        teardown),
 #define T(f) cmocka_unit_test_setup_teardown(f, setup, teardown)
         T(test_loop_step_on_time_sleeps_on_grid),
         T(test_loop_step_long_tick_counts_overrun_keeps_grid),
