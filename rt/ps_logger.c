@@ -106,11 +106,19 @@ static void handle_record(ps_logger_t *lg, const ps_loop_rec_t *rec)
     }
 }
 
-static void drain_frames(ps_logger_frames_t *fr)
+/* At most this many frames between two looks at the record ring, so that a
+ * loop that sends faster than the file takes them cannot starve the
+ * transitions. */
+#define FRAMES_PER_DRAIN 4096u
+
+/* @return true if frames are left for the next pass */
+static bool drain_frames(ps_logger_frames_t *fr)
 {
     ps_loop_frame_rec_t rec;
     char line[PS_CANDUMP_LINE_MAX];
-    while (ps_ring_pop(fr->ring, &rec) == 0) {
+    for (uint32_t k = 0; k < FRAMES_PER_DRAIN; k++) {
+        if (ps_ring_pop(fr->ring, &rec) != 0)
+            return false;
         const int n =
             rec.bus_idx < fr->n_buses
                 ? ps_candump_format(&rec.frame, fr->ifname[rec.bus_idx], line, sizeof(line))
@@ -122,15 +130,16 @@ static void drain_frames(ps_logger_frames_t *fr)
         (void)fwrite(line, 1, (size_t)n, fr->out);
         fr->n_lines++;
     }
+    return true;
 }
 
-static void drain(ps_logger_t *lg)
+/* @return true if frames are left (records are always drained) */
+static bool drain(ps_logger_t *lg)
 {
     ps_loop_rec_t rec;
     while (ps_ring_pop(lg->ring, &rec) == 0)
         handle_record(lg, &rec);
-    if (lg->frames != NULL)
-        drain_frames(lg->frames);
+    return lg->frames != NULL && drain_frames(lg->frames);
 }
 
 static void *worker_main(void *arg)
@@ -140,10 +149,11 @@ static void *worker_main(void *arg)
         (void)ps_rtsetup_thread_best_effort(0, lg->cpu); /* best effort: the worker is not RT */
     const struct timespec idle = {0, IDLE_SLEEP_NS};
     while (!atomic_load(&lg->should_stop)) {
-        drain(lg);
-        nanosleep(&idle, NULL);
+        if (!drain(lg))
+            nanosleep(&idle, NULL);
     }
-    drain(lg);
+    while (drain(lg)) {
+    }
     return NULL;
 }
 
