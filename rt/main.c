@@ -399,8 +399,9 @@ static int open_candump(char *err, size_t len)
 {
     g.frames.out = fopen(g.opt.candump_path, "w");
     if (g.frames.out == NULL) {
-        ps_err_format(err, len, "%s: %s", g.opt.candump_path, strerror(errno));
-        return -errno;
+        const int e = errno;
+        ps_err_format(err, len, "%s: %s", g.opt.candump_path, strerror(e));
+        return -e;
     }
     const size_t bytes = PS_CANDUMP_RING_SLOTS * sizeof(ps_loop_frame_rec_t);
     g.frame_storage = malloc(bytes);

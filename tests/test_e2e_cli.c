@@ -226,6 +226,9 @@ static void test_cli_lockstep_candump_log_has_every_frame(void **state)
     assert_int_equal(n_read, n_lines);
     unlink(sum_path);
     unlink(log_path);
+    /* a file that cannot be made: refused before the run, naming it */
+    assert_int_equal(run("--lockstep --duration 1 --candump /nonexistent-dir/f.log"), 2);
+    assert_non_null(strstr(out, "--candump: /nonexistent-dir/f.log: No such file or directory"));
 }
 
 /* A shove the controller cannot take: the loop detects the fall and brakes,
