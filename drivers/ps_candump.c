@@ -50,7 +50,7 @@ static void put_decimal(line_writer_t *w, uint64_t v, unsigned digits)
         put_char(w, tmp[i]);
 }
 
-static bool is_valid_ifname(const char *ifname)
+bool ps_candump_is_valid_ifname(const char *ifname)
 {
     const size_t n = strnlen(ifname, PS_CANDUMP_IFNAME_MAX);
     if (n == 0 || n >= PS_CANDUMP_IFNAME_MAX)
@@ -64,7 +64,7 @@ static bool is_valid_ifname(const char *ifname)
 
 int ps_candump_format(const ps_can_frame_t *f, const char *ifname, char *buf, size_t len)
 {
-    if (f->t_ns < 0 || !is_valid_ifname(ifname) || !ps_can_is_valid_frame(f))
+    if (f->t_ns < 0 || !ps_candump_is_valid_ifname(ifname) || !ps_can_is_valid_frame(f))
         return -EINVAL;
     line_writer_t w = {.buf = buf, .len = len};
     const uint64_t us = (uint64_t)f->t_ns / 1000u;

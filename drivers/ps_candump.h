@@ -23,6 +23,7 @@
 #ifndef PS_CANDUMP_H
 #define PS_CANDUMP_H
 
+#include <stdbool.h>
 #include <stddef.h>
 
 #include "ps_can.h"
@@ -33,6 +34,10 @@
  *  included: "(" 10-digit seconds (an int64_t of ns has at most 10) "." 6
  *  ") " ifname " " 8-digit id "##" F 128 data digits "\n". */
 #define PS_CANDUMP_LINE_MAX (1u + 10u + 1u + 6u + 2u + 15u + 1u + 8u + 2u + 1u + 128u + 2u)
+
+/** @return true if ifname can stand in a line: 1..15 bytes, no blank, no '('
+ *  @rt RT-SAFE, any thread */
+bool ps_candump_is_valid_ifname(const char *ifname);
 
 /** Write f as one log line (ending in '\n') into buf; the time is f->t_ns
  *  truncated to microseconds.

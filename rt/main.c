@@ -19,6 +19,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../drivers/ps_candump.h"
 #include "ps_app.h"
 #include "ps_err.h"
 #include "ps_guard.h"
@@ -393,28 +394,46 @@ static int64_t wall_ns(void)
     return (int64_t)ts.tv_sec * PS_NS_PER_S + ts.tv_nsec;
 }
 
-/* --candump: the file and the ring the loop fills, touched now so that the
- * loop's first pushes do not fault pages in. */
-static int open_candump(char *err, size_t len)
+/* --candump, before the loop is built: the ring it fills, touched now so
+ * that the loop's first pushes do not fault pages in. */
+static int alloc_candump_ring(char *err, size_t len)
 {
-    g.frames.out = fopen(g.opt.candump_path, "w");
-    if (g.frames.out == NULL) {
-        const int e = errno;
-        ps_err_format(err, len, "%s: %s", g.opt.candump_path, strerror(e));
-        return -e;
-    }
     const size_t bytes = PS_CANDUMP_RING_SLOTS * sizeof(ps_loop_frame_rec_t);
     g.frame_storage = malloc(bytes);
     if (g.frame_storage == NULL) {
         ps_err_format(err, len, "no memory for the frame ring (%zu bytes)", bytes);
-        (void)fclose(g.frames.out);
-        g.frames.out = NULL;
         return -ENOMEM;
     }
     memset(g.frame_storage, 0, bytes);
     g.frames.ring = &g.frame_ring;
     return ps_ring_init(&g.frame_ring, g.frame_storage, PS_CANDUMP_RING_SLOTS,
                         sizeof(ps_loop_frame_rec_t));
+}
+
+/* --candump, once the configuration is good (an existing log is not
+ * truncated by a run that never starts): every bus name must fit a candump
+ * line, then the file is made. */
+static int open_candump_file(char *err, size_t len)
+{
+    for (uint32_t b = 0; b < g.app.board.n_buses; b++) {
+        const char *name = g.app.board.buses[b].ifname;
+        if (!ps_candump_is_valid_ifname(name)) {
+            ps_err_format(err, len,
+                          "%s: buses[%u].ifname \"%s\" does not fit a candump line (1..15 "
+                          "bytes, no blanks)",
+                          g.app.board_path, b, name);
+            return -EINVAL;
+        }
+        g.frames.ifname[b] = name;
+    }
+    g.frames.n_buses = g.app.board.n_buses;
+    g.frames.out = fopen(g.opt.candump_path, "w");
+    if (g.frames.out == NULL) {
+        const int e = errno;
+        ps_err_format(err, len, "%s: %s", g.opt.candump_path, strerror(e));
+        return -e;
+    }
+    return 0;
 }
 
 /* Report what the log holds and what it lost; -EIO when the file could not
@@ -611,7 +630,7 @@ int main(int argc, char **argv)
         return 2;
     find_data_dir(g.data_dir, sizeof(g.data_dir));
     char err[PS_ERR_MSG_LEN];
-    if (g.opt.candump_path != NULL && open_candump(err, sizeof(err)) < 0) {
+    if (g.opt.candump_path != NULL && alloc_candump_ring(err, sizeof(err)) < 0) {
         fprintf(stderr, "pushstep: --candump: %s\n", err);
         return 2;
     }
@@ -623,7 +642,7 @@ int main(int argc, char **argv)
         .is_lockstep = g.opt.is_lockstep,
         .wake_hist_us = g.opt.hist_us,
         .trace = g.opt.is_trace ? &g.trace : NULL,
-        .frame_ring = g.frames.out != NULL ? &g.frame_ring : NULL,
+        .frame_ring = g.frames.ring,
     };
     ps_trace_init(&g.trace);
     if (g.opt.is_trace && ps_trace_open(&g.trace, NULL, err, sizeof(err)) < 0) {
@@ -639,9 +658,12 @@ int main(int argc, char **argv)
         ps_trace_close(&g.trace);
         return 2;
     }
-    for (uint32_t b = 0; b < g.app.board.n_buses; b++)
-        g.frames.ifname[b] = g.app.board.buses[b].ifname;
-    g.frames.n_buses = g.app.board.n_buses;
+    if (g.opt.candump_path != NULL && open_candump_file(err, sizeof(err)) < 0) {
+        fprintf(stderr, "pushstep: --candump: %s\n", err);
+        ps_app_deinit(&g.app);
+        ps_trace_close(&g.trace);
+        return 2;
+    }
     rc = setup_process_rt();
     if (rc == 0)
         rc = block_stop_signals(SIG_UNBLOCK); /* the loop exists: pending stops land */

@@ -165,7 +165,9 @@ static void test_cli_lockstep_candump_log_has_every_frame(void **state)
     make_temp_file(sum_path, sizeof(sum_path));
     make_temp_file(log_path, sizeof(log_path));
     char args[256];
-    snprintf(args, sizeof(args), "--lockstep --duration 2 --quiet --summary %s --candump %s",
+    /* 10 s: about 190,000 frames, three times the 65,536-frame ring, so that
+     * nothing lost means the logger drained while the loop ran */
+    snprintf(args, sizeof(args), "--lockstep --duration 10 --quiet --summary %s --candump %s",
              sum_path, log_path);
     int rc = run(args);
     if (rc != 0)
@@ -188,8 +190,8 @@ static void test_cli_lockstep_candump_log_has_every_frame(void **state)
         n_lines++;
         if (ps_candump_parse(line, &fr, ifname, sizeof(ifname), err, sizeof(err)) != 0)
             fail_msg("%s line %lu: %s: %s", log_path, n_lines, err, line);
-        /* lockstep time starts at 1 s; 2 s of run and at most 2 s of damping */
-        assert_true(fr.t_ns >= 1000000000LL && fr.t_ns <= 5100000000LL);
+        /* lockstep time starts at 1 s; 10 s of run and at most 2 s of damping */
+        assert_true(fr.t_ns >= 1000000000LL && fr.t_ns <= 13100000000LL);
         int b = 0;
         while (b < n_buses &&
                strcmp(cJSON_GetStringValue(obj(cJSON_GetArrayItem(buses, b), "name")), ifname))
@@ -225,6 +227,31 @@ static void test_cli_lockstep_candump_log_has_every_frame(void **state)
     assert_int_equal(pclose(p), 0);
     assert_int_equal(n_read, n_lines);
     unlink(sum_path);
+    unlink(log_path);
+    /* a bus name a candump line cannot carry: refused before the run, and an
+     * existing log is left as it was */
+    char board[] = "/tmp/ps_cli_board_XXXXXX.yaml";
+    const int bfd = mkstemps(board, 5);
+    assert_true(bfd >= 0);
+    close(bfd);
+    char sed_cmd[512];
+    snprintf(sed_cmd, sizeof(sed_cmd),
+             "sed 's/ifname: can0,/ifname: sixteen_chars_ab,/' boards/sim.yaml > %s && "
+             "echo keep > %s",
+             board, log_path);
+    assert_int_equal(system(sed_cmd), 0);
+    snprintf(args, sizeof(args), "--board %s --lockstep --duration 1 --candump %s", board,
+             log_path);
+    assert_int_equal(run(args), 2);
+    if (strstr(out, "buses[0].ifname \"sixteen_chars_ab\" does not fit") == NULL)
+        fail_msg("want the bus name refused in:\n%s", out);
+    FILE *kept = fopen(log_path, "r");
+    assert_non_null(kept);
+    char first[16] = "";
+    assert_non_null(fgets(first, sizeof(first), kept));
+    fclose(kept);
+    assert_string_equal(first, "keep\n");
+    unlink(board);
     unlink(log_path);
     /* a file that cannot be made: refused before the run, naming it */
     assert_int_equal(run("--lockstep --duration 1 --candump /nonexistent-dir/f.log"), 2);
