@@ -154,6 +154,9 @@ void ps_app_sim_robot(const ps_robot_cfg_t *r, const ps_sim_devices_cfg_t *devic
     }
     out->imu = r->imu;
     out->devices = *devices;
+    memcpy(out->src_path, r->src.path, sizeof(out->src_path));
+    memcpy(out->joint_name_line, r->src.joint_name_line, sizeof(out->joint_name_line));
+    out->model_line = r->src.model_line;
 }
 
 static void hook_setup_thread(void *ctx, unsigned priority, int cpu)
@@ -193,41 +196,6 @@ ps_sim_hooks_t ps_app_sim_hooks(ps_loop_t *loop)
     return h;
 }
 
-/* The model and the robot file disagree (a joint or motor the model lacks,
- * a model that does not load): name the robot file's line of the field, as
- * every other two-file error does. The plant names the joint in quotes. */
-static void name_robot_field(const ps_app_t *app, char *err, size_t len)
-{
-    if (err == NULL || len == 0 || err[0] == '\0' || app->robot.src.path[0] == '\0')
-        return;
-    const ps_robot_src_t *src = &app->robot.src;
-    char field[64] = "";
-    uint32_t line = 0;
-    const char *q = strchr(err, '\'');
-    const char *q2 = q != NULL ? strchr(q + 1, '\'') : NULL;
-    if (q2 != NULL && (strncmp(err, "joint '", 7) == 0 || strncmp(err, "actuator '", 10) == 0)) {
-        for (uint32_t j = 0; j < app->robot.n_joints; j++) {
-            const size_t n = (size_t)(q2 - q - 1);
-            if (n == strnlen(app->robot.joint_name[j], PS_NAME_LEN) &&
-                strncmp(q + 1, app->robot.joint_name[j], n) == 0) {
-                (void)snprintf(field, sizeof(field), "joints[%u].name", j);
-                line = src->joint_name_line[j];
-                break;
-            }
-        }
-    }
-    if (field[0] == '\0') {
-        (void)snprintf(field, sizeof(field), "model");
-        line = src->model_line;
-    }
-    char msg[PS_ERR_MSG_LEN];
-    const bool names_model = strstr(err, app->model_path) != NULL;
-    ps_err_format(msg, sizeof(msg), "%s:%u: %s: %s%s%s%s", src->path, line, field, err,
-                  names_model ? "" : " (model ", names_model ? "" : app->model_path,
-                  names_model ? "" : ")");
-    (void)snprintf(err, len, "%s", msg);
-}
-
 static int wire_sim(ps_app_t *app, ps_loop_cfg_t *lc, char *err, size_t len)
 {
     ps_app_sim_board(&app->board, &app->sim_board);
@@ -242,10 +210,8 @@ static int wire_sim(ps_app_t *app, ps_loop_cfg_t *lc, char *err, size_t len)
         .hooks = ps_app_sim_hooks(&app->loop),
     };
     int rc = ps_sim_create(&sc, &app->sim, err, len);
-    if (rc < 0) {
-        name_robot_field(app, err, len);
+    if (rc < 0)
         return rc;
-    }
     for (uint32_t b = 0; b < app->board.n_buses; b++)
         lc->buses[b] = ps_sim_can_port(app->sim, b);
     lc->gpio = ps_sim_gpio_port(app->sim);

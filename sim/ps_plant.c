@@ -8,6 +8,7 @@
 #include <mujoco/mujoco.h>
 
 #include "../rt/ps_err.h"
+#include "../rt/ps_limits.h"
 
 /* Harness gains: a gantry holding the limp 38 kg robot. 343 N of weight on
  * 20 kN/m sags 1.7 cm at worst; the damping is near critical for the whole
@@ -127,9 +128,53 @@ static double foot_min_z(const ps_plant_t *p)
     return min_z;
 }
 
-static int map_joints(ps_plant_t *p, const ps_plant_cfg_t *robot, char *err, size_t err_len)
+/* Put "FILE:LINE: FIELD: " (the robot file's place of what err is about)
+ * before err, and the model's path after it when err does not name it. */
+static void prefix_robot_source(const ps_plant_cfg_t *robot, uint32_t line, const char *field,
+                                char *err, size_t err_len)
+{
+    if (robot->src_path == NULL || robot->src_path[0] == '\0' || line == 0 || err == NULL ||
+        err_len == 0)
+        return;
+    char msg[PS_ERR_MSG_LEN];
+    const bool names_model = strstr(err, robot->model_path) != NULL;
+    ps_err_format(msg, sizeof(msg), "%s:%u: %s: %s%s%s%s", robot->src_path, line, field, err,
+                  names_model ? "" : " (model ", names_model ? "" : robot->model_path,
+                  names_model ? "" : ")");
+    ps_err_format(err, err_len, "%s", msg);
+}
+
+/* One joint of the robot file: a hinge of the model and the motor driving it. */
+static int map_joint(ps_plant_t *p, const ps_plant_cfg_t *robot, int i, char *err, size_t err_len)
 {
     const mjModel *m = p->m;
+    const char *name = robot->joint_name[i];
+    const int j = mj_name2id(m, mjOBJ_JOINT, name);
+    if (j < 0) {
+        ps_err_format(err, err_len, "joint '%s' not found in the model", name);
+        return -PS_ERR_CONFIG;
+    }
+    if (m->jnt_type[j] != mjJNT_HINGE) {
+        ps_err_format(err, err_len, "joint '%s' is not a hinge", name);
+        return -PS_ERR_CONFIG;
+    }
+    const int a = mj_name2id(m, mjOBJ_ACTUATOR, name);
+    if (a < 0) {
+        ps_err_format(err, err_len, "actuator '%s' not found in the model", name);
+        return -PS_ERR_CONFIG;
+    }
+    if (m->actuator_trntype[a] != mjTRN_JOINT || m->actuator_trnid[2 * a] != j) {
+        ps_err_format(err, err_len, "actuator '%s' does not drive joint '%s'", name, name);
+        return -PS_ERR_CONFIG;
+    }
+    p->qpos_adr[i] = m->jnt_qposadr[j];
+    p->dof_adr[i] = m->jnt_dofadr[j];
+    p->act_id[i] = a;
+    return 0;
+}
+
+static int map_joints(ps_plant_t *p, const ps_plant_cfg_t *robot, char *err, size_t err_len)
+{
     if (robot->n_joints > PS_MAX_JOINTS) {
         ps_err_format(err, err_len, "robot has %u joints, at most %u", robot->n_joints,
                       PS_MAX_JOINTS);
@@ -137,28 +182,14 @@ static int map_joints(ps_plant_t *p, const ps_plant_cfg_t *robot, char *err, siz
     }
     p->n_joints = (int)robot->n_joints;
     for (int i = 0; i < p->n_joints; i++) {
-        const char *name = robot->joint_name[i];
-        const int j = mj_name2id(m, mjOBJ_JOINT, name);
-        if (j < 0) {
-            ps_err_format(err, err_len, "joint '%s' not found in the model", name);
-            return -PS_ERR_CONFIG;
+        const int rc = map_joint(p, robot, i, err, err_len);
+        if (rc < 0) {
+            char field[32];
+            (void)snprintf(field, sizeof(field), "joints[%d].name", i);
+            prefix_robot_source(robot, robot->joint_name_line ? robot->joint_name_line[i] : 0,
+                                field, err, err_len);
+            return rc;
         }
-        if (m->jnt_type[j] != mjJNT_HINGE) {
-            ps_err_format(err, err_len, "joint '%s' is not a hinge", name);
-            return -PS_ERR_CONFIG;
-        }
-        const int a = mj_name2id(m, mjOBJ_ACTUATOR, name);
-        if (a < 0) {
-            ps_err_format(err, err_len, "actuator '%s' not found in the model", name);
-            return -PS_ERR_CONFIG;
-        }
-        if (m->actuator_trntype[a] != mjTRN_JOINT || m->actuator_trnid[2 * a] != j) {
-            ps_err_format(err, err_len, "actuator '%s' does not drive joint '%s'", name, name);
-            return -PS_ERR_CONFIG;
-        }
-        p->qpos_adr[i] = m->jnt_qposadr[j];
-        p->dof_adr[i] = m->jnt_dofadr[j];
-        p->act_id[i] = a;
     }
     return 0;
 }
@@ -280,6 +311,7 @@ int ps_plant_create(const ps_plant_cfg_t *robot, ps_plant_t **out, char *err, si
     if (p->m == NULL) {
         one_line(mj_err);
         ps_err_format(err, err_len, "%s: %s", model_path, mj_err[0] ? mj_err : "load failed");
+        prefix_robot_source(robot, robot->model_line, "model", err, err_len);
         rc = -PS_ERR_PLANT;
         goto fail;
     }
@@ -296,8 +328,10 @@ int ps_plant_create(const ps_plant_cfg_t *robot, ps_plant_t **out, char *err, si
     if (rc < 0)
         goto fail;
     rc = map_bodies(p, err, err_len);
-    if (rc < 0)
+    if (rc < 0) {
+        prefix_robot_source(robot, robot->model_line, "model", err, err_len);
         goto fail;
+    }
 
     place_in_stance(p, robot);
     if (full_warning_count(p->d) != 0) {

@@ -51,6 +51,12 @@ typedef struct {
     uint32_t n_joints;                     /**< robot joints, <= PS_MAX_JOINTS */
     const char (*joint_name)[PS_NAME_LEN]; /**< hinge and motor names, by joint */
     const float *stance_rad;               /**< initial pose, by joint */
+    /* Where the robot file names the model and the joints, so that an error
+     * says FILE:LINE: FIELD: as every configuration error does. NULL or 0:
+     * unknown (a robot built in code), the message goes without. */
+    const char *src_path;
+    const uint32_t *joint_name_line; /**< by joint */
+    uint32_t model_line;
 } ps_plant_cfg_t;
 
 typedef struct {

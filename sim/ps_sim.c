@@ -493,6 +493,9 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
         .n_joints = s->robot.n_joints,
         .joint_name = s->robot.joint_name,
         .stance_rad = s->robot.stance_rad,
+        .src_path = s->robot.src_path,
+        .joint_name_line = s->robot.joint_name_line,
+        .model_line = s->robot.model_line,
     };
     rc = ps_plant_create(&plant_cfg, &s->plant, err, err_len);
     if (rc < 0)

@@ -63,6 +63,7 @@
 #ifndef PS_SIM_H
 #define PS_SIM_H
 
+#include <limits.h>
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -89,6 +90,11 @@ typedef struct {
     float stance_rad[PS_MAX_JOINTS];             /**< initial pose */
     ps_imu_cfg_t imu;
     ps_sim_devices_cfg_t devices;
+    /* Where the robot file names the model and each joint, for the plant's
+     * errors (FILE:LINE: FIELD:); empty or 0: unknown. */
+    char src_path[PATH_MAX];
+    uint32_t joint_name_line[PS_MAX_JOINTS];
+    uint32_t model_line;
 } ps_sim_robot_t;
 
 /** The board as the simulation needs it. */
