@@ -11,8 +11,8 @@ CXX     ?= c++
 # and run the system; TOOL_PKGS are for working with targets (cyclictest,
 # can-utils, libgpiod, C++ for the camera side). `make deps` installs both.
 BUILD_PKGS := gcc libc6-dev make pkg-config libmujoco-dev libcyaml-dev libyaml-dev \
-              libcmocka-dev libcjson-dev
-TOOL_PKGS  := g++ libgpiod-dev rt-tests can-utils
+              libcmocka-dev libcjson-dev libmnl-dev libgpiod-dev
+TOOL_PKGS  := g++ rt-tests can-utils
 # What `make test` needs beyond building: can-utils' log2long reads the
 # candump-format lines the runtime writes (tests/test_candump.c).
 TEST_PKGS  := can-utils
@@ -22,7 +22,7 @@ BENCH_PKGS := stress-ng gnuplot-nox python3
 WARN    := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototypes
 CFLAGS  ?= -O2 -g
 CFLAGS  += -std=c11 -D_GNU_SOURCE -pthread $(WARN) -MMD -MP
-LDLIBS  := -lmujoco -lcyaml -lyaml -lcjson -lm -pthread
+LDLIBS  := -lmujoco -lcyaml -lyaml -lcjson -lmnl -lgpiod -lm -pthread
 SANFLAGS := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
 
 LIB_SRCS  := $(filter-out rt/main.c,$(wildcard rt/*.c drivers/*.c policy/*.c sim/*.c))
@@ -41,8 +41,13 @@ LIB_SANOBJS := $(call SANOBJ,$(LIB_SRCS))
 FAKE_OBJS    := $(call OBJ,$(FAKE_SRCS))
 FAKE_SANOBJS := $(call SANOBJ,$(FAKE_SRCS))
 TEST_BINS := $(addprefix $(BUILD)/tests/,$(SAN_TESTS) $(NOSAN_TESTS))
+# Tests of the real drivers: they need vcan/vxcan and gpio-mockup, so they run
+# inside a Debian kernel booted under qemu (tools/qemu/, docs/testing-hw.md).
+HW_SRCS := $(wildcard tests/hw/test_hw_*.c)
+HW_BINS := $(patsubst tests/hw/%.c,$(BUILD)/tests/hw/%,$(HW_SRCS))
+QEMU_WORK ?= $(BUILD)/qemu
 
-.PHONY: all deps deps-build deps-test deps-bench run test clean format help bench
+.PHONY: all deps deps-build deps-test deps-bench run test test-hw clean format help bench
 all: $(BUILD)/pushstep
 
 help:
@@ -52,7 +57,10 @@ help:
 	@echo "make all     build $(BUILD)/pushstep (default)"
 	@echo "make run     deps + build + run against the simulated crowd, board sim"
 	@echo "             options pass through: make run ARGS=\"--duration 5 --lockstep\""
-	@echo "make test    deps + build + run the whole cmocka suite"
+	@echo "make test    deps + build + run the whole cmocka suite, test-hw included"
+	@echo "             (skipped with a message where qemu cannot be installed)"
+	@echo "make test-hw the real drivers (SocketCAN, libgpiod) in a Debian kernel"
+	@echo "             booted under qemu with vcan, vxcan and gpio-mockup"
 	@echo "make bench   latency beside cyclictest, tick share, bus load, allocations:"
 	@echo "             bench/results/*.json and summary.md (see docs/latency.md)"
 	@echo "make format  clang-format every C source in place"
@@ -89,11 +97,19 @@ $(addprefix $(BUILD)/tests/,$(NOSAN_TESTS)): $(BUILD)/tests/%: $(BUILD)/obj/test
 	@mkdir -p $(@D)
 	$(CC) $(CFLAGS) -o $@ $^ $(LDLIBS) -lcmocka
 
+$(HW_BINS): $(BUILD)/tests/hw/%: $(BUILD)/obj/tests/hw/%.o $(LIB_OBJS) $(FAKE_OBJS)
+	@mkdir -p $(@D)
+	$(CC) $(CFLAGS) -o $@ $^ $(LDLIBS) -lcmocka
+
 run: deps-build $(BUILD)/pushstep
 	$(BUILD)/pushstep --board sim $(ARGS)
 
-test: deps-test $(BUILD)/pushstep $(TEST_BINS)
-	@PUSHSTEP_BIN=$(BUILD)/pushstep bash tools/run-tests.sh tools/check-layers.sh $(TEST_BINS)
+test: deps-test $(BUILD)/pushstep $(TEST_BINS) $(HW_BINS)
+	@PUSHSTEP_BIN=$(BUILD)/pushstep QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh \
+	    tools/check-layers.sh $(TEST_BINS) tools/qemu/test-hw.sh
+
+test-hw: deps-test $(BUILD)/pushstep $(HW_BINS)
+	@PUSHSTEP_BIN=$(BUILD)/pushstep QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh tools/qemu/test-hw.sh
 
 bench: deps-bench $(BUILD)/pushstep
 	@bash bench/run.sh
@@ -104,4 +120,4 @@ format:
 clean:
 	rm -rf $(BUILD)
 
--include $(shell find $(BUILD) -name '*.d' 2>/dev/null)
+-include $(shell find $(BUILD)/obj $(BUILD)/san -name '*.d' -type f 2>/dev/null)

@@ -146,6 +146,11 @@ typedef struct {
                           size_t max);
     /** @return true if f is a reply of the drive a (id, width, and any id field) */
     bool (*match_reply)(const ps_act_cfg_t *a, const ps_can_frame_t *f);
+    /** The receive filter for drive a's replies: a frame of the protocol's id
+     *  width whose identifier equals *out_id on the bits set in *out_mask
+     *  (SocketCAN's CAN_RAW_FILTER rule). It passes every frame match_reply
+     *  accepts, and as few others as the layout allows. */
+    void (*reply_filter)(const ps_act_cfg_t *a, uint32_t *out_id, uint32_t *out_mask);
     /** @post *out motor side, t_ns untouched  @return 0 | -PS_ERR_PROTOCOL malformed */
     int (*decode_reply)(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_act_meas_t *out);
 

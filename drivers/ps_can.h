@@ -3,7 +3,7 @@
  *
  * The loop talks to every CAN bus through a ps_can_port_t: an ops table plus
  * an implementation context. Implementations: drivers/ps_can_socket.c (Linux
- * SocketCAN, later), sim/ps_can_sim.c (simulated wire with bit timing),
+ * SocketCAN), sim/ps_can_sim.c (simulated wire with bit timing),
  * tests/fakes/ps_can_fake.c (scripted). The loop never knows which it has.
  *
  * Only data frames reach the loop: an implementation drops remote (RTR) and
@@ -79,6 +79,15 @@ typedef struct {
     uint64_t n_late;         /**< frames that completed after the tick they were sent in */
     uint64_t n_bits;         /**< bit times used on the wire by both directions */
     double load;             /**< observed bus load, 0..1, since open */
+    /* Error reports of the controller (SocketCAN error frames); 0 where an
+     * implementation has none. */
+    uint64_t n_err_frames;    /**< error reports taken */
+    uint64_t n_bus_off;       /**< times the controller went bus-off */
+    uint64_t n_restarts;      /**< times it came back from bus-off */
+    uint64_t n_prot_errors;   /**< protocol violations and bus errors seen */
+    uint64_t n_no_ack;        /**< transmissions nobody acknowledged */
+    uint64_t n_ctrl_overflow; /**< controller rx/tx buffer overflows */
+    uint64_t n_tx_saturated;  /**< send calls that met a full queue (ENOBUFS/EAGAIN) */
 } ps_can_state_t;
 
 typedef struct {

@@ -272,6 +272,12 @@ static bool mit_match_reply(const ps_act_cfg_t *a, const ps_can_frame_t *f)
     return !f->is_ext && !f->is_fd && f->id == a->reply_id;
 }
 
+static void mit_reply_filter(const ps_act_cfg_t *a, uint32_t *out_id, uint32_t *out_mask)
+{
+    *out_id = a->reply_id;
+    *out_mask = 0x7ffu;
+}
+
 static int mit_decode_reply(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_act_meas_t *out)
 {
     ps_mit_reply_t rep;
@@ -367,6 +373,7 @@ const ps_act_proto_t ps_mit_proto = {
     .encode_cmd = mit_encode_cmd,
     .encode_request = mit_encode_request,
     .match_reply = mit_match_reply,
+    .reply_filter = mit_reply_filter,
     .decode_reply = mit_decode_reply,
     .is_for_drive = mit_is_for_drive,
     .classify_request = mit_classify_request,

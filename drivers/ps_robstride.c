@@ -147,6 +147,13 @@ static bool rs_match_reply(const ps_act_cfg_t *a, const ps_can_frame_t *f)
            (f->id & 0xffu) == (a->reply_id & 0xffu);
 }
 
+/* Type, drive id and host id fixed; the mode and fault bits (23..16) free. */
+static void rs_reply_filter(const ps_act_cfg_t *a, uint32_t *out_id, uint32_t *out_mask)
+{
+    *out_id = ps_robstride_id(PS_ROBSTRIDE_TYPE_FEEDBACK, (a->can_id & 0xffu), a->reply_id);
+    *out_mask = ps_robstride_id(0x1fu, 0xffu, 0xffu);
+}
+
 static int rs_decode_reply(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_act_meas_t *out)
 {
     if (f->len != LEN)
@@ -231,6 +238,7 @@ const ps_act_proto_t ps_robstride_proto = {
     .encode_cmd = rs_encode_cmd,
     .encode_request = rs_encode_request,
     .match_reply = rs_match_reply,
+    .reply_filter = rs_reply_filter,
     .decode_reply = rs_decode_reply,
     .is_for_drive = rs_is_for_drive,
     .classify_request = rs_classify_request,
