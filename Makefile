@@ -27,7 +27,7 @@ SANFLAGS := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-r
 
 LIB_SRCS  := $(filter-out rt/main.c,$(wildcard rt/*.c drivers/*.c policy/*.c sim/*.c))
 MAIN_SRC  := rt/main.c
-FAKE_SRCS := $(wildcard tests/fakes/*.c)
+FAKE_SRCS := $(wildcard tests/fakes/*.c tests/contract/*.c)
 TEST_SRCS := $(wildcard tests/test_*.c)
 # Tests that count allocations or page faults, or need full speed, run without
 # sanitizers (ASan replaces malloc, which the allocation guard interposes).

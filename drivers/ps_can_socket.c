@@ -516,7 +516,7 @@ int ps_can_socket_check_iface(const ps_canbus_bus_cfg_t *bus, const ps_can_socke
         if (is_real)
             check_timing(&e, bus, info);
         else
-            add(&n, "%s is a virtual CAN interface (%s): bitrate not checked", bus->ifname,
+            add(&n, "%s: virtual (%s), bitrate not checked", bus->ifname,
                 info->kind[0] ? info->kind : "unknown kind");
         if (bus->is_fd && info->mtu != CANFD_MTU)
             add(&e, "; %s has mtu %u, CAN FD needs %u: `sudo ip link set %s mtu %u`", bus->ifname,

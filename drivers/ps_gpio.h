@@ -2,7 +2,7 @@
  * ps_gpio: the GPIO port interface (e-stop input, heartbeat output to the
  * drives' power relay, status LED).
  *
- * Implementations: drivers/ps_gpio_gpiod.c (libgpiod v1.6, later),
+ * Implementations: drivers/ps_gpio_gpiod.c (libgpiod v1.6),
  * sim/ps_gpio_sim.c, tests/fakes/ps_gpio_fake.c.
  *
  * E-stop: active when pressed. The loop reads it once a tick, so a press
@@ -10,8 +10,13 @@
  * "pressed since the last read", latched inside the implementation (an edge
  * interrupt or an edge event on real hardware): true if the input is pressed
  * now OR was pressed at any time since the previous read_estop call (the
- * first call: since open). Implementations debounce nothing; the state
- * machine latches e-stop on the first read that says pressed.
+ * first call: since open). The state machine latches e-stop on the first
+ * read that says pressed, so whatever debounce there is lives below this
+ * interface: the gpiod port debounces in software (estop_debounce_us: a
+ * press counts once the line has been pressed for that long without a
+ * break, a glitch shorter than that is ignored; 0 = the first edge counts),
+ * because libgpiod v1 and the v1 kernel interface have none. The sim and
+ * the fake debounce nothing: their lines do not bounce.
  *
  * Heartbeat: the drives' power stage is fed through an external watchdog
  * relay, not switched by a level: the relay keeps power on only while the
@@ -33,13 +38,35 @@
 
 #include "../rt/ps_limits.h"
 
-/** GPIO lines of a board (board file, `gpio:`), for the libgpiod port. */
+/** Bias (pull) of the e-stop input, set when the line is requested. */
+typedef enum {
+    PS_GPIO_BIAS_AS_IS = 0, /**< leave what firmware or device tree set */
+    PS_GPIO_BIAS_PULL_UP,
+    PS_GPIO_BIAS_PULL_DOWN,
+    PS_GPIO_BIAS_DISABLED,
+} ps_gpio_bias_t;
+
+/** The longest e-stop debounce a board may ask for: a contact that bounces
+ *  for longer is broken, and every microsecond of it delays an e-stop. */
+#define PS_GPIO_DEBOUNCE_MAX_US 20000u
+
+/** GPIO lines of a board (board file, `gpio:`), for the libgpiod port. Each
+ *  line is given by offset on the chip or, where its *_name is not empty, by
+ *  the line's name (`gpioinfo` shows both); a zeroed struct plus chip and
+ *  offsets is the old, offset-only configuration. */
 typedef struct {
-    char chip[PS_NAME_LEN]; /**< "gpiochip0" */
-    uint32_t estop_line;
+    char chip[PS_NAME_LEN]; /**< "gpiochip0", a chip label, a number or a /dev path */
+    uint32_t estop_line;    /**< offset; unused when estop_name is set */
     bool is_estop_active_low;
-    uint32_t enable_line;
-    uint32_t led_line;
+    uint32_t enable_line;          /**< heartbeat output; unused when enable_name is set */
+    uint32_t led_line;             /**< unused when led_name is set */
+    char estop_name[PS_NAME_LEN];  /**< "" = use estop_line */
+    char enable_name[PS_NAME_LEN]; /**< "" = use enable_line */
+    char led_name[PS_NAME_LEN];    /**< "" = use led_line */
+    ps_gpio_bias_t estop_bias;
+    /** A change of the e-stop input counts once it has held this long
+     *  (press and release alike); 0 = the first edge counts. */
+    uint32_t estop_debounce_us;
 } ps_gpio_cfg_t;
 
 /** The watchdog relay drops the drives' power when the heartbeat has not

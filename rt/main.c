@@ -21,6 +21,8 @@
 
 #include "../drivers/ps_candump.h"
 #include "ps_app.h"
+#include "ps_emulate.h"
+#include "ps_monitor.h"
 #include "ps_err.h"
 #include "ps_guard.h"
 #include "ps_logger.h"
@@ -78,6 +80,8 @@ static struct {
 static const char USAGE[] =
     "usage: pushstep [options]\n"
     "       pushstep profile [options] [profile options]\n"
+    "       pushstep monitor --board FILE [--log FILE] (see pushstep monitor -h)\n"
+    "       pushstep emulate --board FILE --ifaces IF,... (see pushstep emulate -h)\n"
     "Runs the balance controller's fixed-step loop against a board: real hardware\n"
     "or, for board `sim`, the MuJoCo plant with emulated CAN actuators, IMU and GPIO.\n"
     "\n"
@@ -483,7 +487,7 @@ static int run_loop(ps_summary_t *sum)
                         g.app.board.rt.worker_cpu, g.frames.out != NULL ? &g.frames : NULL);
     if (rc < 0)
         return rc;
-    rc = ps_sim_start(g.app.sim, g.start_ns);
+    rc = g.app.sim != NULL ? ps_sim_start(g.app.sim, g.start_ns) : 0; /* real boards: none */
     if (rc < 0) {
         ps_logger_stop(&g.logger);
         return rc;
@@ -622,6 +626,11 @@ int main(int argc, char **argv)
     /* Line-buffered even into a pipe: whoever reads the output (tee, a
      * supervisor, the tests) sees each transition when it happens. */
     (void)setvbuf(stdout, NULL, _IOLBF, 0); /* before any output: cannot fail */
+    if (argc > 1 && (strcmp(argv[1], "emulate") == 0 || strcmp(argv[1], "monitor") == 0)) {
+        find_data_dir(g.data_dir, sizeof(g.data_dir));
+        return argv[1][0] == 'e' ? ps_emulate_main(argc - 1, argv + 1, g.data_dir)
+                                 : ps_monitor_main(argc - 1, argv + 1, g.data_dir);
+    }
     if (block_stop_signals(SIG_BLOCK) < 0 || install_signals() < 0) {
         fprintf(stderr, "pushstep: cannot install the SIGINT/SIGTERM handler\n");
         return 1;
@@ -658,6 +667,8 @@ int main(int argc, char **argv)
         ps_trace_close(&g.trace);
         return 2;
     }
+    if (g.app.notes[0] != '\0')
+        printf("note: %s\n", g.app.notes);
     if (g.opt.candump_path != NULL && open_candump_file(err, sizeof(err)) < 0) {
         fprintf(stderr, "pushstep: --candump: %s\n", err);
         ps_app_deinit(&g.app);

@@ -8,21 +8,6 @@
 #include "ps_guard.h"
 #include "ps_rtsetup.h"
 
-static bool is_file_arg(const char *arg)
-{
-    size_t n = strlen(arg);
-    return strchr(arg, '/') != NULL || (n > 5 && strcmp(arg + n - 5, ".yaml") == 0);
-}
-
-static void resolve(const char *data_dir, const char *arg, const char *dir, const char *fallback,
-                    char *out, size_t len)
-{
-    if (arg != NULL && is_file_arg(arg))
-        snprintf(out, len, "%s", arg);
-    else
-        snprintf(out, len, "%s/%s/%s.yaml", data_dir, dir, arg ? arg : fallback);
-}
-
 /* The model path in a robot file is relative to the robot file. */
 static void resolve_model_path(ps_app_t *app)
 {
@@ -38,15 +23,15 @@ static void resolve_model_path(ps_app_t *app)
 static int load_configs(ps_app_t *app, const ps_app_opts_t *o, char *err, size_t len)
 {
     const char *dd = o->data_dir ? o->data_dir : ".";
-    resolve(dd, o->board ? o->board : "sim", "boards", "sim", app->board_path,
-            sizeof(app->board_path));
-    resolve(dd, o->robot, "robots", "ps1", app->robot_path, sizeof(app->robot_path));
+    ps_config_resolve(dd, o->board ? o->board : "sim", "boards", "sim", app->board_path,
+                      sizeof(app->board_path));
+    ps_config_resolve(dd, o->robot, "robots", "ps1", app->robot_path, sizeof(app->robot_path));
     int rc = ps_config_load_board(app->board_path, &app->board, err, len);
     if (rc == 0)
         rc = ps_config_load_robot_sim(app->robot_path, &app->robot, &app->robot_sim, err, len);
     if (rc == 0 && (o->scenario != NULL || app->board.kind == PS_BOARD_SIM)) {
-        resolve(dd, o->scenario, "scenarios", "stand", app->scenario_path,
-                sizeof(app->scenario_path));
+        ps_config_resolve(dd, o->scenario, "scenarios", "stand", app->scenario_path,
+                          sizeof(app->scenario_path));
         rc = ps_config_load_scenario(app->scenario_path, &app->scenario, err, len);
     }
     if (rc == 0)
@@ -222,6 +207,88 @@ static int wire_sim(ps_app_t *app, ps_loop_cfg_t *lc, char *err, size_t len)
     return 0;
 }
 
+void ps_app_bus_filters(const ps_robot_cfg_t *r, uint32_t bus_idx, ps_can_socket_cfg_t *out)
+{
+    out->n_filters = 0;
+    for (uint32_t j = 0; j < r->n_joints && out->n_filters < PS_CAN_SOCKET_MAX_FILTERS; j++) {
+        const ps_act_proto_t *p = ps_act_proto_get(r->act[j].protocol);
+        if (r->act[j].bus_idx != bus_idx || p == NULL)
+            continue;
+        ps_can_socket_filter_t *f = &out->filters[out->n_filters++];
+        p->reply_filter(&r->act[j], &f->id, &f->mask);
+        f->is_ext = p->id_bits > 11u;
+    }
+    if (r->imu.bus_idx == bus_idx && out->n_filters + 2u <= PS_CAN_SOCKET_MAX_FILTERS) {
+        out->filters[out->n_filters++] = (ps_can_socket_filter_t){r->imu.base_id, 0x7ffu, false};
+        out->filters[out->n_filters++] =
+            (ps_can_socket_filter_t){r->imu.base_id + 1u, 0x7ffu, false};
+    }
+}
+
+uint32_t ps_app_min_txqueuelen(const ps_robot_cfg_t *r, uint32_t bus_idx)
+{
+    uint32_t frames = 0;
+    for (uint32_t j = 0; j < r->n_joints; j++) {
+        const ps_act_proto_t *p = ps_act_proto_get(r->act[j].protocol);
+        if (r->act[j].bus_idx == bus_idx && p != NULL)
+            frames += p->n_cmd + 1u;
+    }
+    return 2u * frames > 16u ? 2u * frames : 16u;
+}
+
+static void add_note(ps_app_t *app, const char *note)
+{
+    const size_t used = strlen(app->notes);
+    if (note[0] != '\0' && used + 1 < sizeof(app->notes))
+        snprintf(app->notes + used, sizeof(app->notes) - used, "%s%s", used ? "; " : "", note);
+}
+
+static int open_bus(ps_app_t *app, uint32_t b, char *err, size_t len)
+{
+    const ps_canbus_bus_cfg_t *bus = &app->board.buses[b];
+    ps_can_socket_iface_t info;
+    char why[768], note[160];
+    int rc = ps_can_socket_query(bus->ifname, &info, why, sizeof(why));
+    if (rc == 0)
+        rc = ps_can_socket_check_iface(bus, &info, ps_app_min_txqueuelen(&app->robot, b), why,
+                                       sizeof(why), note, sizeof(note));
+    if (rc < 0) {
+        snprintf(err, len, "board %s: bus %u: %s", app->board_path, b, why);
+        return rc;
+    }
+    add_note(app, note);
+    ps_can_socket_cfg_t sc = {.is_fd = bus->is_fd, .bitrate = bus->bitrate};
+    memcpy(sc.ifname, bus->ifname, sizeof(sc.ifname));
+    ps_app_bus_filters(&app->robot, b, &sc);
+    rc = ps_can_socket_open(&app->sockets[b], &sc, why, sizeof(why));
+    if (rc < 0)
+        snprintf(err, len, "board %s: %s", app->board_path, why);
+    else
+        app->n_sockets_open = b + 1u;
+    return rc;
+}
+
+static int wire_linux(ps_app_t *app, ps_loop_cfg_t *lc, char *err, size_t len)
+{
+    for (uint32_t b = 0; b < app->board.n_buses; b++) {
+        int rc = open_bus(app, b, err, len);
+        if (rc < 0)
+            return rc;
+        lc->buses[b] = ps_can_socket_port(&app->sockets[b]);
+    }
+    char why[384];
+    int rc = ps_gpio_gpiod_open(&app->gpiod, &app->board.gpio, why, sizeof(why));
+    if (rc < 0) {
+        snprintf(err, len, "board %s: %s", app->board_path, why);
+        return rc;
+    }
+    app->is_gpiod_open = true;
+    lc->gpio = ps_gpio_gpiod_port(&app->gpiod);
+    lc->clock = ps_clock_monotonic();
+    lc->perf_clock = lc->clock;
+    return 0;
+}
+
 static int wire(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t len)
 {
     ps_loop_cfg_t lc = {
@@ -234,14 +301,8 @@ static int wire(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t len)
         .trace = opts->trace,
         .frame_ring = opts->frame_ring,
     };
-    if (app->board.kind != PS_BOARD_SIM) {
-        snprintf(err, len,
-                 "board %s (%s) is kind linux: the SocketCAN and libgpiod drivers are not "
-                 "part of this build yet; use --board sim",
-                 app->board.name, app->board_path);
-        return -ENOTSUP;
-    }
-    int rc = wire_sim(app, &lc, err, len);
+    int rc = app->board.kind == PS_BOARD_SIM ? wire_sim(app, &lc, err, len)
+                                             : wire_linux(app, &lc, err, len);
     if (rc < 0)
         return rc;
     rc = ps_stand_init(&app->stand, app->robot.n_joints, app->robot.joint_name, app->robot.servo);
@@ -281,5 +342,11 @@ void ps_app_deinit(ps_app_t *app)
 {
     ps_sim_destroy(app->sim);
     app->sim = NULL;
+    for (uint32_t b = 0; b < app->n_sockets_open; b++)
+        ps_can_socket_close(&app->sockets[b]);
+    app->n_sockets_open = 0;
+    if (app->is_gpiod_open)
+        ps_gpio_gpiod_close(&app->gpiod);
+    app->is_gpiod_open = false;
     ps_loop_deinit(&app->loop);
 }

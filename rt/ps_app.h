@@ -2,7 +2,7 @@
  * ps_app: builds a runnable system from the three configuration files, in
  * one place: loads and cross-checks board, robot and scenario, plans the CAN
  * buses, wires the ports of the board's kind (the simulated plant for `sim`;
- * the SocketCAN/libgpiod drivers for `linux` are not built yet), the policy
+ * SocketCAN and libgpiod for `linux`, each interface checked first), the policy
  * slot (standing controller), the record ring and the loop. main() and the
  * end-to-end tests both start the system through here. It is the composition
  * root (with rt/main.c and the config loader): the only application code that
@@ -17,7 +17,9 @@
 #include <limits.h>
 #include <stdbool.h>
 
+#include "../drivers/ps_can_socket.h"
 #include "../drivers/ps_canbus.h"
+#include "../drivers/ps_gpio_gpiod.h"
 #include "../policy/ps_stand.h"
 #include "../sim/ps_sim.h"
 #include "ps_config.h"
@@ -50,7 +52,12 @@ typedef struct {
     ps_canbus_plan_t plan;
     ps_sim_board_t sim_board;
     ps_sim_robot_t sim_robot;
-    ps_sim_t *sim; /**< NULL on real boards */
+    ps_sim_t *sim;                         /**< NULL on real boards */
+    ps_can_socket_t sockets[PS_MAX_BUSES]; /**< linux boards: one per bus */
+    uint32_t n_sockets_open;
+    ps_gpio_gpiod_t gpiod; /**< linux boards */
+    bool is_gpiod_open;
+    char notes[512]; /**< what start-up did not check (virtual CAN interfaces) */
     ps_stand_t stand;
     ps_ring_t ring;
     ps_loop_rec_t ring_storage[PS_APP_RING_SLOTS];
@@ -65,8 +72,10 @@ typedef struct {
 /** Load, check, plan and wire. On a bus budget error the plan in app->plan is
  *  still filled so the caller can show it.
  *  @post err holds one line naming the file/field/bus on failure
- *  @return 0 | -PS_ERR_CONFIG | -PS_ERR_BUS_BUDGET | -ENOENT | -ENOTSUP (linux
- *          board) | -PS_ERR_PLANT | -ENOMEM  @rt INIT, main thread */
+ *  @return 0 | -PS_ERR_CONFIG (also: a CAN interface not set up as the board
+ *          says; err names the `ip link` fix) | -PS_ERR_BUS_BUDGET | -ENOENT
+ *          | -ENODEV, -EPERM, -EBUSY (a CAN socket or GPIO line could not be had)
+ *          | -PS_ERR_PLANT | -ENOMEM  @rt INIT, main thread */
 int ps_app_init(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t err_len);
 
 /** Plan the board's buses for the robot: one source per joint (its
@@ -93,7 +102,17 @@ ps_sim_hooks_t ps_app_sim_hooks(ps_loop_t *loop);
  *  @rt any thread */
 void ps_app_request_start_at(ps_app_t *app, int64_t t_ns);
 
-/** Free the sim. Safe twice and on a failed init.  @rt INIT */
+/** The receive filters of one bus: every joint's replies (its protocol's
+ *  reply_filter) and the IMU's two frames.  @rt INIT */
+void ps_app_bus_filters(const ps_robot_cfg_t *r, uint32_t bus_idx, ps_can_socket_cfg_t *out);
+
+/** Frames a bus's kernel queue must hold: twice the most the loop sends on it
+ *  in one tick (every joint's command frames plus a mode request each), at
+ *  least 16.  @rt INIT */
+uint32_t ps_app_min_txqueuelen(const ps_robot_cfg_t *r, uint32_t bus_idx);
+
+/** Free the sim, close sockets and GPIO lines (heartbeat low). Safe twice and
+ *  on a failed init.  @rt INIT */
 void ps_app_deinit(ps_app_t *app);
 
 #endif /* PS_APP_H */

@@ -85,6 +85,12 @@ struct ps_robot_cfg {
 
 /* ---- loading ---------------------------------------------------------- */
 
+/** The path of a config argument: a path as given (it has a '/' or ends in
+ *  .yaml), else data_dir/dir/NAME.yaml (NAME = arg, or fallback when arg is
+ *  NULL).  @rt INIT */
+void ps_config_resolve(const char *data_dir, const char *arg, const char *dir, const char *fallback,
+                       char *out, size_t len);
+
 /** Load and check a board file. @pre path != NULL
  *  @post *out fully written on success, untouched on failure; err (if not NULL)
  *        holds a one-line message "FILE[:LINE]: [FIELD: ]problem" on failure

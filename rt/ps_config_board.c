@@ -22,19 +22,41 @@ typedef struct {
     uint32_t *data_bitrate;
 } bus_raw_t;
 
+/* The gpio mapping as written: each line by offset or by name, so the
+ * offsets are optional (NULL when absent) and the names empty when absent. */
+typedef struct {
+    char chip[PS_NAME_LEN];
+    uint32_t *estop_line;
+    bool is_estop_active_low;
+    uint32_t *enable_line;
+    uint32_t *led_line;
+    char estop_name[PS_NAME_LEN];
+    char enable_name[PS_NAME_LEN];
+    char led_name[PS_NAME_LEN];
+    ps_gpio_bias_t estop_bias;
+    uint32_t estop_debounce_us;
+} gpio_raw_t;
+
 typedef struct {
     char name[PS_NAME_LEN];
     ps_board_kind_t kind;
     float *bus_budget; /* optional: NULL when absent */
     bus_raw_t *buses;
     uint32_t n_buses;
-    ps_gpio_cfg_t gpio;
+    gpio_raw_t gpio;
     ps_rt_cfg_t rt;
 } board_raw_t;
 
 static const cyaml_strval_t BOARD_KINDS[] = {
     {"sim", PS_BOARD_SIM},
     {"linux", PS_BOARD_LINUX},
+};
+
+static const cyaml_strval_t GPIO_BIASES[] = {
+    {"as-is", PS_GPIO_BIAS_AS_IS},
+    {"pull-up", PS_GPIO_BIAS_PULL_UP},
+    {"pull-down", PS_GPIO_BIAS_PULL_DOWN},
+    {"disabled", PS_GPIO_BIAS_DISABLED},
 };
 
 static const cyaml_schema_field_t BUS_FIELDS[] = {
@@ -47,12 +69,20 @@ static const cyaml_schema_field_t BUS_FIELDS[] = {
 static const cyaml_schema_value_t BUS_SCHEMA = {
     CYAML_VALUE_MAPPING(CYAML_FLAG_DEFAULT, bus_raw_t, BUS_FIELDS),
 };
+/* Each of estop/enable/led: X_line or X_name, exactly one (checked after
+ * the load, gpio_from_raw). */
 static const cyaml_schema_field_t GPIO_FIELDS[] = {
-    CYAML_FIELD_STRING("chip", CYAML_FLAG_DEFAULT, ps_gpio_cfg_t, chip, 1),
-    CYAML_FIELD_UINT("estop_line", CYAML_FLAG_DEFAULT, ps_gpio_cfg_t, estop_line),
-    CYAML_FIELD_BOOL("estop_active_low", CYAML_FLAG_STRICT, ps_gpio_cfg_t, is_estop_active_low),
-    CYAML_FIELD_UINT("enable_line", CYAML_FLAG_DEFAULT, ps_gpio_cfg_t, enable_line),
-    CYAML_FIELD_UINT("led_line", CYAML_FLAG_DEFAULT, ps_gpio_cfg_t, led_line),
+    CYAML_FIELD_STRING("chip", CYAML_FLAG_DEFAULT, gpio_raw_t, chip, 1),
+    CYAML_FIELD_UINT_PTR("estop_line", CYAML_FLAG_OPTIONAL, gpio_raw_t, estop_line),
+    CYAML_FIELD_BOOL("estop_active_low", CYAML_FLAG_STRICT, gpio_raw_t, is_estop_active_low),
+    CYAML_FIELD_UINT_PTR("enable_line", CYAML_FLAG_OPTIONAL, gpio_raw_t, enable_line),
+    CYAML_FIELD_UINT_PTR("led_line", CYAML_FLAG_OPTIONAL, gpio_raw_t, led_line),
+    CYAML_FIELD_STRING("estop_name", CYAML_FLAG_OPTIONAL, gpio_raw_t, estop_name, 1),
+    CYAML_FIELD_STRING("enable_name", CYAML_FLAG_OPTIONAL, gpio_raw_t, enable_name, 1),
+    CYAML_FIELD_STRING("led_name", CYAML_FLAG_OPTIONAL, gpio_raw_t, led_name, 1),
+    CYAML_FIELD_ENUM("estop_bias", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, gpio_raw_t, estop_bias,
+                     GPIO_BIASES, CYAML_ARRAY_LEN(GPIO_BIASES)),
+    CYAML_FIELD_UINT("estop_debounce_us", CYAML_FLAG_OPTIONAL, gpio_raw_t, estop_debounce_us),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_field_t RT_FIELDS[] = {
@@ -89,6 +119,8 @@ static const ps_cfg_rule_t BOARD_RANGES[] = {
     PS_CFG_RULE_U32(0, 0, "gpio.estop_line", ps_board_cfg_t, gpio.estop_line, 0.0, MAX_GPIO_LINE),
     PS_CFG_RULE_U32(0, 0, "gpio.enable_line", ps_board_cfg_t, gpio.enable_line, 0.0, MAX_GPIO_LINE),
     PS_CFG_RULE_U32(0, 0, "gpio.led_line", ps_board_cfg_t, gpio.led_line, 0.0, MAX_GPIO_LINE),
+    PS_CFG_RULE_U32(0, 0, "gpio.estop_debounce_us", ps_board_cfg_t, gpio.estop_debounce_us, 0.0,
+                    PS_GPIO_DEBOUNCE_MAX_US),
     PS_CFG_RULE_U32(0, 0, "rt.priority", ps_board_cfg_t, rt.priority, 0.0, 98.0),
     PS_CFG_RULE_I32(0, 0, "rt.loop_cpu", ps_board_cfg_t, rt.loop_cpu, -1.0, 1023.0),
     PS_CFG_RULE_I32(0, 0, "rt.plant_cpu", ps_board_cfg_t, rt.plant_cpu, -1.0, 1023.0),
@@ -122,22 +154,66 @@ static int check_board(ps_cfg_ctx_t *c, const ps_board_cfg_t *b)
             }
         }
     }
+    /* Lines by offset are compared by offset, lines by name by name; one by
+     * name against one by offset can only be compared on the chip (the port
+     * refuses two roles on one line at open). */
     const struct {
         const char *key;
+        const char *name_key;
         uint32_t line;
+        const char *name;
     } lines[] = {
-        {"gpio.estop_line", b->gpio.estop_line},
-        {"gpio.enable_line", b->gpio.enable_line},
-        {"gpio.led_line", b->gpio.led_line},
+        {"gpio.estop_line", "gpio.estop_name", b->gpio.estop_line, b->gpio.estop_name},
+        {"gpio.enable_line", "gpio.enable_name", b->gpio.enable_line, b->gpio.enable_name},
+        {"gpio.led_line", "gpio.led_name", b->gpio.led_line, b->gpio.led_name},
     };
     for (size_t i = 1; i < sizeof(lines) / sizeof(lines[0]); i++) {
         for (size_t k = 0; k < i; k++) {
-            if (lines[i].line == lines[k].line)
+            const bool is_named_i = lines[i].name[0] != '\0';
+            const bool is_named_k = lines[k].name[0] != '\0';
+            if (!is_named_i && !is_named_k && lines[i].line == lines[k].line)
                 return ps_cfg_fail_field(c, lines[i].key, "line %u already used by %s",
                                          lines[i].line, lines[k].key);
+            if (is_named_i && is_named_k && strcmp(lines[i].name, lines[k].name) == 0)
+                return ps_cfg_fail_field(c, lines[i].name_key, "line \"%s\" already used by %s",
+                                         lines[i].name, lines[k].name_key);
         }
     }
     return 0;
+}
+
+/* One line of the gpio mapping: exactly one of X_line and X_name. */
+static int gpio_line_from_raw(ps_cfg_ctx_t *c, const char *role, const uint32_t *line,
+                              const char *name, uint32_t *out_line)
+{
+    char key[PS_CFG_FIELD_PATH_LEN];
+    if (line != NULL && name[0] != '\0') {
+        (void)snprintf(key, sizeof(key), "gpio.%s_name", role);
+        return ps_cfg_fail_field(c, key, "give gpio.%s_line or gpio.%s_name, not both", role, role);
+    }
+    if (line == NULL && name[0] == '\0')
+        return ps_cfg_fail_field(c, "gpio", "missing field \"%s_line\" (or \"%s_name\")", role,
+                                 role);
+    *out_line = line != NULL ? *line : 0u; /* by name: the offset is unused */
+    return 0;
+}
+
+static int gpio_from_raw(ps_cfg_ctx_t *c, const gpio_raw_t *r, ps_gpio_cfg_t *out)
+{
+    memset(out, 0, sizeof(*out));
+    memcpy(out->chip, r->chip, sizeof(out->chip));
+    out->is_estop_active_low = r->is_estop_active_low;
+    memcpy(out->estop_name, r->estop_name, sizeof(out->estop_name));
+    memcpy(out->enable_name, r->enable_name, sizeof(out->enable_name));
+    memcpy(out->led_name, r->led_name, sizeof(out->led_name));
+    out->estop_bias = r->estop_bias;               /* absent: 0, as-is */
+    out->estop_debounce_us = r->estop_debounce_us; /* absent: 0, no debounce */
+    int rc = gpio_line_from_raw(c, "estop", r->estop_line, r->estop_name, &out->estop_line);
+    if (rc == 0)
+        rc = gpio_line_from_raw(c, "enable", r->enable_line, r->enable_name, &out->enable_line);
+    if (rc == 0)
+        rc = gpio_line_from_raw(c, "led", r->led_line, r->led_name, &out->led_line);
+    return rc;
 }
 
 int ps_config_load_board(const char *path, ps_board_cfg_t *out, char *err, size_t err_len)
@@ -169,8 +245,8 @@ int ps_config_load_board(const char *path, ps_board_cfg_t *out, char *err, size_
             if (r->data_bitrate != NULL && !b.buses[i].is_fd && dbr_without_fd < 0)
                 dbr_without_fd = (int)i;
         }
-        b.gpio = raw->gpio;
         b.rt = raw->rt;
+        rc = gpio_from_raw(&c, &raw->gpio, &b.gpio);
     }
     if (raw != NULL)
         (void)cyaml_free(&c.cyaml, &BOARD_SCHEMA, raw, 0); /* only fails on a NULL schema */

@@ -15,6 +15,7 @@
  *   5. (per file kind) copy, apply defaults, ps_cfg_check_ranges, semantic rules.
  */
 #include "ps_config_common.h"
+#include "ps_config.h"
 
 #include <ctype.h>
 #include <errno.h>
@@ -857,4 +858,19 @@ void ps_cfg_ctx_close(ps_cfg_ctx_t *c)
     tree_free(&c->tree);
     free(c->cyaml_log);
     c->cyaml_log = NULL;
+}
+
+static bool is_file_arg(const char *arg)
+{
+    size_t n = strlen(arg);
+    return strchr(arg, '/') != NULL || (n > 5 && strcmp(arg + n - 5, ".yaml") == 0);
+}
+
+void ps_config_resolve(const char *data_dir, const char *arg, const char *dir, const char *fallback,
+                       char *out, size_t len)
+{
+    if (arg != NULL && is_file_arg(arg))
+        snprintf(out, len, "%s", arg);
+    else
+        snprintf(out, len, "%s/%s/%s.yaml", data_dir, dir, arg ? arg : fallback);
 }

@@ -17,6 +17,7 @@ static const char *const STAGE_NAMES[PS_STAGE_COUNT] = {
     [PS_STAGE_TICK] = "tick",
     [PS_STAGE_TICK_PLAIN] = "tick_plain",
     [PS_STAGE_TICK_POLICY] = "tick_policy",
+    [PS_STAGE_REACTION] = "reaction",
 };
 _Static_assert(sizeof(STAGE_NAMES) / sizeof(STAGE_NAMES[0]) == PS_STAGE_COUNT,
                "one name per stage");
@@ -131,6 +132,8 @@ static bool take_reply(ps_loop_t *loop, uint32_t bus_idx, const ps_can_frame_t *
         }
         m.t_ns = loop->t_deadline_ns;
         loop->meas.joints[j] = m;
+        if (f->t_ns > loop->newest_reply_rx_ns)
+            loop->newest_reply_rx_ns = f->t_ns;
         return true;
     }
     return false;
@@ -222,6 +225,7 @@ static void read_bus_states(ps_loop_t *loop)
 
 static void stage_read(ps_loop_t *loop)
 {
+    loop->newest_reply_rx_ns = 0;
     for (uint32_t b = 0; b < loop->cfg.board->n_buses; b++)
         read_bus(loop, b);
     read_bus_states(loop);
@@ -682,6 +686,11 @@ void ps_loop_tick(ps_loop_t *loop, int64_t deadline_ns)
     int64_t t4 = ps_clock_now_ns(clk);
     stage_write(loop);
     int64_t t5 = ps_clock_now_ns(clk);
+    /* Reply in to commands out, on the clock the receive stamps are on (the
+     * kernel's CLOCK_MONOTONIC on SocketCAN, simulated time on the sim). */
+    if (loop->newest_reply_rx_ns > 0)
+        ps_perf_record(&loop->perf[PS_STAGE_REACTION],
+                       ps_clock_now_ns(loop->cfg.clock) - loop->newest_reply_rx_ns);
 
     ps_perf_record(&loop->perf[PS_STAGE_READ], t1 - t0);
     ps_perf_record(&loop->perf[PS_STAGE_ESTIMATE], t2 - t1);

@@ -92,6 +92,8 @@ typedef enum {
     PS_STAGE_TICK,        /**< read start to write end */
     PS_STAGE_TICK_PLAIN,  /**< PS_STAGE_TICK of ticks without a policy run */
     PS_STAGE_TICK_POLICY, /**< PS_STAGE_TICK of ticks with a policy run */
+    PS_STAGE_REACTION,    /**< receive stamp of the newest reply taken to the end of the
+                               write stage, on the loop's clock; ticks that took a reply */
     PS_STAGE_COUNT
 } ps_stage_t;
 
@@ -221,7 +223,8 @@ typedef struct {
     uint32_t n_tx[PS_MAX_BUSES];
     int64_t t_deadline_ns; /**< deadline of the current tick */
     ps_perf_hist_t perf[PS_STAGE_COUNT];
-    ps_perf_us_hist_t wake_us; /**< wake-up latency, cyclictest's 1-us layout */
+    int64_t newest_reply_rx_ns; /**< this tick's newest reply stamp; 0: none */
+    ps_perf_us_hist_t wake_us;  /**< wake-up latency, cyclictest's 1-us layout */
     ps_loop_counters_t counters;
 } ps_loop_t;
 

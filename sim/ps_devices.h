@@ -129,6 +129,14 @@ int ps_devices_handle_frame(ps_devices_actuator_t *a, const ps_can_frame_t *f, d
 double ps_devices_step_actuator(ps_devices_actuator_t *a, double q_rad, double qd_rad_s,
                                 int64_t now_ns, double dt_s);
 
+/** Offer one frame from bus bus_idx to the drives on that bus (acts[j] is
+ *  joint j, at q_rad[j], qd_rad_s[j]), the first that it addresses takes it.
+ *  @return as ps_devices_handle_frame; -ENOENT when no drive on the bus is
+ *          addressed  @rt RT-SAFE O(n_joints) */
+int ps_devices_route_frame(ps_devices_actuator_t *acts, uint32_t n_joints, uint32_t bus_idx,
+                           const ps_can_frame_t *f, const double *q_rad, const double *qd_rad_s,
+                           ps_can_frame_t *out_reply);
+
 /** @pre cfg->rate_div >= 1  @post biases drawn from seed  @rt INIT */
 void ps_devices_init_imu(ps_devices_imu_t *imu, const ps_imu_cfg_t *cfg,
                          const ps_sim_devices_cfg_t *sim, uint64_t seed);

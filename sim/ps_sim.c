@@ -156,21 +156,12 @@ static void route_frames(ps_sim_t *s)
             ps_can_frame_t tx[RX_BATCH];
             size_t n_tx = 0;
             for (int i = 0; i < n; i++) {
-                bool is_routed = false;
-                for (uint32_t j = 0; j < s->robot.n_joints; j++) {
-                    if (s->robot.act[j].bus_idx != b)
-                        continue;
-                    const int rc = ps_devices_handle_frame(&s->act[j], &rx[i], s->q_rad[j],
-                                                           s->qd_rad_s[j], &tx[n_tx]);
-                    if (rc == -ENOENT)
-                        continue;
-                    is_routed = true;
-                    if (rc == 1)
-                        n_tx++;
-                    break;
-                }
-                if (!is_routed)
+                const int rc = ps_devices_route_frame(s->act, s->robot.n_joints, b, &rx[i],
+                                                      s->q_rad, s->qd_rad_s, &tx[n_tx]);
+                if (rc == -ENOENT)
                     s->n_unrouted++;
+                else if (rc == 1)
+                    n_tx++;
             }
             send_dev(s, b, tx, n_tx);
             if ((unsigned)n < RX_BATCH)

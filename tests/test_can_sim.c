@@ -14,6 +14,7 @@
 #include "../drivers/ps_canbus.h"
 #include "../rt/ps_clock.h"
 #include "../sim/ps_can_sim.h"
+#include "contract/ps_can_contract.h"
 
 #define BITRATE   1000000u
 #define PERIOD_NS 1000000 /* 1 kHz servo tick: 1000 bit times at 1 Mbit/s */
@@ -526,9 +527,62 @@ static void test_two_threads_host_sends_device_echoes(void **state)
     ps_can_sim_destroy(bus);
 }
 
+/* ---- the transport contract every port keeps (tests/contract) ---------- */
+
+static int sim_far_send(void *ctx, const ps_can_frame_t *f)
+{
+    fixture_t *fx = ctx;
+    return ps_can_send_batch(&fx->dev, f, 1) == 1 ? 0 : -EIO;
+}
+
+static int sim_far_recv(void *ctx, ps_can_frame_t *out)
+{
+    fixture_t *fx = ctx;
+    return ps_can_recv_batch(&fx->dev, out, 1);
+}
+
+static void sim_settle(void *ctx)
+{
+    fixture_t *fx = ctx;
+    fx->clk.now_ns += 10 * PERIOD_NS; /* the wire delivers everything in flight */
+}
+
+static int64_t sim_now(void *ctx)
+{
+    fixture_t *fx = ctx;
+    return fx->clk.now_ns;
+}
+
+static void run_contract(fixture_t *f, bool is_fd)
+{
+    const ps_can_contract_t c = {.port = f->host,
+                                 .ctx = f,
+                                 .far_send = sim_far_send,
+                                 .far_recv = sim_far_recv,
+                                 .settle = sim_settle,
+                                 .now_ns = sim_now,
+                                 .is_fd = is_fd};
+    ps_can_contract_check(&c);
+}
+
+static void test_sim_bus_keeps_the_transport_contract(void **state)
+{
+    run_contract(*state, false);
+}
+
+static void test_sim_fd_bus_keeps_the_transport_contract(void **state)
+{
+    fixture_t *f = *state;
+    assert_int_equal(ps_can_sim_set_fd(f->bus, 5000000), 0);
+    run_contract(f, true);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
+        cmocka_unit_test_setup_teardown(test_sim_bus_keeps_the_transport_contract, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_sim_fd_bus_keeps_the_transport_contract, setup,
+                                        teardown),
         cmocka_unit_test_setup_teardown(test_send_batch_one_frame_arrives_after_frame_time, setup,
                                         teardown),
         cmocka_unit_test_setup_teardown(test_send_batch_fd_frame_data_phase_at_data_bitrate, setup,

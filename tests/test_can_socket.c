@@ -170,7 +170,7 @@ static void test_check_on_virtual_and_missing_interfaces(void **state)
                                .txqueuelen = 1000,
                                .can_state = -1};
     assert_int_equal(check(&CAN0, &i, err, note), 0);
-    assert_non_null(strstr(note, "can0 is a virtual CAN interface (vcan): bitrate not checked"));
+    assert_non_null(strstr(note, "can0: virtual (vcan), bitrate not checked"));
     i.is_up = false;
     assert_int_equal(check(&CAN0, &i, err, note), -PS_ERR_CONFIG);
     assert_string_equal(err, "can0 is down: `sudo ip link set can0 up`");

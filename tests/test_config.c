@@ -174,6 +174,8 @@ static void test_load_board_shipped_boards_ok(void **state)
         for (uint32_t b = 0; b < f->board.n_buses; b++)
             assert_int_equal(f->board.buses[b].bitrate, 1000000);
         assert_true(f->board.rt.loop_cpu > 0);
+        /* real e-stop contacts bounce: every real board debounces them */
+        assert_int_equal(f->board.gpio.estop_debounce_us, 2000);
     }
 }
 
@@ -591,6 +593,104 @@ static void test_load_board_gpio_line_reused_rejected(void **state)
     edit(f, "boards/sim.yaml", "led_line: 2", "led_line: 0");
     want(f, "%s:%d: gpio.led_line: line 0 already used by gpio.estop_line", f->path,
          line_of(f, "led_line"));
+    expect_board_error(f);
+}
+
+/* Lines by name instead of offset, with the optional bias and debounce. */
+static void test_load_board_gpio_names_loaded(void **state)
+{
+    fx_t *f = *state;
+    edit(f, BOARD_OK, "estop_line: 4, estop_active_low: false, enable_line: 5, led_line: 6",
+         "estop_name: GPIO17, estop_active_low: false, enable_name: \"GPIO27\", led_line: 6,\n"
+         "       estop_bias: pull-up, estop_debounce_us: 2000");
+    assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)), 0);
+    const ps_gpio_cfg_t *g = &f->board.gpio;
+    assert_string_equal(g->estop_name, "GPIO17");
+    assert_string_equal(g->enable_name, "GPIO27");
+    assert_string_equal(g->led_name, "");
+    assert_int_equal(g->estop_line, 0);
+    assert_int_equal(g->enable_line, 0);
+    assert_int_equal(g->led_line, 6);
+    assert_int_equal(g->estop_bias, PS_GPIO_BIAS_PULL_UP);
+    assert_int_equal(g->estop_debounce_us, 2000);
+
+    /* absent: no name, bias as-is, no debounce */
+    assert_int_equal(ps_config_load_board(BOARD_OK, &f->board, f->err, sizeof(f->err)), 0);
+    assert_string_equal(f->board.gpio.estop_name, "");
+    assert_int_equal(f->board.gpio.estop_bias, PS_GPIO_BIAS_AS_IS);
+    assert_int_equal(f->board.gpio.estop_debounce_us, 0);
+}
+
+static void test_load_board_gpio_debounce_out_of_range_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, BOARD_OK, "led_line: 6}", "led_line: 6, estop_debounce_us: 20001}");
+    want(f, "%s:%d: gpio.estop_debounce_us: value 20001 outside [0, 20000]", f->path,
+         line_of(f, "estop_debounce_us"));
+    expect_board_error(f);
+    edit(f, BOARD_OK, "led_line: 6}", "led_line: 6, estop_debounce_us: -1}");
+    want(f, "%s:%d: gpio.estop_debounce_us: value -1 outside [0, 20000]", f->path,
+         line_of(f, "estop_debounce_us"));
+    expect_board_error(f);
+    edit(f, BOARD_OK, "led_line: 6}", "led_line: 6, estop_debounce_us: 2.5}");
+    want(f, "%s:%d: gpio.estop_debounce_us: value \"2.5\" is not an integer in [0, 20000]", f->path,
+         line_of(f, "estop_debounce_us"));
+    expect_board_error(f);
+    edit(f, BOARD_OK, "led_line: 6}", "led_line: 6, estop_debounce_us: 20000}"); /* the bound */
+    assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)), 0);
+    assert_int_equal(f->board.gpio.estop_debounce_us, 20000);
+}
+
+static void test_load_board_gpio_name_too_long_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, BOARD_OK, "led_line: 6", "led_name: abcdefghijklmnopqrstuvwxyz012345");
+    want(f,
+         "%s:%d: gpio.led_name: string \"abcdefghijklmnopqrstuvwxyz012345\" length 32 "
+         "outside [1, 31]",
+         f->path, line_of(f, "led_name"));
+    expect_board_error(f);
+    edit(f, BOARD_OK, "led_line: 6", "led_name: \"\""); /* written, so not empty */
+    want(f, "%s:%d: gpio.led_name: string \"\" length 0 outside [1, 31]", f->path,
+         line_of(f, "led_name"));
+    expect_board_error(f);
+}
+
+/* Each line by offset or by name: exactly one of the two. */
+static void test_load_board_gpio_line_and_name_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, BOARD_OK, "enable_line: 5", "enable_line: 5, enable_name: GPIO27");
+    want(f, "%s:%d: gpio.enable_name: give gpio.enable_line or gpio.enable_name, not both", f->path,
+         line_of(f, "enable_name"));
+    expect_board_error(f);
+    edit(f, BOARD_OK, "enable_line: 5, ", "");
+    want(f, "%s:%d: gpio: missing field \"enable_line\" (or \"enable_name\")", f->path,
+         line_of(f, "gpio:"));
+    expect_board_error(f);
+}
+
+static void test_load_board_gpio_name_reused_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, BOARD_OK, "estop_line: 4", "estop_name: GPIO17");
+    edit_again(f, "led_line: 6", "led_name: GPIO17");
+    want(f, "%s:%d: gpio.led_name: line \"GPIO17\" already used by gpio.estop_name", f->path,
+         line_of(f, "led_name"));
+    expect_board_error(f);
+    /* a name and an offset are not compared: the port checks them on the chip */
+    edit(f, BOARD_OK, "estop_line: 4", "estop_name: GPIO5");
+    assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)), 0);
+}
+
+static void test_load_board_gpio_bias_unknown_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, BOARD_OK, "led_line: 6}", "led_line: 6, estop_bias: up}");
+    want(f,
+         "%s:%d: gpio.estop_bias: unknown value \"up\" (allowed: as-is, pull-up, pull-down, "
+         "disabled)",
+         f->path, line_of(f, "estop_bias"));
     expect_board_error(f);
 }
 
@@ -1357,6 +1457,12 @@ int main(void)
         T(test_load_board_duplicate_key_rejected),
         T(test_load_board_syntax_error_rejected),
         T(test_load_board_gpio_line_reused_rejected),
+        T(test_load_board_gpio_names_loaded),
+        T(test_load_board_gpio_debounce_out_of_range_rejected),
+        T(test_load_board_gpio_name_too_long_rejected),
+        T(test_load_board_gpio_line_and_name_rejected),
+        T(test_load_board_gpio_name_reused_rejected),
+        T(test_load_board_gpio_bias_unknown_rejected),
         T(test_load_robot_string_for_number_rejected),
         T(test_load_robot_missing_field_rejected),
         T(test_load_robot_duplicate_can_id_rejected),

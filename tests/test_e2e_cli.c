@@ -99,7 +99,8 @@ static void test_cli_help_documents_every_option(void **state)
     static const char *const OPTIONS[] = {
         "--board NAME|FILE", "--robot FILE",        "--scenario FILE", "--duration S",
         "--lockstep",        "--summary FILE.json", "--require-rt",    "--trace",
-        "pushstep profile",  "--stress cpu|mem|io", "--out DIR",       "--hist-us N"};
+        "pushstep profile",  "--stress cpu|mem|io", "--out DIR",       "--hist-us N",
+        "pushstep monitor",  "pushstep emulate",    "--start-after S", "--candump FILE"};
     for (size_t i = 0; i < sizeof(OPTIONS) / sizeof(OPTIONS[0]); i++)
         if (strstr(out, OPTIONS[i]) == NULL)
             fail_msg("--help does not mention %s", OPTIONS[i]);
@@ -569,13 +570,51 @@ static void test_cli_robot_model_mismatch_names_robot_line(void **state)
                           "model", "nope.xml");
 }
 
-static void test_cli_linux_board_says_drivers_missing(void **state)
+/* This machine has no can0: the start-up check says so and how to make one. */
+static void test_cli_linux_board_without_its_interfaces_names_the_fix(void **state)
 {
     (void)state;
     assert_int_equal(run("--board rpi4 --duration 1"), 2);
-    assert_non_null(strstr(out, "SocketCAN"));
+    if (strstr(out, "no interface can0") == NULL || strstr(out, "ip link") == NULL)
+        fail_msg("want the missing interface and an `ip link` command in:\n%s", out);
+    assert_non_null(strstr(out, "boards/rpi4.yaml: bus 0"));
     /* the bus plan of that board was still checked and shown */
     assert_non_null(strstr(out, "bus can0:"));
+}
+
+static void test_cli_monitor_decodes_a_candump_log_per_joint(void **state)
+{
+    (void)state;
+    char log_path[32], args[160];
+    make_temp_file(log_path, sizeof(log_path));
+    snprintf(args, sizeof(args), "--lockstep --duration 2 --quiet --candump %s", log_path);
+    assert_int_equal(run(args), 0);
+    snprintf(args, sizeof(args), "monitor --board sim --log %s --rates", log_path);
+    if (run(args) != 0)
+        fail_msg("monitor:\n%s", out);
+    if (strstr(out, " 0 malformed, 0 unknown") == NULL)
+        fail_msg("every frame of the runtime's own log decodes:\n%s", out);
+    /* l_knee: rate_div 2 at 1 kHz, 500 commands/s while the loop commands it */
+    const char *knee = strstr(out, "\nl_knee ");
+    assert_non_null(knee);
+    unsigned bus;
+    double cmd_hz, reply_hz;
+    assert_int_equal(sscanf(knee, " l_knee %u %lf %lf", &bus, &cmd_hz, &reply_hz), 3);
+    assert_true(cmd_hz > 450.0 && cmd_hz < 520.0);
+    assert_true(reply_hz > 450.0 && reply_hz < 520.0);
+    snprintf(args, sizeof(args), "monitor --board sim --log %s --count 3", log_path);
+    assert_int_equal(run(args), 0);
+    assert_non_null(strstr(out, " can0 l_hip_yaw request enable"));
+    /* a line that is not a candump line: file and line named, status 2 */
+    FILE *f = fopen(log_path, "a");
+    assert_non_null(f);
+    fputs("(3.000000) can0 12#zz\n", f);
+    fclose(f);
+    snprintf(args, sizeof(args), "monitor --board sim --log %s --rates", log_path);
+    assert_int_equal(run(args), 2);
+    assert_non_null(strstr(out, log_path));
+    assert_non_null(strstr(out, "column"));
+    remove(log_path);
 }
 
 /* ---- SIGINT / SIGTERM in every state, in real time ---------------------- */
@@ -764,7 +803,8 @@ int main(void)
         cmocka_unit_test(test_cli_bad_option_exit_2),
         cmocka_unit_test(test_cli_bad_config_names_file_and_field),
         cmocka_unit_test(test_cli_robot_model_mismatch_names_robot_line),
-        cmocka_unit_test(test_cli_linux_board_says_drivers_missing),
+        cmocka_unit_test(test_cli_linux_board_without_its_interfaces_names_the_fix),
+        cmocka_unit_test(test_cli_monitor_decodes_a_candump_log_per_joint),
         cmocka_unit_test(test_cli_sigint_every_state_exits_promptly_status_0),
         cmocka_unit_test(test_cli_sigterm_every_state_exits_promptly_status_0),
     };

@@ -24,6 +24,7 @@
 
 #include "../../drivers/ps_can_socket.h"
 #include "../../rt/ps_err.h"
+#include "../contract/ps_can_contract.h"
 
 static ps_can_socket_t g_sock, g_sock2;
 
@@ -329,7 +330,7 @@ static void test_check_and_send_on_a_downed_interface(void **state)
     const ps_canbus_bus_cfg_t bus = {.ifname = "vcan1", .bitrate = 1000000};
     assert_int_equal(ps_can_socket_check_iface(&bus, &info, 64, err, sizeof err, note, sizeof note),
                      0);
-    assert_non_null(strstr(note, "virtual CAN interface (vcan)"));
+    assert_non_null(strstr(note, "vcan1: virtual (vcan), bitrate not checked"));
     open_sock(&g_sock, "vcan1", false, 0, NULL);
     sh("ip link set vcan1 down && ip link set vcan1 txqueuelen 4");
     assert_int_equal(ps_can_socket_query("vcan1", &info, err, sizeof err), 0);
@@ -375,9 +376,84 @@ static void test_two_buses_in_one_tick_over_a_vxcan_pair(void **state)
     ps_can_socket_close(&g_sock2);
 }
 
+/* ---- the transport contract, as the simulated wire keeps it ------------ */
+
+static int far_send(void *ctx, const ps_can_frame_t *f)
+{
+    const int fd = *(int *)ctx;
+    struct canfd_frame k;
+    memset(&k, 0, sizeof k);
+    k.can_id = f->is_ext ? (f->id | CAN_EFF_FLAG) : f->id;
+    k.len = f->len;
+    k.flags = f->is_brs ? CANFD_BRS : 0;
+    memcpy(k.data, f->data, f->len);
+    const size_t n = f->is_fd ? CANFD_MTU : CAN_MTU;
+    return write(fd, &k, n) == (ssize_t)n ? 0 : -errno;
+}
+
+static int far_recv(void *ctx, ps_can_frame_t *out)
+{
+    const int fd = *(int *)ctx;
+    struct canfd_frame k;
+    const ssize_t n = recv(fd, &k, sizeof k, MSG_DONTWAIT);
+    if (n != CAN_MTU && n != CANFD_MTU)
+        return 0;
+    memset(out, 0, sizeof *out);
+    out->is_ext = (k.can_id & CAN_EFF_FLAG) != 0;
+    out->id = k.can_id & (out->is_ext ? CAN_EFF_MASK : CAN_SFF_MASK);
+    out->is_fd = n == CANFD_MTU;
+    out->is_brs = out->is_fd && (k.flags & CANFD_BRS);
+    out->len = k.len;
+    memcpy(out->data, k.data, k.len);
+    return 1;
+}
+
+static void far_settle(void *ctx)
+{
+    (void)ctx;
+    usleep(5000);
+}
+
+static int64_t far_now(void *ctx)
+{
+    (void)ctx;
+    return mono_ns();
+}
+
+static void run_contract(const char *ifname, bool is_fd)
+{
+    const ps_can_socket_filter_t all[] = {{0, 0, false}, {0, 0, true}};
+    open_sock(&g_sock, ifname, is_fd, 2, all);
+    int peer = peer_open(ifname);
+    const ps_can_contract_t c = {.port = ps_can_socket_port(&g_sock),
+                                 .ctx = &peer,
+                                 .far_send = far_send,
+                                 .far_recv = far_recv,
+                                 .settle = far_settle,
+                                 .now_ns = far_now,
+                                 .is_fd = is_fd};
+    ps_can_contract_check(&c);
+    close(peer);
+    ps_can_socket_close(&g_sock);
+}
+
+static void test_socketcan_keeps_the_transport_contract(void **state)
+{
+    (void)state;
+    run_contract("vcan0", false);
+}
+
+static void test_socketcan_fd_keeps_the_transport_contract(void **state)
+{
+    (void)state;
+    run_contract("vcan1", true);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_socketcan_keeps_the_transport_contract),
+        cmocka_unit_test(test_socketcan_fd_keeps_the_transport_contract),
         cmocka_unit_test(test_filters_pass_only_the_expected_ids_with_monotonic_stamps),
         cmocka_unit_test(test_batches_go_out_in_order_without_blocking),
         cmocka_unit_test(test_fd_frames_both_ways_and_fd_refused_on_a_classical_interface),

@@ -2,14 +2,18 @@
 # Runs inside the test VM (chrooted into the host's root, repository as the
 # current directory): makes the CAN interfaces the hardware tests expect and
 # runs each test binary given. Interfaces: vcan0, vcan1 (FD capable, mtu 72),
-# vcan2 (classical, mtu 16) and the pair vxcan0 <-> vxcan1. A binary that
+# vcan2 (classical, mtu 16) and the pairs vxcan0 <-> vxcan1, vxcan2 <-> vxcan3,
+# vxcan4 <-> vxcan5, vxcan6 <-> vxcan7 (tests/data/boards/vm-vxcan.yaml). A binary that
 # ends without cmocka's summary is reported as one failed test. Exit: 0 when
 # every binary exited 0.
 set -u
 ip link add dev vcan0 type vcan && ip link set vcan0 up
 ip link add dev vcan1 type vcan && ip link set vcan1 up
 ip link add dev vcan2 type vcan && ip link set vcan2 mtu 16 && ip link set vcan2 up
-ip link add vxcan0 type vxcan peer name vxcan1 && ip link set vxcan0 up && ip link set vxcan1 up
+for i in 0 2 4 6; do
+    ip link add vxcan$i type vxcan peer name vxcan$((i + 1)) &&
+        ip link set vxcan$i up && ip link set vxcan$((i + 1)) up
+done
 status=0
 for t in "$@"; do
     echo "=== $(basename "$t") (in the VM)"

@@ -1,0 +1,291 @@
+/*
+ * The whole runtime on the real drivers, in the qemu VM of `make test-hw`:
+ * `pushstep --board tests/data/boards/vm-vxcan.yaml` drives the near ends of
+ * four vxcan pairs through SocketCAN and gpio-mockup's lines through
+ * libgpiod; `pushstep emulate` answers on the far ends as the robot on a
+ * hoist (RobStride legs, MIT waist and arms: tests/data/robots/
+ * ps1-mixed-250hz.yaml), presses the e-stop, plays the heartbeat's watchdog
+ * relay and injects controller error reports. The figures each test prints
+ * are the VM's (qemu TCG: several times slower than a board).
+ */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <fcntl.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#define BIN     "build/pushstep"
+#define BOARD   "tests/data/boards/vm-vxcan.yaml"
+#define ROBOT   "tests/data/robots/ps1-mixed-250hz.yaml"
+#define IFACES  "vxcan1,vxcan3,vxcan5,vxcan7"
+#define GPIO    "/sys/kernel/debug/gpio-mockup/gpiochip0/"
+#define OUT_DIR "build/hw"
+#define TICK_MS 4.0 /* 250 Hz */
+
+static int64_t mono_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (int64_t)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+}
+
+static pid_t spawn(char *const argv[], const char *out_path)
+{
+    pid_t pid = fork();
+    assert_true(pid >= 0);
+    if (pid == 0) {
+        int fd = open(out_path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        if (fd < 0 || dup2(fd, 1) < 0 || dup2(fd, 2) < 0)
+            _exit(127);
+        execv(argv[0], argv);
+        _exit(127);
+    }
+    return pid;
+}
+
+static int wait_exit(pid_t pid)
+{
+    int st = 0;
+    assert_int_equal(waitpid(pid, &st, 0), pid);
+    return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
+}
+
+static const char *slurp(const char *path)
+{
+    static char buf[1 << 17];
+    FILE *f = fopen(path, "r");
+    assert_non_null(f);
+    size_t n = fread(buf, 1, sizeof(buf) - 1, f);
+    buf[n] = '\0';
+    fclose(f);
+    return buf;
+}
+
+static double json_num(const char *json, const char *key)
+{
+    char pat[64];
+    snprintf(pat, sizeof(pat), "\"%s\": ", key);
+    const char *p = strstr(json, pat);
+    if (p == NULL) {
+        print_error("no %s in %s\n", key, json);
+        fail();
+    }
+    return strtod(p + strlen(pat), NULL);
+}
+
+/* The transitions appear in this order in the runtime's output. */
+static void assert_in_order(const char *text, const char *const *steps, size_t n)
+{
+    const char *at = text;
+    for (size_t i = 0; i < n; i++) {
+        const char *p = strstr(at, steps[i]);
+        if (p == NULL) {
+            print_error("'%s' missing (after '%s') in:\n%s\n", steps[i], i ? steps[i - 1] : "",
+                        text);
+            fail();
+        }
+        at = p + strlen(steps[i]);
+    }
+}
+
+static void print_lines_with(const char *text, const char *what)
+{
+    for (const char *p = strstr(text, what); p != NULL; p = strstr(p + 1, what)) {
+        const char *bol = p;
+        while (bol > text && bol[-1] != '\n')
+            bol--;
+        const char *eol = strchr(p, '\n');
+        print_message("  %.*s\n", (int)(eol ? eol - bol : (long)strlen(bol)), bol);
+        if (eol == NULL)
+            break;
+        p = eol;
+    }
+}
+
+/* Heartbeat line changes the emulator saw after t_ns (its last 8), in ms. */
+static int changes_after(const char *json, double t_ns, double *out_ms, int max)
+{
+    const char *arr = strstr(json, "\"heartbeat_last_changes_mono_ns\": [");
+    assert_non_null(arr);
+    arr = strchr(arr, '[') + 1;
+    int n = 0;
+    for (char *end; *arr != ']'; arr = end + (*end == ',' ? 1 : 0)) {
+        const double t = strtod(arr, &end);
+        assert_true(end != arr);
+        if (t > t_ns && n < max)
+            out_ms[n++] = (t - t_ns) * 1e-6;
+    }
+    return n;
+}
+
+static pid_t start_emulator(const char *duration, const char *report, const char *out,
+                            const char *extra1, const char *extra2)
+{
+    char *argv[] = {BIN,
+                    "emulate",
+                    "--board",
+                    BOARD,
+                    "--robot",
+                    ROBOT,
+                    "--ifaces",
+                    IFACES,
+                    "--duration",
+                    (char *)duration,
+                    "--heartbeat-file",
+                    GPIO "1",
+                    "--estop-file",
+                    GPIO "0",
+                    "--report",
+                    (char *)report,
+                    (char *)extra1,
+                    (char *)extra2,
+                    NULL};
+    pid_t pid = spawn(argv, out);
+    usleep(300000); /* its sockets are bound before the runtime's first frame */
+    return pid;
+}
+
+static int setup(void **state)
+{
+    (void)state;
+    mkdir(OUT_DIR, 0755);
+    return 0;
+}
+
+static void test_the_loop_runs_standby_ramp_active_damping_over_socketcan(void **state)
+{
+    (void)state;
+    pid_t emu = start_emulator("8", OUT_DIR "/emu-run.json", OUT_DIR "/emu-run.out", NULL, NULL);
+    char *argv[] = {
+        BIN,          "--board", BOARD,       "--robot",           ROBOT, "--start-after", "1",
+        "--duration", "4",       "--summary", OUT_DIR "/run.json", NULL};
+    pid_t rt = spawn(argv, OUT_DIR "/run.out");
+    sleep(2); /* in ACTIVE: watch the live buses from the runtime's side */
+    char *mon_argv[] = {BIN,   "monitor",    "--board", BOARD,     "--robot",
+                        ROBOT, "--duration", "1.5",     "--rates", NULL};
+    const int mon_rc = wait_exit(spawn(mon_argv, OUT_DIR "/monitor.out"));
+    const int rc = wait_exit(rt);
+    const char *mon = slurp(OUT_DIR "/monitor.out");
+    print_lines_with(mon, "monitor: ");
+    print_lines_with(mon, "l_knee ");
+    assert_int_equal(mon_rc, 0);
+    assert_non_null(strstr(mon, " 0 malformed, 0 unknown"));
+    unsigned bus;
+    double cmd_hz, reply_hz;
+    assert_int_equal(
+        sscanf(strstr(mon, "\nl_knee "), " l_knee %u %lf %lf", &bus, &cmd_hz, &reply_hz), 3);
+    assert_true(cmd_hz > 100.0 && reply_hz > 100.0); /* 250 Hz on a board; the VM lags */
+    const char *out = slurp(OUT_DIR "/run.out");
+    if (rc != 0)
+        print_error("%s\n", out);
+    assert_int_equal(rc, 0);
+    static const char *const steps[] = {"STANDBY -> RAMP", "RAMP -> ACTIVE (RAMP_DONE)",
+                                        "ACTIVE -> DAMPING (REQ_STOP)",
+                                        "DAMPING -> STANDBY (DAMP_DONE"};
+    assert_in_order(out, steps, 4);
+    assert_non_null(strstr(out, "0 mallocs, 0 frees, 0 page faults, 0 locks"));
+    print_lines_with(out, "reaction ");
+    print_lines_with(out, "  tick  ");
+    print_lines_with(out, "overruns (");
+    assert_int_equal(wait_exit(emu), 0);
+    const char *emu_out = slurp(OUT_DIR "/emu-run.out");
+    print_lines_with(emu_out, "emulate: ");
+    const char *j = slurp(OUT_DIR "/emu-run.json");
+    assert_true(json_num(j, "commands") > 1000);
+    assert_int_equal(json_num(j, "unclaimed"), 0);
+    assert_int_equal(json_num(j, "malformed"), 0);
+    assert_true(json_num(j, "replies") >= json_num(j, "commands"));
+}
+
+static void test_an_estop_edge_in_active_limps_the_drives_within_two_ticks(void **state)
+{
+    (void)state;
+    pid_t emu = start_emulator("6", OUT_DIR "/emu-estop.json", OUT_DIR "/emu-estop.out",
+                               "--press-estop-at", "3.5");
+    char *argv[] = {BIN, "--board",    BOARD, "--robot", ROBOT, "--start-after",
+                    "1", "--duration", "4.5", NULL};
+    (void)wait_exit(spawn(argv, OUT_DIR "/estop.out"));
+    assert_int_equal(wait_exit(emu), 0);
+    const char *out = slurp(OUT_DIR "/estop.out");
+    static const char *const steps[] = {"RAMP -> ACTIVE", "ACTIVE -> ESTOP (ESTOP_INPUT"};
+    assert_in_order(out, steps, 2);
+    print_lines_with(slurp(OUT_DIR "/emu-estop.out"), "e-stop");
+    const char *j = slurp(OUT_DIR "/emu-estop.json");
+    const double ms = json_num(j, "estop_reaction_ms");
+    print_message("  e-stop edge -> first limp command: %.3f ms (%.2f ticks of %.0f ms)\n", ms,
+                  ms / TICK_MS, TICK_MS);
+    assert_true(ms >= 0.0);
+    assert_true(ms <= 2.0 * TICK_MS + 1.0); /* two ticks and the 1 ms debounce */
+    /* In ESTOP the loop holds the heartbeat still, so the relay drops power:
+     * after the edge and three ticks, the only change left is the line's
+     * release when the runtime exits. */
+    double after_ms[8];
+    const double quiet_from_ns = json_num(j, "estop_press_mono_ns") + 3.0 * TICK_MS * 1e6;
+    const int n_after = changes_after(j, quiet_from_ns, after_ms, 8);
+    assert_true(n_after <= 1);
+}
+
+static void test_sigkill_stops_the_heartbeat_within_a_few_ticks(void **state)
+{
+    (void)state;
+    pid_t emu = start_emulator("5", OUT_DIR "/emu-kill.json", OUT_DIR "/emu-kill.out", NULL, NULL);
+    char *argv[] = {BIN, "--board",    BOARD, "--robot", ROBOT, "--start-after",
+                    "1", "--duration", "0",   NULL};
+    pid_t rt = spawn(argv, OUT_DIR "/kill.out");
+    sleep(3); /* ACTIVE by now */
+    const int64_t kill_ns = mono_ns();
+    assert_int_equal(kill(rt, SIGKILL), 0);
+    assert_int_equal(wait_exit(rt), 128 + SIGKILL);
+    assert_int_equal(wait_exit(emu), 0);
+    assert_non_null(strstr(slurp(OUT_DIR "/kill.out"), "RAMP -> ACTIVE"));
+    const char *j = slurp(OUT_DIR "/emu-kill.json");
+    /* The line changes for the beats still in flight, then once more when
+     * the kernel releases it at process exit (gpio-mockup resets a released
+     * line to its pull): that release can come late under qemu, it is not a
+     * beat. So: at most two changes after the kill, the beats within two
+     * ticks of it. */
+    double after_ms[8];
+    const int n_after = changes_after(j, (double)kill_ns, after_ms, 8);
+    for (int i = 0; i < n_after; i++)
+        print_message("  SIGKILL -> heartbeat line change %d after %.3f ms%s\n", i + 1, after_ms[i],
+                      i == n_after - 1 ? " (the last: the line released)" : "");
+    assert_true(n_after <= 2);
+    if (n_after == 2)
+        assert_true(after_ms[0] < 2.0 * TICK_MS);
+    assert_true(json_num(j, "heartbeat_stopped_s") > 0.0);
+}
+
+static void test_a_bus_off_report_in_active_is_an_estop(void **state)
+{
+    (void)state;
+    pid_t emu = start_emulator("5", OUT_DIR "/emu-busoff.json", OUT_DIR "/emu-busoff.out",
+                               "--bus-off-at", "3.2");
+    char *argv[] = {BIN, "--board",    BOARD, "--robot", ROBOT, "--start-after",
+                    "1", "--duration", "3.5", NULL};
+    (void)wait_exit(spawn(argv, OUT_DIR "/busoff.out"));
+    assert_int_equal(wait_exit(emu), 0);
+    const char *out = slurp(OUT_DIR "/busoff.out");
+    static const char *const steps[] = {"RAMP -> ACTIVE", "ACTIVE -> ESTOP (BUS_OFF"};
+    assert_in_order(out, steps, 2);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_the_loop_runs_standby_ramp_active_damping_over_socketcan),
+        cmocka_unit_test(test_an_estop_edge_in_active_limps_the_drives_within_two_ticks),
+        cmocka_unit_test(test_sigkill_stops_the_heartbeat_within_a_few_ticks),
+        cmocka_unit_test(test_a_bus_off_report_in_active_is_an_estop),
+    };
+    return cmocka_run_group_tests(tests, setup, NULL);
+}
