@@ -52,8 +52,8 @@
 #include "ps_can.h"
 #include "ps_canbus.h"
 
-/** Kernel filters of one socket: every drive, the IMU, a spare. */
-#define PS_CAN_SOCKET_MAX_FILTERS (PS_MAX_JOINTS + 4u)
+/** Kernel filters of one socket: every drive, the IMU's frames (up to 5), spares. */
+#define PS_CAN_SOCKET_MAX_FILTERS (PS_MAX_JOINTS + 8u)
 /** Frames one recvmmsg/sendmmsg call moves at most. */
 #define PS_CAN_SOCKET_BATCH 64u
 

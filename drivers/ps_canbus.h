@@ -39,8 +39,9 @@
 #define PS_CANBUS_MAX_HYPERPERIOD 64u
 /** Sources the planner takes: every joint and the IMU. */
 #define PS_CANBUS_MAX_SOURCES (PS_MAX_JOINTS + 1u)
-/** Frame shapes one source may put on the wire each time it is due. */
-#define PS_CANBUS_MAX_SOURCE_FRAMES 4u
+/** Frame shapes one source may put on the wire each time it is due (an
+ *  Xsens IMU sample is five). */
+#define PS_CANBUS_MAX_SOURCE_FRAMES 5u
 
 /** One bus of a board. */
 typedef struct {

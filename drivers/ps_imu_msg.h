@@ -17,11 +17,21 @@
 
 #include "ps_can.h"
 
+/** Which IMU message an IMU sends (robot file, `imu.protocol`). */
+typedef enum {
+    PS_IMU_PROTO_PUSHSTEP = 0, /**< this file's two-frame message */
+    PS_IMU_PROTO_XSENS,        /**< Xsens MTi-600 CAN output: drivers/ps_imu_xsens.h */
+    PS_IMU_PROTO_COUNT
+} ps_imu_proto_id_t;
+
 /** Where the IMU sits on the wire (robot file, `imu:`). */
 typedef struct {
     uint32_t bus_idx;
-    uint32_t base_id;  /**< gyro frame on base_id, accel frame on base_id + 1 (11-bit) */
+    uint32_t base_id;  /**< pushstep: gyro frame on base_id, accel frame on base_id + 1;
+                            xsens: the SampleTime message's id (default 0x005), the
+                            others at their default offsets from it (11-bit) */
     uint32_t rate_div; /**< one sample every rate_div servo ticks */
+    ps_imu_proto_id_t protocol;
 } ps_imu_cfg_t;
 
 #define PS_IMU_GYRO_LSB_RAD_S       0.001f

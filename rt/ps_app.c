@@ -104,8 +104,11 @@ int ps_app_plan_buses(const ps_board_cfg_t *b, const ps_robot_cfg_t *r, ps_canbu
     imu->name = "imu";
     imu->bus_idx = r->imu.bus_idx;
     imu->rate_div = r->imu.rate_div;
-    imu->n_frames = 2; /* gyro and accel frames per sample */
-    imu->frames[0] = imu->frames[1] = (ps_canbus_frame_shape_t){.len = 8};
+    uint32_t imu_ids[PS_IMU_MAX_FRAMES];
+    uint8_t imu_lens[PS_IMU_MAX_FRAMES];
+    imu->n_frames = ps_imu_frames(&r->imu, imu_ids, imu_lens); /* one sample's frames */
+    for (uint32_t k = 0; k < imu->n_frames; k++)
+        imu->frames[k] = (ps_canbus_frame_shape_t){.len = imu_lens[k]};
     const ps_canbus_cfg_t cfg = {
         .n_buses = b->n_buses,
         .buses = b->buses,
@@ -218,11 +221,11 @@ void ps_app_bus_filters(const ps_robot_cfg_t *r, uint32_t bus_idx, ps_can_socket
         p->reply_filter(&r->act[j], &f->id, &f->mask);
         f->is_ext = p->id_bits > 11u;
     }
-    if (r->imu.bus_idx == bus_idx && out->n_filters + 2u <= PS_CAN_SOCKET_MAX_FILTERS) {
-        out->filters[out->n_filters++] = (ps_can_socket_filter_t){r->imu.base_id, 0x7ffu, false};
-        out->filters[out->n_filters++] =
-            (ps_can_socket_filter_t){r->imu.base_id + 1u, 0x7ffu, false};
-    }
+    uint32_t ids[PS_IMU_MAX_FRAMES];
+    uint8_t lens[PS_IMU_MAX_FRAMES];
+    const unsigned n_imu = r->imu.bus_idx == bus_idx ? ps_imu_frames(&r->imu, ids, lens) : 0u;
+    for (unsigned k = 0; k < n_imu && out->n_filters < PS_CAN_SOCKET_MAX_FILTERS; k++)
+        out->filters[out->n_filters++] = (ps_can_socket_filter_t){ids[k], 0x7ffu, false};
 }
 
 uint32_t ps_app_min_txqueuelen(const ps_robot_cfg_t *r, uint32_t bus_idx)

@@ -80,8 +80,8 @@ int ps_app_init(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t err_
 
 /** Plan the board's buses for the robot: one source per joint (its
  *  protocol's command and reply frames, at its rate_div; source index = joint
- *  index) and one for the IMU (two classical 8-byte frames; source index =
- *  n_joints). @return as ps_canbus_plan  @rt INIT */
+ *  index) and one for the IMU (its protocol's frames of one sample; source
+ *  index = n_joints). @return as ps_canbus_plan  @rt INIT */
 int ps_app_plan_buses(const ps_board_cfg_t *b, const ps_robot_cfg_t *r, ps_canbus_plan_t *out,
                       char *err, size_t err_len);
 
@@ -103,7 +103,7 @@ ps_sim_hooks_t ps_app_sim_hooks(ps_loop_t *loop);
 void ps_app_request_start_at(ps_app_t *app, int64_t t_ns);
 
 /** The receive filters of one bus: every joint's replies (its protocol's
- *  reply_filter) and the IMU's two frames.  @rt INIT */
+ *  reply_filter) and each frame of the IMU's message.  @rt INIT */
 void ps_app_bus_filters(const ps_robot_cfg_t *r, uint32_t bus_idx, ps_can_socket_cfg_t *out);
 
 /** Frames a bus's kernel queue must hold: twice the most the loop sends on it

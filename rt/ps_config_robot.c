@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "ps_config_common.h"
+#include "../drivers/ps_imu.h"
 #include "ps_config_sim.h"
 #include "ps_err.h"
 
@@ -92,7 +93,8 @@ typedef struct {
     uint32_t n_drivers;
     driver_raw_t drivers[MAX_DRIVERS];
     char joint_driver[PS_MAX_JOINTS][PS_NAME_LEN];
-    id_use_t id_uses[2u * PS_MAX_JOINTS + 2u]; /* command + reply per joint, IMU's two */
+    id_use_t
+        id_uses[2u * PS_MAX_JOINTS + PS_IMU_MAX_FRAMES]; /* command + reply per joint, the IMU's */
 } robot_work_t;
 
 /* The protocol words of the robot file are the protocols' own names
@@ -122,7 +124,13 @@ static const cyaml_schema_field_t CONTROL_FIELDS[] = {
     CYAML_FIELD_FLOAT("hold_s", CYAML_FLAG_DEFAULT, control_file_t, hold_s),
     CYAML_FIELD_END,
 };
+static const cyaml_strval_t IMU_PROTOCOLS[] = {
+    {"pushstep", PS_IMU_PROTO_PUSHSTEP},
+    {"xsens", PS_IMU_PROTO_XSENS},
+};
 static const cyaml_schema_field_t IMU_FIELDS[] = {
+    CYAML_FIELD_ENUM("protocol", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, ps_imu_cfg_t, protocol,
+                     IMU_PROTOCOLS, CYAML_ARRAY_LEN(IMU_PROTOCOLS)),
     CYAML_FIELD_UINT("bus", CYAML_FLAG_DEFAULT, ps_imu_cfg_t, bus_idx),
     CYAML_FIELD_UINT("base_id", CYAML_FLAG_DEFAULT, ps_imu_cfg_t, base_id),
     CYAML_FIELD_UINT("rate_div", CYAML_FLAG_DEFAULT, ps_imu_cfg_t, rate_div),
@@ -556,11 +564,22 @@ static int check_robot(ps_cfg_ctx_t *c, robot_work_t *w)
     char field[PS_CFG_FIELD_PATH_LEN];
     id_use_t *uses = w->id_uses;
     uint32_t n_uses = 0;
-    rc = claim_id(c, uses, &n_uses, w->cfg.imu.bus_idx, w->cfg.imu.base_id, false, "imu.base_id",
-                  "imu.base_id");
-    if (rc == 0)
-        rc = claim_id(c, uses, &n_uses, w->cfg.imu.bus_idx, w->cfg.imu.base_id + 1u, false,
-                      "imu.base_id+1", "imu.base_id");
+    /* Every frame of the IMU's message has an identifier of its own. */
+    uint32_t imu_ids[PS_IMU_MAX_FRAMES];
+    uint8_t imu_lens[PS_IMU_MAX_FRAMES];
+    const unsigned n_imu = ps_imu_frames(&w->cfg.imu, imu_ids, imu_lens);
+    for (unsigned k = 0; k < n_imu && rc == 0; k++) {
+        char owner[PS_CFG_FIELD_PATH_LEN];
+        (void)snprintf(owner, sizeof(owner), "imu.base_id+%u", imu_ids[k] - w->cfg.imu.base_id);
+        if (imu_ids[k] > MAX_CAN_ID)
+            return ps_cfg_fail_field(c, "imu.base_id",
+                                     "value 0x%x puts the %s IMU's frame %s at 0x%x, beyond 11 "
+                                     "bits",
+                                     w->cfg.imu.base_id, ps_imu_proto_name(w->cfg.imu.protocol),
+                                     owner, imu_ids[k]);
+        rc = claim_id(c, uses, &n_uses, w->cfg.imu.bus_idx, imu_ids[k], false,
+                      k ? owner : "imu.base_id", "imu.base_id");
+    }
     for (uint32_t i = 0; i < w->cfg.n_joints && rc == 0; i++) {
         const joint_file_t *j = &w->cfg.joints[i];
         const bool is_ext = ps_act_proto_get(j->protocol)->id_bits > 11u;

@@ -373,10 +373,11 @@ static void step(int64_t now)
         send_error_report(CAN_ERR_BUSOFF);
     if (is_due(e.o.restart_at_s, &e.is_restart_sent, now))
         send_error_report(CAN_ERR_RESTARTED);
-    ps_can_frame_t imu[2];
-    if (ps_hoist_step(&e.hoist, now, (double)e.period_ns * 1e-9, imu) == 2) {
+    ps_can_frame_t imu[PS_IMU_MAX_FRAMES];
+    const int n_imu = ps_hoist_step(&e.hoist, now, (double)e.period_ns * 1e-9, imu);
+    if (n_imu > 0) {
         ps_can_port_t port = ps_can_socket_port(&e.sock[e.hoist.imu_bus_idx]);
-        (void)ps_can_send_batch(&port, imu, 2);
+        (void)ps_can_send_batch(&port, imu, (size_t)n_imu);
     }
     bool is_pressed = e.estop_press_ns != 0;
     if (e.estop_fd >= 0 && is_due(e.o.press_estop_at_s, &is_pressed, now))

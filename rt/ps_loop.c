@@ -59,7 +59,8 @@ static bool is_schedule_valid(const ps_board_cfg_t *b, const ps_robot_cfg_t *r)
             p->n_cmd > PS_ACT_MAX_FRAMES || ps_act_check_cfg(a, NULL, 0) < 0)
             return false;
     }
-    return r->imu.bus_idx < b->n_buses && r->imu.rate_div != 0 && r->imu.base_id < PS_CAN_SFF_MASK;
+    return r->imu.bus_idx < b->n_buses && r->imu.rate_div != 0 &&
+           r->imu.base_id < PS_CAN_SFF_MASK && r->imu.protocol < PS_IMU_PROTO_COUNT;
 }
 
 int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg)
@@ -99,7 +100,7 @@ int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg)
     build_reply_table(loop);
     for (uint32_t j = 0; j < PS_MAX_JOINTS; j++)
         loop->fault_grace_until_ns[j] = INT64_MAX; /* drives not enabled yet */
-    ps_imu_msg_rx_init(&loop->imu_rx, cfg->robot->imu.base_id);
+    ps_imu_rx_init(&loop->imu_rx, &cfg->robot->imu);
     for (int s = 0; s < PS_STAGE_COUNT; s++)
         ps_perf_reset(&loop->perf[s]);
     rc = ps_perf_us_reset(&loop->wake_us, cfg->wake_hist_us ? cfg->wake_hist_us : 1000u);
@@ -153,7 +154,7 @@ static void take_frame(ps_loop_t *loop, uint32_t bus_idx, const ps_can_frame_t *
         return;
     }
     ps_imu_sample_t sample;
-    int rc = ps_imu_msg_rx_feed(&loop->imu_rx, f, &sample);
+    int rc = ps_imu_rx_feed(&loop->imu_rx, f, &sample);
     if (rc == -ENOENT) {
         loop->counters.n_rx_unknown++;
     } else if (rc < 0) {

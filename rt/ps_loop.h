@@ -43,7 +43,7 @@
 #include "../drivers/ps_can.h"
 #include "../drivers/ps_canbus.h"
 #include "../drivers/ps_gpio.h"
-#include "../drivers/ps_imu_msg.h"
+#include "../drivers/ps_imu.h"
 #include "../policy/ps_estimate.h"
 #include "../policy/ps_policy.h"
 #include "../policy/ps_servo.h"
@@ -212,7 +212,7 @@ typedef struct {
     uint32_t bus_off_mask;
     uint8_t bus_joint[PS_MAX_BUSES][PS_MAX_JOINTS]; /**< joints on each bus, in order */
     uint32_t n_bus_joints[PS_MAX_BUSES];
-    ps_imu_msg_rx_t imu_rx;
+    ps_imu_rx_t imu_rx;
     bool has_imu_seq;
     uint8_t imu_seq; /**< seq of the last IMU sample taken */
     ps_can_frame_t rx_buf[64];

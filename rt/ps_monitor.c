@@ -25,7 +25,7 @@ static const char *const REQUEST_NAMES[PS_ACT_REQ_COUNT] = {
 void ps_monitor_init(ps_monitor_t *m, const ps_robot_cfg_t *r)
 {
     memset(m, 0, sizeof(*m));
-    ps_imu_msg_rx_init(&m->imu_rx, r->imu.base_id);
+    ps_imu_rx_init(&m->imu_rx, &r->imu);
 }
 
 static void raw(const ps_can_frame_t *f, char *out, size_t len)
@@ -91,11 +91,22 @@ static int describe_joint(const ps_robot_cfg_t *r, uint32_t bus_idx, const ps_ca
     return 0;
 }
 
+static bool is_imu_id(const ps_imu_cfg_t *imu, const ps_can_frame_t *f)
+{
+    uint32_t ids[PS_IMU_MAX_FRAMES];
+    uint8_t lens[PS_IMU_MAX_FRAMES];
+    const unsigned n = ps_imu_frames(imu, ids, lens);
+    for (unsigned i = 0; i < n && !f->is_ext; i++)
+        if (f->id == ids[i])
+            return true;
+    return false;
+}
+
 static ps_monitor_kind_t describe_imu(ps_monitor_t *m, const ps_can_frame_t *f, char *out,
                                       size_t len)
 {
     ps_imu_sample_t s;
-    const int rc = ps_imu_msg_rx_feed(&m->imu_rx, f, &s);
+    const int rc = ps_imu_rx_feed(&m->imu_rx, f, &s);
     if (rc == 1) {
         snprintf(out, len,
                  "imu sample %u gyro %+.3f %+.3f %+.3f rad/s accel %+.3f %+.3f %+.3f m/s2 %d C "
@@ -106,7 +117,10 @@ static ps_monitor_kind_t describe_imu(ps_monitor_t *m, const ps_can_frame_t *f, 
         return PS_MONITOR_IMU;
     }
     if (rc == 0) {
-        snprintf(out, len, "imu gyro half (seq %u)", f->len == 8 ? f->data[6] : 0u);
+        if (m->imu_rx.protocol == PS_IMU_PROTO_XSENS)
+            snprintf(out, len, "imu xsens frame %03X [%u] of a sample", f->id, f->len);
+        else
+            snprintf(out, len, "imu gyro half (seq %u)", f->len == 8 ? f->data[6] : 0u);
         return PS_MONITOR_IMU;
     }
     snprintf(out, len, "imu malformed frame %03X [%u] (wrong length or unpaired seq)", f->id,
@@ -122,8 +136,7 @@ ps_monitor_kind_t ps_monitor_describe(ps_monitor_t *m, const ps_robot_cfg_t *r, 
     ps_monitor_kind_t kind = PS_MONITOR_UNKNOWN;
     if (describe_joint(r, bus_idx, f, out_joint, out, len, &kind))
         return kind;
-    if (bus_idx == r->imu.bus_idx && !f->is_ext &&
-        (f->id == r->imu.base_id || f->id == r->imu.base_id + 1u))
+    if (bus_idx == r->imu.bus_idx && is_imu_id(&r->imu, f))
         return describe_imu(m, f, out, len);
     raw(f, out, len);
     return PS_MONITOR_UNKNOWN;

@@ -7,7 +7,7 @@
  * half or sample; anything else as raw bytes, marked unknown. With --rates
  * it prints, per joint, commands and replies per second instead.
  *
- * The decoding is the runtime's own (drivers/ps_actuator, ps_imu_msg): the
+ * The decoding is the runtime's own (drivers/ps_actuator, ps_imu): the
  * monitor shows what the loop would understand.
  *
  * Threads: main thread. Allocation: none after start-up.
@@ -19,7 +19,7 @@
 #include <stdint.h>
 
 #include "../drivers/ps_can.h"
-#include "../drivers/ps_imu_msg.h"
+#include "../drivers/ps_imu.h"
 #include "ps_config.h"
 
 typedef enum {
@@ -33,7 +33,7 @@ typedef enum {
 
 /** State the decoder keeps: the IMU's half samples. */
 typedef struct {
-    ps_imu_msg_rx_t imu_rx;
+    ps_imu_rx_t imu_rx;
 } ps_monitor_t;
 
 /** @rt INIT */

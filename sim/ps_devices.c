@@ -3,7 +3,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "../drivers/ps_imu_msg.h"
+#include "../drivers/ps_imu.h"
 #include "../rt/ps_clock.h"
 #include "../rt/ps_err.h"
 
@@ -240,7 +240,8 @@ void ps_devices_init_imu(ps_devices_imu_t *imu, const ps_imu_cfg_t *cfg,
 }
 
 int ps_devices_tick_imu(ps_devices_imu_t *imu, uint64_t tick, const double gyro_rad_s[3],
-                        const double accel_m_s2[3], int64_t t_ns, ps_can_frame_t out[2])
+                        const double accel_m_s2[3], int64_t t_ns,
+                        ps_can_frame_t out[PS_IMU_MAX_FRAMES])
 {
     const uint32_t div = imu->cfg.rate_div > 0 ? imu->cfg.rate_div : 1u;
     if (tick % div != 0)
@@ -253,12 +254,12 @@ int ps_devices_tick_imu(ps_devices_imu_t *imu, uint64_t tick, const double gyro_
                                         (double)imu->sim.accel_noise_m_s2 * gaussian(imu->rng));
     }
     s.temp_c = to_int8_c((double)imu->sim.ambient_c);
-    ps_imu_msg_encode(imu->cfg.base_id, &s, out);
-    out[0].t_ns = t_ns;
-    out[1].t_ns = t_ns;
+    const int n = ps_imu_encode(&imu->cfg, &s, (uint32_t)imu->n_samples, t_ns, out);
+    for (int i = 0; i < n; i++)
+        out[i].t_ns = t_ns;
     imu->seq++;
     imu->n_samples++;
-    return 2;
+    return n;
 }
 
 int ps_devices_route_frame(ps_devices_actuator_t *acts, uint32_t n_joints, uint32_t bus_idx,

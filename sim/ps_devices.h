@@ -33,7 +33,7 @@
  *  - drop_replies_until_ns: fault injection, replies to frames arriving before
  *    this time are suppressed while the commands are still obeyed.
  *
- * IMU: every rate_div servo ticks one sample (two frames, ps_imu_msg_encode)
+ * IMU: every rate_div servo ticks one sample (in the IMU's protocol, ps_imu_encode)
  * of the ideal readings plus white Gaussian noise (sigma from robot->sim) and
  * a constant bias per axis drawn uniformly in [-bias, +bias] at init, all from
  * a xoshiro256** generator seeded through splitmix64 from the scenario seed:
@@ -53,7 +53,7 @@
 
 #include "../drivers/ps_actuator.h"
 #include "../drivers/ps_can.h"
-#include "../drivers/ps_imu_msg.h"
+#include "../drivers/ps_imu.h"
 
 /** Parameters of the emulated devices (board `sim` only). */
 typedef struct {
@@ -142,11 +142,12 @@ void ps_devices_init_imu(ps_devices_imu_t *imu, const ps_imu_cfg_t *cfg,
                          const ps_sim_devices_cfg_t *sim, uint64_t seed);
 
 /** Servo tick `tick` (0 at start): when tick % rate_div == 0, sample the ideal
- *  readings with bias and noise and encode the two frames stamped t_ns.
- *  @post out[0] gyro, out[1] accel when 2 is returned
- *  @return 2 frames written | 0 no sample this tick  @units rad/s, m/s^2, ns
+ *  readings with bias and noise and encode them in the IMU's protocol
+ *  (ps_imu_encode: two frames for pushstep, five for xsens) stamped t_ns.
+ *  @return frames written | 0 no sample this tick  @units rad/s, m/s^2, ns
  *  @rt RT-SAFE O(1), plant thread */
 int ps_devices_tick_imu(ps_devices_imu_t *imu, uint64_t tick, const double gyro_rad_s[3],
-                        const double accel_m_s2[3], int64_t t_ns, ps_can_frame_t out[2]);
+                        const double accel_m_s2[3], int64_t t_ns,
+                        ps_can_frame_t out[PS_IMU_MAX_FRAMES]);
 
 #endif /* PS_DEVICES_H */

@@ -34,7 +34,8 @@ int ps_hoist_take_frame(ps_hoist_t *h, uint32_t bus_idx, const ps_can_frame_t *f
     return rc;
 }
 
-int ps_hoist_step(ps_hoist_t *h, int64_t now_ns, double dt_s, ps_can_frame_t out_imu[2])
+int ps_hoist_step(ps_hoist_t *h, int64_t now_ns, double dt_s,
+                  ps_can_frame_t out_imu[PS_IMU_MAX_FRAMES])
 {
     for (uint32_t j = 0; j < h->n_joints; j++) {
         const double tau =

@@ -57,10 +57,11 @@ void ps_hoist_init(ps_hoist_t *h, const ps_sim_robot_t *robot, uint64_t seed);
 int ps_hoist_take_frame(ps_hoist_t *h, uint32_t bus_idx, const ps_can_frame_t *f,
                         ps_can_frame_t *out_reply);
 
-/** Advance every joint by dt_s ending at now_ns; on IMU ticks write its two
- *  frames (bus: h->imu_bus_idx).  @return 2 IMU frames written | 0
+/** Advance every joint by dt_s ending at now_ns; on IMU ticks write its
+ *  frames (bus: h->imu_bus_idx).  @return IMU frames written | 0
  *  @units s, ns  @rt RT-SAFE O(joints) */
-int ps_hoist_step(ps_hoist_t *h, int64_t now_ns, double dt_s, ps_can_frame_t out_imu[2]);
+int ps_hoist_step(ps_hoist_t *h, int64_t now_ns, double dt_s,
+                  ps_can_frame_t out_imu[PS_IMU_MAX_FRAMES]);
 
 /** Power of every drive (the relay).  @rt RT-SAFE */
 void ps_hoist_set_power(ps_hoist_t *h, bool is_powered);

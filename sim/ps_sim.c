@@ -181,10 +181,11 @@ static void substep(ps_sim_t *s, int64_t t_dev_ns, int64_t rel_ns)
     if (rel_ns % s->period_ns == 0) {
         double gyro[3], accel[3];
         ps_plant_get_imu(s->plant, gyro, accel);
-        ps_can_frame_t f[2];
+        ps_can_frame_t f[PS_IMU_MAX_FRAMES];
         const uint64_t tick = (uint64_t)(rel_ns / s->period_ns);
-        if (ps_devices_tick_imu(&s->imu, tick, gyro, accel, t_dev_ns, f) == 2)
-            send_dev(s, s->robot.imu.bus_idx, f, 2);
+        const int n = ps_devices_tick_imu(&s->imu, tick, gyro, accel, t_dev_ns, f);
+        if (n > 0)
+            send_dev(s, s->robot.imu.bus_idx, f, (size_t)n);
     }
 
     /* The drives' power stage is fed through the watchdog relay: without the

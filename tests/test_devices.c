@@ -437,7 +437,7 @@ static void test_tick_imu_rate_div_frames_ids_and_seq(void **state)
     ps_devices_imu_t imu;
     ps_devices_init_imu(&imu, &cfg, &sim, 7);
     const double g[3] = {0.1, -0.2, 0.3}, a[3] = {0.0, 0.0, 9.81};
-    ps_can_frame_t out[2];
+    ps_can_frame_t out[PS_IMU_MAX_FRAMES];
     unsigned n = 0;
     for (uint64_t tick = 0; tick < 30; tick++) {
         const int r = ps_devices_tick_imu(&imu, tick, g, a, (int64_t)tick * 1000, out);
@@ -479,7 +479,7 @@ static void run_imu(uint64_t seed, unsigned n, imu_stats_t *st, ps_devices_imu_t
     ps_imu_msg_rx_t rx;
     ps_imu_msg_rx_init(&rx, cfg.base_id);
     for (unsigned k = 0; k < n; k++) {
-        ps_can_frame_t out[2];
+        ps_can_frame_t out[PS_IMU_MAX_FRAMES];
         assert_int_equal(ps_devices_tick_imu(out_imu, k, g, a, 0, out), 2);
         for (unsigned f = 0; f < 2; f++)
             for (unsigned b = 0; b < 8; b++)

@@ -633,6 +633,48 @@ static void test_lockstep_mixed_protocols_robot_stands(void **state)
     assert_int_equal(app.loop.counters.n_transitions, 2);
 }
 
+/* A commercial IMU: the Xsens MTi-630's CAN output, five frames a sample at
+ * 500 Hz (tests/data/robots/ps1-xsens.yaml), emulated by the plant and
+ * decoded by the loop; the robot stands on it as on our own message. */
+static void test_lockstep_xsens_imu_robot_stands(void **state)
+{
+    (void)state;
+    char err[PS_ERR_MSG_LEN] = "";
+    ps_app_opts_t o = {.data_dir = ".",
+                       .board = "sim",
+                       .robot = "tests/data/robots/ps1-xsens.yaml",
+                       .scenario = "scenarios/stand.yaml",
+                       .is_lockstep = true};
+    int rc = ps_app_init(&app, &o, err, sizeof(err));
+    if (rc != 0)
+        fail_msg("ps_app_init: %s (%s)", err, ps_strerror(rc));
+    assert_int_equal(app.robot.imu.protocol, PS_IMU_PROTO_XSENS);
+    assert_int_equal(ps_sim_start(app.sim, START_NS), 0);
+    assert_int_equal(ps_loop_start(&app.loop, START_NS), 0);
+    step_until(3.0);
+    assert_int_equal(app.loop.state, PS_SM_ACTIVE);
+    if (ps_rtsetup_lock_memory() < 0)
+        (void)ps_rtsetup_prefault_maps();
+    ps_rtsetup_prefault_stack(256 * 1024);
+    ps_guard_counts_t c;
+    step_guarded_until(8.0, &c);
+    assert_no_alloc_lock_fault(&c, "xsens IMU 3..8 s");
+    assert_int_equal(app.loop.state, PS_SM_ACTIVE);
+    ps_sim_truth_t t;
+    ps_sim_get_truth(app.sim, &t);
+    assert_false(t.is_fallen);
+    assert_true(t.min_com_height_active_m > 0.6);
+    assert_int_equal(app.loop.counters.n_rx_bad, 0);
+    assert_int_equal(app.loop.counters.n_rx_unknown, 0);
+    assert_int_equal(app.loop.counters.n_imu_rejected, 0);
+    assert_int_equal(app.loop.counters.n_imu_repeated, 0);
+    const ps_imu_xsens_rx_t *rx = &app.loop.imu_rx.u.xsens;
+    assert_int_equal(rx->n_gaps, 0);
+    assert_int_equal(rx->n_incomplete, 0);
+    assert_int_equal(rx->n_frozen, 0);
+    assert_int_equal(app.loop.counters.n_transitions, 2);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -650,6 +692,7 @@ int main(void)
         cmocka_unit_test_teardown(test_lockstep_slow_policy_overruns_counted, teardown),
         cmocka_unit_test_teardown(test_lockstep_slow_policy_in_active_holds_policy_late, teardown),
         cmocka_unit_test_teardown(test_lockstep_mixed_protocols_robot_stands, teardown),
+        cmocka_unit_test_teardown(test_lockstep_xsens_imu_robot_stands, teardown),
         cmocka_unit_test_teardown(test_lockstep_subtick_estop_press_reaches_estop, teardown),
     };
     return cmocka_run_group_tests_name("e2e_lockstep", tests, NULL, NULL);
