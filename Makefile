@@ -47,7 +47,7 @@ HW_SRCS := $(wildcard tests/hw/test_hw_*.c)
 HW_BINS := $(patsubst tests/hw/%.c,$(BUILD)/tests/hw/%,$(HW_SRCS))
 QEMU_WORK ?= $(BUILD)/qemu
 
-.PHONY: all deps deps-build deps-test deps-bench run test test-hw clean format help bench
+.PHONY: all deps deps-build deps-test deps-bench run test test-hw clean format help bench bench-hw
 all: $(BUILD)/pushstep
 
 help:
@@ -63,6 +63,8 @@ help:
 	@echo "             booted under qemu with vcan, vxcan and gpio-mockup"
 	@echo "make bench   latency beside cyclictest, tick share, bus load, allocations:"
 	@echo "             bench/results/*.json and summary.md (see docs/latency.md)"
+	@echo "make bench-hw the real drivers' figures in the test VM (e-stop reaction,"
+	@echo "             loop reaction, frames per bus): bench/results/hw.json"
 	@echo "make format  clang-format every C source in place"
 	@echo "make clean   remove $(BUILD)/"
 
@@ -113,6 +115,10 @@ test-hw: deps-test $(BUILD)/pushstep $(HW_BINS)
 
 bench: deps-bench $(BUILD)/pushstep
 	@bash bench/run.sh
+	@QEMU_WORK=$(QEMU_WORK) bash bench/hw.sh
+
+bench-hw: deps-test $(BUILD)/pushstep
+	@QEMU_WORK=$(QEMU_WORK) bash bench/hw.sh
 
 format:
 	clang-format -i $$(git ls-files '*.c' '*.h')

@@ -53,6 +53,7 @@ static struct {
     int64_t *reaction_ns;
     size_t n_reaction;
     uint64_t n_cmd[PS_MAX_BUSES], n_reply[PS_MAX_BUSES];
+    int64_t first_cmd_ns[PS_MAX_BUSES], last_cmd_ns[PS_MAX_BUSES]; /* the span commands came in */
     int64_t period_ns, t0_ns;
     /* e-stop and heartbeat */
     int estop_fd, heartbeat_fd;
@@ -297,7 +298,11 @@ static void account(uint32_t j, const ps_can_frame_t *f, int64_t now)
         e.estop_seen_ns = f->t_ns;
     if (!is_cmd)
         return;
-    e.n_cmd[a->act.bus_idx]++;
+    const uint32_t b = a->act.bus_idx;
+    e.n_cmd[b]++;
+    if (e.first_cmd_ns[b] == 0)
+        e.first_cmd_ns[b] = f->t_ns;
+    e.last_cmd_ns[b] = f->t_ns;
     if (ej->last_reply_ns != 0 && e.n_reaction < MAX_SAMPLES && e.reaction_ns != NULL)
         e.reaction_ns[e.n_reaction++] = f->t_ns - ej->last_reply_ns;
     ej->last_reply_ns = 0;
@@ -421,6 +426,14 @@ static void run(void)
     }
 }
 
+/* Commands per second while the runtime was sending: over the span from the
+ * bus's first command to its last, not over the emulator's whole run. */
+static double cmd_rate(uint32_t b)
+{
+    const double span_s = (double)(e.last_cmd_ns[b] - e.first_cmd_ns[b]) * 1e-9;
+    return span_s > 0.0 ? (double)(e.n_cmd[b] - 1u) / span_s : 0.0;
+}
+
 static int cmp_i64(const void *a, const void *b)
 {
     const int64_t x = *(const int64_t *)a, y = *(const int64_t *)b;
@@ -446,8 +459,9 @@ static void report(FILE *out, double elapsed_s)
             elapsed_s, (unsigned long long)e.hoist.n_frames, (unsigned long long)e.hoist.n_replies,
             (unsigned long long)e.hoist.n_unclaimed, (unsigned long long)e.hoist.n_bad_frames);
     for (uint32_t b = 0; b < e.n_open; b++)
-        fprintf(out, "emulate: bus %u %s: %.1f commands/s, %.1f replies/s\n", b, e.o.ifaces[b],
-                (double)e.n_cmd[b] / elapsed_s, (double)e.n_reply[b] / elapsed_s);
+        fprintf(out, "emulate: bus %u %s: %llu commands, %.1f/s while the runtime sent, %llu replies\n",
+                b, e.o.ifaces[b], (unsigned long long)e.n_cmd[b], cmd_rate(b),
+                (unsigned long long)e.n_reply[b]);
     fprintf(out, "emulate: late commands: %llu\n", (unsigned long long)late);
     fprintf(out,
             "emulate: reaction reply->next command (us): n %zu p50 %.1f p90 %.1f p99 %.1f "
@@ -490,7 +504,7 @@ static int write_json(double elapsed_s, char *err, size_t len)
             (unsigned long long)n_cmd, (unsigned long long)late);
     fprintf(f, " \"commands_per_s\": [");
     for (uint32_t b = 0; b < e.n_open; b++)
-        fprintf(f, "%s%.1f", b ? ", " : "", (double)e.n_cmd[b] / elapsed_s);
+        fprintf(f, "%s%.1f", b ? ", " : "", cmd_rate(b));
     fprintf(f,
             "],\n \"reaction_us\": {\"n\": %zu, \"p50\": %.1f, \"p90\": %.1f, \"p99\": %.1f, "
             "\"p999\": %.1f, \"max\": %.1f},\n",
