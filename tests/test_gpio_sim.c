@@ -9,6 +9,7 @@
 #include <errno.h>
 
 #include "../sim/ps_gpio_sim.h"
+#include "contract/ps_gpio_contract.h"
 
 #define MS 1000000LL /* ns */
 
@@ -143,9 +144,46 @@ static void test_set_led_on_off_and_invalid(void **state)
     ps_gpio_close(&p); /* twice is safe */
 }
 
+/* ---- the port contract the libgpiod port keeps too (tests/contract) ---- */
+
+static void sim_set_estop(void *ctx, bool is_pressed)
+{
+    ps_gpio_sim_set_estop(ctx, is_pressed);
+}
+
+static void sim_settle(void *ctx)
+{
+    (void)ctx; /* the simulated line has no kernel in between */
+}
+
+static bool sim_heartbeat_level(void *ctx)
+{
+    return atomic_load(&((ps_gpio_sim_t *)ctx)->heartbeat);
+}
+
+static bool sim_is_led_on(void *ctx)
+{
+    return ps_gpio_sim_get_led(ctx) == PS_GPIO_LED_ON;
+}
+
+static void test_ps_gpio_sim_keeps_the_port_contract(void **state)
+{
+    (void)state;
+    ps_gpio_sim_t g;
+    ps_gpio_sim_init(&g);
+    const ps_gpio_contract_t c = {.port = ps_gpio_sim_port(&g),
+                                  .ctx = &g,
+                                  .set_estop = sim_set_estop,
+                                  .settle = sim_settle,
+                                  .heartbeat_level = sim_heartbeat_level,
+                                  .is_led_on = sim_is_led_on};
+    ps_gpio_contract_check(&c);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_ps_gpio_sim_keeps_the_port_contract),
         cmocka_unit_test(test_ps_gpio_sim_init_released_heartbeat_low_power_off),
         cmocka_unit_test(test_ps_gpio_read_estop_follows_level),
         cmocka_unit_test(test_ps_gpio_read_estop_press_between_reads_seen_once),

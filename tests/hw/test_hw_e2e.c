@@ -173,7 +173,12 @@ static void test_the_loop_runs_standby_ramp_active_damping_over_socketcan(void *
     sleep(2); /* in ACTIVE: watch the live buses from the runtime's side */
     char *mon_argv[] = {BIN,   "monitor",    "--board", BOARD,     "--robot",
                         ROBOT, "--duration", "1.5",     "--rates", NULL};
+    /* can-utils' candump on two of the runtime's buses, beside it */
+    char *dump_argv[] = {"/usr/bin/candump", "-L",     "-n", "400", "-T", "4000",
+                         "vxcan0",           "vxcan6", NULL};
+    pid_t dump = spawn(dump_argv, OUT_DIR "/candump.log");
     const int mon_rc = wait_exit(spawn(mon_argv, OUT_DIR "/monitor.out"));
+    assert_int_equal(wait_exit(dump), 0);
     const int rc = wait_exit(rt);
     const char *mon = slurp(OUT_DIR "/monitor.out");
     print_lines_with(mon, "monitor: ");
@@ -185,6 +190,15 @@ static void test_the_loop_runs_standby_ramp_active_damping_over_socketcan(void *
     assert_int_equal(
         sscanf(strstr(mon, "\nl_knee "), " l_knee %u %lf %lf", &bus, &cmd_hz, &reply_hz), 3);
     assert_true(cmd_hz > 100.0 && reply_hz > 100.0); /* 250 Hz on a board; the VM lags */
+    /* Every frame candump saw is one the runtime's own decoder names. */
+    char *dec_argv[] = {BIN,       "monitor", "--board", BOARD,
+                        "--robot", ROBOT,     "--log",   OUT_DIR "/candump.log",
+                        "--rates", NULL};
+    assert_int_equal(wait_exit(spawn(dec_argv, OUT_DIR "/candump-decoded.out")), 0);
+    const char *dec = slurp(OUT_DIR "/candump-decoded.out");
+    print_lines_with(dec, "monitor: ");
+    assert_non_null(strstr(dec, "monitor: 400 frames"));
+    assert_non_null(strstr(dec, " 0 malformed, 0 unknown"));
     const char *out = slurp(OUT_DIR "/run.out");
     if (rc != 0)
         print_error("%s\n", out);

@@ -35,6 +35,7 @@
 
 #include "../../drivers/ps_gpio_gpiod.h"
 #include "../../rt/ps_err.h"
+#include "../contract/ps_gpio_contract.h"
 
 #define CHIP        "gpiochip0"
 #define MOCKUP_DIR  "/sys/kernel/debug/gpio-mockup/" CHIP
@@ -679,9 +680,50 @@ static void test_sigkill_heartbeat_stops(void **state)
 
 #define T(fn) cmocka_unit_test_setup_teardown(fn, setup, teardown)
 
+/* ---- the port contract the simulated lines keep too (tests/contract) ----- */
+
+static void mock_set_estop(void *ctx, bool is_pressed)
+{
+    (void)ctx;
+    mock_set(0, is_pressed ? 1 : 0); /* active-high in cfg_default */
+}
+
+static void mock_settle(void *ctx)
+{
+    (void)ctx;
+    sleep_us(3000); /* the edge's interrupt thread queues the event */
+}
+
+static bool mock_heartbeat_level(void *ctx)
+{
+    (void)ctx;
+    return mock_get(1) == 1;
+}
+
+static bool mock_is_led_on(void *ctx)
+{
+    (void)ctx;
+    return mock_get(2) == 1;
+}
+
+static void test_gpiod_keeps_the_port_contract(void **state)
+{
+    (void)state;
+    const ps_gpio_cfg_t c = cfg_default(); /* debounce 0 */
+    open_ok(&g_a, &c);
+    const ps_gpio_contract_t k = {.port = ps_gpio_gpiod_port(&g_a),
+                                  .ctx = NULL,
+                                  .set_estop = mock_set_estop,
+                                  .settle = mock_settle,
+                                  .heartbeat_level = mock_heartbeat_level,
+                                  .is_led_on = mock_is_led_on};
+    ps_gpio_contract_check(&k);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
+        T(test_gpiod_keeps_the_port_contract),
         T(test_open_by_offset_outputs_low),
         T(test_open_by_name_resolves_offsets),
         T(test_estop_active_high_latched_until_read),
