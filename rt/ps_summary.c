@@ -43,6 +43,13 @@ static cJSON *transitions_json(const ps_logger_t *lg)
     return a;
 }
 
+static const char *bus_mode_name(ps_can_bus_mode_t m)
+{
+    static const char *const NAMES[] = {"error-active", "error-warning", "error-passive",
+                                        "bus-off"};
+    return (unsigned)m < sizeof(NAMES) / sizeof(NAMES[0]) ? NAMES[m] : "?";
+}
+
 static cJSON *buses_json(const ps_summary_t *s)
 {
     cJSON *a = cJSON_CreateArray();
@@ -59,6 +66,17 @@ static cJSON *buses_json(const ps_summary_t *s)
         cJSON_AddNumberToObject(
             o, "dropped_frames",
             (double)(s->bus_states[b].n_tx_dropped + s->bus_states[b].n_rx_dropped));
+        /* the controller's own reports (SocketCAN error frames; 0 on the sim) */
+        const ps_can_state_t *st = &s->bus_states[b];
+        cJSON_AddStringToObject(o, "mode", bus_mode_name(st->mode));
+        cJSON_AddNumberToObject(o, "tx_error_count", st->tx_error_count);
+        cJSON_AddNumberToObject(o, "rx_error_count", st->rx_error_count);
+        cJSON_AddNumberToObject(o, "error_frames", (double)st->n_err_frames);
+        cJSON_AddNumberToObject(o, "bus_off", (double)st->n_bus_off);
+        cJSON_AddNumberToObject(o, "restarts", (double)st->n_restarts);
+        cJSON_AddNumberToObject(o, "protocol_errors", (double)st->n_prot_errors);
+        cJSON_AddNumberToObject(o, "no_ack", (double)st->n_no_ack);
+        cJSON_AddNumberToObject(o, "tx_saturated", (double)st->n_tx_saturated);
         cJSON_AddItemToArray(a, o);
     }
     return a;
@@ -215,10 +233,23 @@ void ps_summary_print(const ps_summary_t *s, FILE *out)
     for (int st = 0; st < PS_STAGE_COUNT; st++)
         print_stage(out, ps_loop_stage_name((ps_stage_t)st), &loop->perf[st]);
     fprintf(out, " buses:\n");
-    for (uint32_t b = 0; b < s->board->n_buses; b++)
+    for (uint32_t b = 0; b < s->board->n_buses; b++) {
+        const ps_can_state_t *st = &s->bus_states[b];
         fprintf(out, "  %-6s planned peak %5.1f%% avg %5.1f%%, observed %5.1f%%, late %llu\n",
                 s->board->buses[b].ifname, s->plan->load_peak[b] * 100, s->plan->load_avg[b] * 100,
-                s->bus_states[b].load * 100, (unsigned long long)s->bus_states[b].n_late);
+                st->load * 100, (unsigned long long)st->n_late);
+        if (st->n_err_frames || st->n_tx_saturated || st->n_tx_dropped || st->n_rx_dropped ||
+            st->mode != PS_CAN_BUS_ERROR_ACTIVE)
+            fprintf(out,
+                    "         %s, TEC %u REC %u, %llu error reports (%llu bus-off, %llu "
+                    "restarts, %llu protocol, %llu no ACK), queue full %llu times (%llu frames "
+                    "dropped), %llu received frames lost\n",
+                    bus_mode_name(st->mode), st->tx_error_count, st->rx_error_count,
+                    (unsigned long long)st->n_err_frames, (unsigned long long)st->n_bus_off,
+                    (unsigned long long)st->n_restarts, (unsigned long long)st->n_prot_errors,
+                    (unsigned long long)st->n_no_ack, (unsigned long long)st->n_tx_saturated,
+                    (unsigned long long)st->n_tx_dropped, (unsigned long long)st->n_rx_dropped);
+    }
     fprintf(out,
             " after init on the loop thread: %llu mallocs%s, %llu frees, %llu page faults, "
             "%llu locks%s\n",
