@@ -9,11 +9,13 @@
 
 #include "../rt/ps_err.h"
 #include "ps_mit.h"
+#include "ps_moteus.h"
 #include "ps_robstride.h"
 
 static const ps_act_proto_t *const PROTOS[PS_ACT_PROTO_COUNT] = {
     [PS_ACT_PROTO_MIT] = &ps_mit_proto,
     [PS_ACT_PROTO_ROBSTRIDE] = &ps_robstride_proto,
+    [PS_ACT_PROTO_MOTEUS] = &ps_moteus_proto,
 };
 _Static_assert(sizeof(PROTOS) / sizeof(PROTOS[0]) == PS_ACT_PROTO_COUNT, "one table per protocol");
 
@@ -63,10 +65,11 @@ int ps_act_check_cfg(const ps_act_cfg_t *a, char *err, size_t err_len)
         ps_err_format(err, err_len, "zero_offset_rad: not finite");
         return -EINVAL;
     }
-    if (a->can_id == 0u || a->can_id > p->id_max || a->reply_id > p->id_max) {
+    const uint32_t can_id_min = p->can_id_min > 0u ? p->can_id_min : 1u;
+    if (a->can_id < can_id_min || a->can_id > p->id_max || a->reply_id > p->id_max) {
         ps_err_format(err, err_len,
-                      "can_id/reply_id: 0x%x/0x%x outside [0x1, 0x%x] for protocol %s", a->can_id,
-                      a->reply_id, p->id_max, p->name);
+                      "can_id/reply_id: 0x%x/0x%x outside [0x%x, 0x%x] for protocol %s", a->can_id,
+                      a->reply_id, can_id_min, p->id_max, p->name);
         return -EINVAL;
     }
     return 0;

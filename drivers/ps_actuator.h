@@ -5,7 +5,8 @@
  * types below: a joint command (position, velocity, kp, kd, feed-forward
  * torque, for the drive's own PD) and a joint measurement (position,
  * velocity, torque, temperature, fault bits, time). Each actuator protocol
- * (MIT mode in drivers/ps_mit.c; RobStride, moteus and ODrive come next) is
+ * (MIT mode in drivers/ps_mit.c, RobStride in ps_robstride.c, moteus over
+ * CAN FD in ps_moteus.c; ODrive comes next) is
  * an ops table, ps_act_proto_t, that encodes commands and mode requests into
  * CAN frames and matches and decodes replies, all on the motor side.
  *
@@ -102,6 +103,7 @@ typedef struct {
 typedef enum {
     PS_ACT_PROTO_MIT = 0,   /**< MIT mode (CubeMars AK, Damiao): drivers/ps_mit.h */
     PS_ACT_PROTO_ROBSTRIDE, /**< RobStride / Xiaomi CyberGear: drivers/ps_robstride.h */
+    PS_ACT_PROTO_MOTEUS,    /**< mjbots moteus over CAN FD: drivers/ps_moteus.h */
     PS_ACT_PROTO_COUNT
 } ps_act_proto_id_t;
 
@@ -132,6 +134,7 @@ typedef struct {
     uint8_t reply_len;           /**< payload bytes of a reply frame */
     uint8_t n_cmd;               /**< frames per command cycle, 1..PS_ACT_MAX_FRAMES */
     uint8_t n_reply;             /**< reply frames per command cycle */
+    uint32_t can_id_min;         /**< smallest valid can_id; 0: 1 */
     uint32_t id_max;             /**< largest valid drive id (can_id and reply_id) */
     bool is_reply_id_shared;     /**< reply_id is the host's id, the same for every drive
                                       on a bus: only can_id must be unique there */
@@ -175,7 +178,8 @@ int ps_act_proto_find(const char *name);
 
 /** Check one actuator's configuration against its protocol: wire ranges
  *  ordered and finite, gear ratio finite and > 0, direction +1 or -1, zero
- *  offset finite, ids within the protocol's id_max.
+ *  offset finite, can_id within [can_id_min (at least 1), id_max], reply_id
+ *  at most id_max.
  *  @post err holds "field: problem" on failure  @return 0 | -EINVAL  @rt INIT */
 int ps_act_check_cfg(const ps_act_cfg_t *a, char *err, size_t err_len);
 

@@ -433,6 +433,11 @@ static int check_joint_limits(ps_cfg_ctx_t *c, const robot_work_t *w, uint32_t i
         return ps_cfg_fail_field(c, field, "value 0x%x above protocol %s's largest id 0x%x",
                                  is_cmd ? j->can_id : j->reply_id, proto->name, proto->id_max);
     }
+    if (j->can_id < proto->can_id_min) {
+        (void)snprintf(field, sizeof(field), "joints[%u].can_id", i);
+        return ps_cfg_fail_field(c, field, "value 0x%x below protocol %s's smallest drive id 0x%x",
+                                 j->can_id, proto->name, proto->can_id_min);
+    }
     ps_act_range_t wire_joint;
     ps_act_joint_range(&act, &wire_joint);
     const ps_act_range_t *r = &wire_joint;

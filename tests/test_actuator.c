@@ -39,7 +39,7 @@ static void test_ps_act_proto_find_known_and_unknown(void **state)
 {
     (void)state;
     assert_int_equal(ps_act_proto_find("mit"), PS_ACT_PROTO_MIT);
-    assert_int_equal(ps_act_proto_find("moteus"), -ENOENT);
+    assert_int_equal(ps_act_proto_find("no-such-protocol"), -ENOENT);
     assert_int_equal(ps_act_proto_find(NULL), -ENOENT);
     assert_ptr_equal(ps_act_proto_get(PS_ACT_PROTO_MIT), &ps_mit_proto);
     assert_null(ps_act_proto_get(PS_ACT_PROTO_COUNT));

@@ -826,6 +826,41 @@ static void test_load_robot_robstride_shared_host_id_ok(void **state)
     assert_int_equal(n_on_bus0, 4);
 }
 
+/* moteus drive ids start at 8: below, the firmware replies with 11-bit ids
+ * (drivers/ps_moteus.h). */
+static void test_load_robot_moteus_low_id_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "can_id: 0x01, reply_id: 0x101, protocol: mit",
+         "can_id: 0x07, reply_id: 0x01, protocol: moteus");
+    want(f, "%s:%d: joints[0].can_id: value 0x7 below protocol moteus's smallest drive id 0x8",
+         f->path, line_of(f, "0x07"));
+    expect_robot_error(f);
+}
+
+/* A moteus joint loads; it needs an FD bus, and the pair check names the
+ * robot file's protocol line when the board's bus is classical. */
+static void test_check_pair_moteus_needs_fd_bus(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "can_id: 0x01, reply_id: 0x101, protocol: mit",
+         "can_id: 0x08, reply_id: 0x01, protocol: moteus");
+    assert_int_equal(ps_config_load_robot(f->path, &f->robot, f->err, sizeof(f->err)), 0);
+    assert_int_equal(f->robot.act[0].protocol, PS_ACT_PROTO_MOTEUS);
+    assert_int_equal(ps_config_load_board(BOARD_OK, &f->board, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    want(f,
+         "%s:%d: joints[0].protocol: moteus needs CAN FD but bus 0 (can0) of board bench is "
+         "classical",
+         f->path, line_of(f, "protocol: moteus"));
+    assert_string_equal(f->err, f->want);
+    edit(f, BOARD_OK, "{ifname: can0, bitrate: 500000}",
+         "{ifname: can0, bitrate: 500000, fd: true, data_bitrate: 2000000}");
+    assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)), 0);
+    assert_int_equal(ps_config_check_pair(&f->board, &f->robot, f->err, sizeof(f->err)), 0);
+}
+
 static void test_load_robot_can_id_beyond_29_bits_rejected(void **state)
 {
     fx_t *f = *state;
@@ -982,7 +1017,8 @@ static void test_load_robot_unknown_protocol_rejected(void **state)
 {
     fx_t *f = *state;
     edit(f, ROBOT_OK, "protocol: mit, driver: ak80-9", "protocol: canopen, driver: ak80-9");
-    want(f, "%s:%d: joints[0].protocol: unknown value \"canopen\" (allowed: mit, robstride)",
+    want(f,
+         "%s:%d: joints[0].protocol: unknown value \"canopen\" (allowed: mit, robstride, moteus)",
          f->path, line_of(f, "canopen"));
     expect_robot_error(f);
 }
@@ -1470,6 +1506,8 @@ int main(void)
         T(test_load_robot_can_id_high_rejected),
         T(test_load_robot_robstride_ids_checked),
         T(test_load_robot_robstride_shared_host_id_ok),
+        T(test_load_robot_moteus_low_id_rejected),
+        T(test_check_pair_moteus_needs_fd_bus),
         T(test_load_robot_policy_deadline_beyond_half_period_rejected),
         T(test_load_robot_reply_timeout_beyond_periods_rejected),
         T(test_load_robot_imu_timeout_beyond_periods_rejected),

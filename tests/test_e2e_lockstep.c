@@ -675,6 +675,57 @@ static void test_lockstep_xsens_imu_robot_stands(void **state)
     assert_int_equal(app.loop.counters.n_transitions, 2);
 }
 
+/* Three protocols in one robot on CAN FD buses: the legs on moteus drives
+ * (32-byte FD frames, 29-bit ids), the waist on RobStride, the arms MIT
+ * mode. The same bar as the mixed robot above: it stands 3..8 s with every
+ * command inside its limits and nothing allocated, faulted or locked. */
+static void test_lockstep_moteus_fd_robot_stands(void **state)
+{
+    (void)state;
+    char err[PS_ERR_MSG_LEN] = "";
+    ps_app_opts_t o = {.data_dir = ".",
+                       .board = "tests/data/boards/sim-fd.yaml",
+                       .robot = "tests/data/robots/ps1-moteus.yaml",
+                       .scenario = "scenarios/stand.yaml",
+                       .is_lockstep = true};
+    int rc = ps_app_init(&app, &o, err, sizeof(err));
+    if (rc != 0)
+        fail_msg("ps_app_init: %s (%s)", err, ps_strerror(rc));
+    unsigned n_moteus = 0, n_robstride = 0, n_mit = 0;
+    for (uint32_t j = 0; j < app.robot.n_joints; j++) {
+        n_moteus += app.robot.act[j].protocol == PS_ACT_PROTO_MOTEUS;
+        n_robstride += app.robot.act[j].protocol == PS_ACT_PROTO_ROBSTRIDE;
+        n_mit += app.robot.act[j].protocol == PS_ACT_PROTO_MIT;
+    }
+    assert_int_equal(n_moteus, 12);
+    assert_int_equal(n_robstride, 1);
+    assert_int_equal(n_mit, app.robot.n_joints - 13);
+    for (uint32_t b = 0; b < app.board.n_buses; b++)
+        assert_true(app.board.buses[b].is_fd);
+    assert_int_equal(ps_sim_start(app.sim, START_NS), 0);
+    assert_int_equal(ps_loop_start(&app.loop, START_NS), 0);
+    step_until(3.0);
+    assert_int_equal(app.loop.state, PS_SM_ACTIVE);
+    if (ps_rtsetup_lock_memory() < 0)
+        (void)ps_rtsetup_prefault_maps();
+    ps_rtsetup_prefault_stack(256 * 1024);
+    ps_guard_counts_t c;
+    step_guarded_until(8.0, &c);
+    assert_no_alloc_lock_fault(&c, "moteus FD robot 3..8 s");
+    assert_int_equal(app.loop.state, PS_SM_ACTIVE);
+    ps_sim_truth_t t;
+    ps_sim_get_truth(app.sim, &t);
+    assert_false(t.is_fallen);
+    assert_true(t.min_com_height_active_m > 0.6);
+    assert_true(t.n_cmd_frames > 5000u * app.robot.n_joints / 10u);
+    assert_int_equal(t.n_cmd_out_of_limits, 0);
+    assert_int_equal(t.n_bad_frames, 0);
+    assert_int_equal(app.loop.counters.n_rx_bad, 0);
+    assert_int_equal(app.loop.counters.n_rx_unknown, 0);
+    assert_int_equal(app.loop.counters.n_cmd_replaced, 0);
+    assert_int_equal(app.loop.counters.n_transitions, 2);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -692,6 +743,7 @@ int main(void)
         cmocka_unit_test_teardown(test_lockstep_slow_policy_overruns_counted, teardown),
         cmocka_unit_test_teardown(test_lockstep_slow_policy_in_active_holds_policy_late, teardown),
         cmocka_unit_test_teardown(test_lockstep_mixed_protocols_robot_stands, teardown),
+        cmocka_unit_test_teardown(test_lockstep_moteus_fd_robot_stands, teardown),
         cmocka_unit_test_teardown(test_lockstep_xsens_imu_robot_stands, teardown),
         cmocka_unit_test_teardown(test_lockstep_subtick_estop_press_reaches_estop, teardown),
     };

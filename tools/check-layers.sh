@@ -25,7 +25,7 @@ BASE="rt/ps_err.h rt/ps_err.c rt/ps_clock.h rt/ps_clock.c rt/ps_ring.h rt/ps_rin
 POLICY_DRIVERS="drivers/ps_actuator.h drivers/ps_can.h"
 # Actuator protocols: only drivers/ (the registry) and sim/ (the drives' side)
 # may name one; the loop, the servo and the loader go through ps_actuator.h.
-PROTOCOL_HEADERS="drivers/ps_mit.h drivers/ps_robstride.h"
+PROTOCOL_HEADERS="drivers/ps_mit.h drivers/ps_robstride.h drivers/ps_moteus.h"
 
 is_in() { local x=$1; shift; for y in "$@"; do [ "$x" = "$y" ] && return 0; done; return 1; }
 
