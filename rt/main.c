@@ -54,6 +54,7 @@ typedef struct {
     const char *stress;       /**< profile: stress-ng load, NULL none */
     bool is_trace;            /**< trace_marker points */
     const char *candump_path; /**< --candump: every frame as a candump -L line */
+    const char *replay_path;  /**< --replay: buses fed from this candump -L log */
     unsigned hist_us;         /**< wake-up histogram buckets (cyclictest -h N) */
 } options_t;
 
@@ -76,6 +77,13 @@ static struct {
     int loop_rc;
     _Atomic bool is_loop_done;
 } g;
+
+/* Lockstep and replay run on a clock the loop itself moves: no real-time
+ * setup, no pacing. */
+static bool is_unpaced(void)
+{
+    return g.opt.is_lockstep || g.opt.replay_path != NULL;
+}
 
 static const char USAGE[] =
     "usage: pushstep [options]\n"
@@ -102,12 +110,18 @@ static const char USAGE[] =
     "  --require-rt          fail instead of warning when mlockall, SCHED_FIFO or CPU\n"
     "                        affinity are not permitted, or (not in profile) when the\n"
     "                        simulated plant falls behind real time\n"
-    "  --start-after S       real boards: request START S seconds after start\n"
-    "                        (on board sim the scenario's events do this)\n"
+    "  --start-after S       real boards and --replay: request START S seconds after\n"
+    "                        start (on board sim the scenario's events do this)\n"
     "  --quiet               no status lines (transitions and the summary still print)\n"
     "  --candump FILE        write every CAN frame the loop reads and sends as a\n"
     "                        candump -L log line (canplayer, log2long read it);\n"
     "                        times are the loop's clock (simulated in lockstep)\n"
+    "  --replay FILE.log     feed the loop the replies and IMU frames of a candump -L\n"
+    "                        log (interfaces named as the board's buses; any board)\n"
+    "                        instead of a plant or the wire: unpaced on the log's time,\n"
+    "                        to its last frame or --duration; the loop's commands are\n"
+    "                        compared with the logged ones. Open loop: the replies do\n"
+    "                        not answer the commands (docs/can-protocols.md, 5)\n"
     "  --trace               write trace points to ftrace's trace_marker (tick start,\n"
     "                        end, overruns, state changes) for trace-cmd/KernelShark\n"
     "  -h, --help            this text\n"
@@ -159,7 +173,8 @@ static int parse_options(int argc, char **argv, options_t *o)
         O_STRESS,
         O_TRACE,
         O_HIST_US,
-        O_CANDUMP
+        O_CANDUMP,
+        O_REPLAY
     };
     static const struct option LONG[] = {
         {"board", required_argument, NULL, 'b'},
@@ -176,6 +191,7 @@ static int parse_options(int argc, char **argv, options_t *o)
         {"trace", no_argument, NULL, O_TRACE},
         {"hist-us", required_argument, NULL, O_HIST_US},
         {"candump", required_argument, NULL, O_CANDUMP},
+        {"replay", required_argument, NULL, O_REPLAY},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
@@ -223,6 +239,9 @@ static int parse_options(int argc, char **argv, options_t *o)
         case O_CANDUMP:
             o->candump_path = optarg;
             break;
+        case O_REPLAY:
+            o->replay_path = optarg;
+            break;
         case O_OUT:
             o->out_dir = optarg;
             is_profile_option = true;
@@ -266,6 +285,11 @@ static int parse_options(int argc, char **argv, options_t *o)
         fprintf(stderr, "pushstep: profile measures the real loop; --lockstep does not apply\n");
         return -EINVAL;
     }
+    if (o->replay_path != NULL && (o->is_profile || o->is_lockstep || o->scenario != NULL)) {
+        fprintf(stderr, "pushstep: --replay runs unpaced on the log's time and has no plant: "
+                        "it does not go with profile, --lockstep or --scenario\n");
+        return -EINVAL;
+    }
     if (o->is_profile && !o->has_duration) {
         o->duration_s = 30.0;
         o->has_duration = true;
@@ -305,7 +329,7 @@ static void find_data_dir(char *out, size_t len)
 static int setup_process_rt(void)
 {
     g.cpu_latency_fd = -1;
-    if (!g.opt.is_lockstep && ps_rtsetup_hold_cpu_latency(&g.cpu_latency_fd) < 0)
+    if (!is_unpaced() && ps_rtsetup_hold_cpu_latency(&g.cpu_latency_fd) < 0)
         g.rt_missing |= PS_RT_MISSING_CPU_LATENCY;
     int rc = ps_rtsetup_lock_memory();
     if (rc < 0) {
@@ -341,7 +365,7 @@ static void report_rt(void)
 static void *loop_thread_main(void *arg)
 {
     (void)arg;
-    if (!g.opt.is_lockstep)
+    if (!is_unpaced())
         g.rt_missing |= ps_rtsetup_thread(g.app.board.rt.priority, g.app.board.rt.loop_cpu);
     report_rt(); /* still INIT: the loop has not started */
     /* The PM QoS request lowers latency but is not a precondition of real
@@ -478,8 +502,16 @@ static int run_loop(ps_summary_t *sum)
 {
     double duration_s = g.opt.has_duration ? g.opt.duration_s : g.app.scenario.duration_s;
     const ps_clock_t *clock = g.app.loop.cfg.clock;
-    g.start_ns = g.opt.is_lockstep ? LOCKSTEP_START_NS : ps_clock_now_ns(clock) + RT_START_LEAD_NS;
+    g.start_ns = g.app.is_replay     ? ps_can_replay_start_ns(&g.app.replay)
+                 : g.opt.is_lockstep ? LOCKSTEP_START_NS
+                                     : ps_clock_now_ns(clock) + RT_START_LEAD_NS;
     g.end_ns = duration_s > 0 ? g.start_ns + ps_s_to_ns(duration_s) : 0;
+    if (g.app.is_replay) { /* the log's last frame, or --duration if sooner */
+        int64_t log_end_ns = ps_can_replay_last_ns(&g.app.replay);
+        log_end_ns = log_end_ns > g.start_ns ? log_end_ns : g.start_ns + 1; /* one tick */
+        g.end_ns = g.end_ns > 0 && g.end_ns < log_end_ns ? g.end_ns : log_end_ns;
+        duration_s = ps_ns_to_s(g.end_ns - g.start_ns);
+    }
     if (g.opt.start_after_s >= 0)
         ps_app_request_start_at(&g.app, g.start_ns + ps_s_to_ns(g.opt.start_after_s));
     int rc =
@@ -497,8 +529,13 @@ static int run_loop(ps_summary_t *sum)
         snprintf(length, sizeof(length), "%.1f s", duration_s);
     else
         snprintf(length, sizeof(length), "until Ctrl-C");
-    printf("running %s on board %s (%s), robot %s, %s\n",
-           g.opt.is_lockstep ? "lockstep" : "in real time", g.app.board.name, g.app.board_path,
+    char mode[PATH_MAX + 16];
+    snprintf(mode, sizeof(mode), "%s%s",
+             g.app.is_replay     ? "a replay of "
+             : g.opt.is_lockstep ? "lockstep"
+                                 : "in real time",
+             g.app.is_replay ? g.opt.replay_path : "");
+    printf("running %s on board %s (%s), robot %s, %s\n", mode, g.app.board.name, g.app.board_path,
            g.app.robot.name, length);
     fflush(stdout);
     pthread_t th;
@@ -507,7 +544,7 @@ static int run_loop(ps_summary_t *sum)
     /* The main thread (truth sampling, summary) is not real-time: keep it off
      * the loop's CPU, with the logger. Only now, so that no thread or child
      * process (stress-ng) inherits its CPU mask. */
-    if (rc == 0 && !g.opt.is_lockstep)
+    if (rc == 0 && !is_unpaced())
         (void)ps_rtsetup_thread_best_effort(0, g.app.board.rt.worker_cpu);
     if (rc == 0) {
         watch_truth(sum);
@@ -553,7 +590,7 @@ static void finish_summary(ps_summary_t *sum)
     sum->board_path = g.app.board_path;
     sum->robot_path = g.app.robot_path;
     sum->scenario_path = g.app.scenario_path[0] ? g.app.scenario_path : NULL;
-    sum->is_lockstep = g.opt.is_lockstep;
+    sum->is_lockstep = is_unpaced(); /* a replay runs as lockstep does */
     /* loop time from the schedule, so deadlines skipped by overruns count */
     sum->loop_s = ps_ns_to_s(g.app.loop.pacer.next_ns - g.start_ns);
     sum->loop = &g.app.loop;
@@ -604,6 +641,35 @@ static void print_plan(const ps_app_t *app)
                (double)app->board.bus_budget * 100);
 }
 
+/* --replay: what the log fed, what the loop sent, and how the loop's
+ * commands compare with the logged ones (drivers/ps_can_replay.h). */
+static void report_replay(void)
+{
+    if (!g.app.is_replay)
+        return;
+    ps_can_replay_stats_t st;
+    ps_can_replay_get_stats(&g.app.replay, &st);
+    printf("replay: %llu frames fed on %u buses, %llu commands sent, %llu expected commands in "
+           "the log, %llu unknown frames skipped",
+           (unsigned long long)st.n_fed, st.n_buses_fed, (unsigned long long)st.n_sent,
+           (unsigned long long)st.n_expected, (unsigned long long)st.n_unknown);
+    if (st.n_fed < st.n_fed_logged)
+        printf(" (%llu logged replies and IMU frames after the run's end)",
+               (unsigned long long)(st.n_fed_logged - st.n_fed));
+    printf("\n");
+    const float *d = st.max_diff, *l = st.max_diff_lsb;
+    printf("replay: %llu sent frames matched a logged one within a tick, %llu did not, %llu "
+           "differ in kind; largest difference of %llu commands: q %.3g rad (%.1f LSB), qd "
+           "%.3g rad/s (%.1f LSB), kp %.3g Nm/rad (%.1f LSB), kd %.3g Nm s/rad (%.1f LSB), tau "
+           "%.3g Nm (%.1f LSB)\n",
+           (unsigned long long)st.n_matched, (unsigned long long)st.n_unmatched,
+           (unsigned long long)st.n_differ, (unsigned long long)st.n_cmd_compared,
+           (double)d[PS_CAN_REPLAY_Q], (double)l[PS_CAN_REPLAY_Q], (double)d[PS_CAN_REPLAY_QD],
+           (double)l[PS_CAN_REPLAY_QD], (double)d[PS_CAN_REPLAY_KP], (double)l[PS_CAN_REPLAY_KP],
+           (double)d[PS_CAN_REPLAY_KD], (double)l[PS_CAN_REPLAY_KD], (double)d[PS_CAN_REPLAY_TAU],
+           (double)l[PS_CAN_REPLAY_TAU]);
+}
+
 /* Profile outputs; plots are a convenience: without them the run still counts. */
 static int finish_profile(const ps_summary_t *sum)
 {
@@ -652,6 +718,7 @@ int main(int argc, char **argv)
         .wake_hist_us = g.opt.hist_us,
         .trace = g.opt.is_trace ? &g.trace : NULL,
         .frame_ring = g.frames.ring,
+        .replay_path = g.opt.replay_path,
     };
     ps_trace_init(&g.trace);
     if (g.opt.is_trace && ps_trace_open(&g.trace, NULL, err, sizeof(err)) < 0) {
@@ -703,6 +770,7 @@ int main(int argc, char **argv)
     if (g.app.loop.counters.n_ticks > 0) {
         finish_summary(&sum);
         ps_summary_print(&sum, stdout);
+        report_replay();
         if (g.opt.summary_path != NULL &&
             ps_summary_write_json(&sum, g.opt.summary_path, err, sizeof(err)) < 0) {
             fprintf(stderr, "pushstep: %s\n", err);

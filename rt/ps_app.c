@@ -2,6 +2,7 @@
 
 #include <libgen.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "ps_err.h"
@@ -29,7 +30,9 @@ static int load_configs(ps_app_t *app, const ps_app_opts_t *o, char *err, size_t
     int rc = ps_config_load_board(app->board_path, &app->board, err, len);
     if (rc == 0)
         rc = ps_config_load_robot_sim(app->robot_path, &app->robot, &app->robot_sim, err, len);
-    if (rc == 0 && (o->scenario != NULL || app->board.kind == PS_BOARD_SIM)) {
+    /* a replay has no plant for the default scenario to drive */
+    const bool is_sim_run = app->board.kind == PS_BOARD_SIM && o->replay_path == NULL;
+    if (rc == 0 && (o->scenario != NULL || is_sim_run)) {
         ps_config_resolve(dd, o->scenario, "scenarios", "stand", app->scenario_path,
                           sizeof(app->scenario_path));
         rc = ps_config_load_scenario(app->scenario_path, &app->scenario, err, len);
@@ -292,6 +295,51 @@ static int wire_linux(ps_app_t *app, ps_loop_cfg_t *lc, char *err, size_t len)
     return 0;
 }
 
+/* --replay: the buses fed from a candump log, time from the replay clock,
+ * no GPIO lines. The log's storage is allocated here, at start-up, sized by
+ * reading the log once; the replay ports themselves never allocate. */
+static int wire_replay(ps_app_t *app, const char *path, ps_loop_cfg_t *lc, char *err, size_t len)
+{
+    ps_can_replay_cfg_t rc_cfg = {
+        .path = path,
+        .n_buses = app->board.n_buses,
+        .act = app->robot.act,
+        .n_joints = app->robot.n_joints,
+        .imu_bus_idx = app->robot.imu.bus_idx,
+        .period_ns = PS_NS_PER_S / app->robot.control.servo_hz,
+    };
+    for (uint32_t b = 0; b < app->board.n_buses && b < PS_MAX_BUSES; b++)
+        rc_cfg.ifname[b] = app->board.buses[b].ifname;
+    uint32_t imu_ids[PS_IMU_MAX_FRAMES];
+    uint8_t imu_lens[PS_IMU_MAX_FRAMES];
+    const unsigned n_imu = ps_imu_frames(&app->robot.imu, imu_ids, imu_lens);
+    for (unsigned k = 0; k < n_imu && k < PS_CAN_REPLAY_MAX_IMU_IDS; k++)
+        rc_cfg.imu_ids[rc_cfg.n_imu_ids++] = imu_ids[k];
+    ps_can_replay_size_t size;
+    int rc = ps_can_replay_measure(&rc_cfg, &size, err, len);
+    if (rc < 0)
+        return rc;
+    app->replay_entries =
+        calloc(size.n_entries > 0 ? size.n_entries : 1u, sizeof(*app->replay_entries));
+    app->replay_data = malloc(size.n_data > 0 ? size.n_data : 1u);
+    if (app->replay_entries == NULL || app->replay_data == NULL) {
+        snprintf(err, len, "%s: no memory for its %zu frames", path, size.n_entries);
+        return -ENOMEM;
+    }
+    rc = ps_can_replay_init(&app->replay, &rc_cfg, app->replay_entries, size.n_entries,
+                            app->replay_data, size.n_data, err, len);
+    if (rc < 0)
+        return rc;
+    app->is_replay = true;
+    for (uint32_t b = 0; b < app->board.n_buses; b++)
+        lc->buses[b] = ps_can_replay_port(&app->replay, b);
+    lc->gpio = ps_can_replay_gpio_port();
+    lc->clock = ps_can_replay_clock(&app->replay);
+    lc->perf_clock = ps_clock_monotonic();
+    lc->deadline_clock = ps_clock_thread_cpu(); /* as in lockstep: the policy's own time */
+    return 0;
+}
+
 static int wire(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t len)
 {
     ps_loop_cfg_t lc = {
@@ -304,8 +352,9 @@ static int wire(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t len)
         .trace = opts->trace,
         .frame_ring = opts->frame_ring,
     };
-    int rc = app->board.kind == PS_BOARD_SIM ? wire_sim(app, &lc, err, len)
-                                             : wire_linux(app, &lc, err, len);
+    int rc = opts->replay_path != NULL         ? wire_replay(app, opts->replay_path, &lc, err, len)
+             : app->board.kind == PS_BOARD_SIM ? wire_sim(app, &lc, err, len)
+                                               : wire_linux(app, &lc, err, len);
     if (rc < 0)
         return rc;
     rc = ps_stand_init(&app->stand, app->robot.n_joints, app->robot.joint_name, app->robot.servo);
@@ -352,4 +401,10 @@ void ps_app_deinit(ps_app_t *app)
         ps_gpio_gpiod_close(&app->gpiod);
     app->is_gpiod_open = false;
     ps_loop_deinit(&app->loop);
+    ps_can_replay_deinit(&app->replay); /* after the loop: its ports read the storage */
+    free(app->replay_entries);
+    free(app->replay_data);
+    app->replay_entries = NULL;
+    app->replay_data = NULL;
+    app->is_replay = false;
 }

@@ -2,11 +2,13 @@
  * ps_app: builds a runnable system from the three configuration files, in
  * one place: loads and cross-checks board, robot and scenario, plans the CAN
  * buses, wires the ports of the board's kind (the simulated plant for `sim`;
- * SocketCAN and libgpiod for `linux`, each interface checked first), the policy
- * slot (standing controller), the record ring and the loop. main() and the
- * end-to-end tests both start the system through here. It is the composition
- * root (with rt/main.c and the config loader): the only application code that
- * includes sim/ (docs/architecture.md).
+ * SocketCAN and libgpiod for `linux`, each interface checked first; with
+ * replay_path, on any board, ports fed from a candump log:
+ * drivers/ps_can_replay.h), the policy slot (standing controller), the
+ * record ring and the loop. main() and the end-to-end tests both start the
+ * system through here. It is the composition root (with rt/main.c and the
+ * config loader): the only application code that includes sim/
+ * (docs/architecture.md).
  *
  * Threads: main thread. Allocation: INIT only (the sim allocates at create);
  * ps_app_t is large: keep it static or on the heap.
@@ -17,6 +19,7 @@
 #include <limits.h>
 #include <stdbool.h>
 
+#include "../drivers/ps_can_replay.h"
 #include "../drivers/ps_can_socket.h"
 #include "../drivers/ps_canbus.h"
 #include "../drivers/ps_gpio_gpiod.h"
@@ -39,6 +42,9 @@ typedef struct {
     uint32_t wake_hist_us; /**< 1-us wake-up histogram size; 0: 1000 */
     ps_trace_t *trace;     /**< trace_marker points for the loop; NULL: off */
     ps_ring_t *frame_ring; /**< every frame the loop reads and sends; NULL: off */
+    /** --replay: buses fed from this candump -L log, its clock, no GPIO, no
+     *  plant (any board); NULL: off */
+    const char *replay_path;
 } ps_app_opts_t;
 
 typedef struct {
@@ -57,6 +63,10 @@ typedef struct {
     uint32_t n_sockets_open;
     ps_gpio_gpiod_t gpiod; /**< linux boards */
     bool is_gpiod_open;
+    ps_can_replay_t replay;                /**< --replay: the log's ports and clock */
+    ps_can_replay_entry_t *replay_entries; /**< --replay: storage, heap, sized at start-up */
+    uint8_t *replay_data;                  /**< --replay: the frames' payload bytes */
+    bool is_replay;
     char notes[512]; /**< what start-up did not check (virtual CAN interfaces) */
     ps_stand_t stand;
     ps_ring_t ring;
@@ -75,7 +85,8 @@ typedef struct {
  *  @return 0 | -PS_ERR_CONFIG (also: a CAN interface not set up as the board
  *          says; err names the `ip link` fix) | -PS_ERR_BUS_BUDGET | -ENOENT
  *          | -ENODEV, -EPERM, -EBUSY (a CAN socket or GPIO line could not be had)
- *          | -PS_ERR_PLANT | -ENOMEM  @rt INIT, main thread */
+ *          | -PS_ERR_PLANT | -ENOMEM | replay: as ps_can_replay_init (a bad log
+ *          line, an interface that is not a board bus)  @rt INIT, main thread */
 int ps_app_init(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t err_len);
 
 /** Plan the board's buses for the robot: one source per joint (its

@@ -787,6 +787,139 @@ static void test_cli_sigterm_every_state_exits_promptly_status_0(void **state)
     check_signal_in_every_state(SIGTERM, "SIGTERM");
 }
 
+/* ---- --replay ----------------------------------------------------------- */
+
+/* The "t= 0.201s state A -> B (...)" lines of out, in order, into buf. */
+static void state_lines(char *buf, size_t len)
+{
+    size_t used = 0;
+    buf[0] = '\0';
+    for (const char *l = out; *l != '\0';) {
+        const char *nl = strchr(l, '\n');
+        const size_t n = nl != NULL ? (size_t)(nl - l) + 1 : strlen(l);
+        if (strncmp(l, "t=", 2) == 0 && memmem(l, n, "s state ", 8) != NULL && used + n < len) {
+            memcpy(buf + used, l, n);
+            used += n;
+            buf[used] = '\0';
+        }
+        l += n;
+    }
+}
+
+/* A lockstep run's own candump log fed back into the loop (board sim, no
+ * plant): START at the time the recorded run took it, and the same
+ * --duration, since the recorded run stopped at 3 s and the log shows the
+ * plant under its damping from then on (without it the replayed loop would
+ * stay ACTIVE and its commands part from the log's). Then the loop gets
+ * every reply and IMU frame on the tick the recorded loop read it (the
+ * plant's wire times are whole microseconds, so the log's truncation keeps
+ * each frame in its tick), and the deterministic loop sends the same
+ * commands bit for bit: the same transitions at the same times, every sent
+ * frame paired with a logged one, no field a wire step apart, and the
+ * replay's own --candump log is the recorded log, byte for byte. Differences
+ * are expected elsewhere, and the comparison line shows them: a log that
+ * starts mid-run (the first ticks see no replies yet and the loop starts in
+ * STANDBY whatever the robot was doing), a live candump (sent frames stamped
+ * on the wire, up to a tick after the deadline: paired within a tick), or a
+ * policy late on this machine's CPU time (HOLD where the recording had none). */
+static void test_cli_replay_of_a_lockstep_log_same_transitions_and_commands(void **state)
+{
+    (void)state;
+    char log_path[32], again_path[32], args[256];
+    make_temp_file(log_path, sizeof(log_path));
+    make_temp_file(again_path, sizeof(again_path));
+    snprintf(args, sizeof(args), "--lockstep --duration 3 --quiet --candump %s", log_path);
+    int rc = run(args);
+    if (rc != 0)
+        fail_msg("record: exit %d:\n%s", rc, out);
+    static char recorded[8192], replayed[8192];
+    state_lines(recorded, sizeof(recorded));
+    const char *ramp = strstr(out, "s state STANDBY -> RAMP");
+    assert_non_null(ramp);
+    while (ramp > out && ramp[-1] != '\n')
+        ramp--;
+    double start_s = -1;
+    assert_int_equal(sscanf(ramp, "t=%lf", &start_s), 1);
+    assert_true(start_s > 0.0 && start_s < 1.0);
+    /* replies and IMU frames (ps1: MIT replies on 0x100 + id, the IMU on
+     * 0x080/0x081) against the commands and requests (0x001..0x009) */
+    unsigned long n_fed_lines = 0, n_cmd_lines = 0;
+    FILE *f = fopen(log_path, "r");
+    assert_non_null(f);
+    char line[PS_CANDUMP_LINE_MAX + 8];
+    while (fgets(line, sizeof(line), f) != NULL) {
+        ps_can_frame_t fr;
+        char ifname[PS_CANDUMP_IFNAME_MAX], err[PS_ERR_MSG_LEN];
+        assert_int_equal(ps_candump_parse(line, &fr, ifname, sizeof(ifname), err, sizeof(err)), 0);
+        if (fr.id >= 0x080)
+            n_fed_lines++;
+        else
+            n_cmd_lines++;
+    }
+    fclose(f);
+    assert_true(n_fed_lines > 10000 && n_cmd_lines > 10000);
+    snprintf(args, sizeof(args),
+             "--replay %s --board sim --start-after %.3f --duration 3 --quiet --candump %s",
+             log_path, start_s, again_path);
+    rc = run(args);
+    if (rc != 0)
+        fail_msg("replay: exit %d:\n%s", rc, out);
+    state_lines(replayed, sizeof(replayed));
+    if (strstr(recorded, "STANDBY -> RAMP") == NULL || strstr(recorded, "RAMP -> ACTIVE") == NULL ||
+        strcmp(recorded, replayed) != 0)
+        fail_msg("transitions differ:\nrecorded:\n%sreplayed:\n%s", recorded, replayed);
+    char want[256];
+    snprintf(want, sizeof(want),
+             "replay: %lu frames fed on 4 buses, %lu commands sent, %lu expected commands in "
+             "the log, 0 unknown frames skipped\n",
+             n_fed_lines, n_cmd_lines, n_cmd_lines);
+    if (strstr(out, want) == NULL)
+        fail_msg("want \"%s\" in:\n%s", want, out);
+    const char *cmp = strstr(out, "replay: ");
+    assert_non_null(cmp = strstr(cmp + 1, "replay: "));
+    snprintf(want, sizeof(want),
+             "replay: %lu sent frames matched a logged one within a tick, 0 "
+             "did not, 0 differ in kind;",
+             n_cmd_lines);
+    if (strncmp(cmp, want, strlen(want)) != 0)
+        fail_msg("want \"%s\" in:\n%s", want, out);
+    unsigned n_fields = 0;
+    for (const char *p = strstr(cmp, " ("); p != NULL && p < strchr(cmp, '\n');
+         p = strstr(p + 1, " (")) {
+        double steps = -1;
+        if (sscanf(p, " (%lf LSB)", &steps) == 1) {
+            n_fields++;
+            if (steps > 1.0)
+                fail_msg("a field more than a wire step from the log:\n%s", cmp);
+        }
+    }
+    assert_int_equal(n_fields, 5);
+    assert_non_null(strstr(out, "after init on the loop thread: 0 mallocs, 0 frees"));
+    /* what the replayed loop read and sent, logged, is the recorded log */
+    snprintf(args, sizeof(args), "cmp -s %s %s", log_path, again_path);
+    if (system(args) != 0)
+        fail_msg("the replay's own candump log differs from the recorded one (cmp %s %s)", log_path,
+                 again_path);
+    unlink(again_path);
+    /* an interface the board does not have: refused before the run, with the
+     * log's file and line */
+    f = fopen(log_path, "w");
+    assert_non_null(f);
+    fputs("(0000000001.000000) can0 001#FFFFFFFFFFFFFFFC\n"
+          "(0000000001.000635) vcan5 101#0180008008001919\n",
+          f);
+    fclose(f);
+    snprintf(args, sizeof(args), "--replay %s", log_path);
+    assert_int_equal(run(args), 2);
+    snprintf(want, sizeof(want), "%s:2: interface \"vcan5\" is not a bus of the board", log_path);
+    if (strstr(out, want) == NULL)
+        fail_msg("want \"%s\" in:\n%s", want, out);
+    assert_int_equal(run("--replay /dev/null --lockstep"), 2);
+    assert_int_equal(run("--help"), 0);
+    assert_non_null(strstr(out, "--replay FILE.log"));
+    unlink(log_path);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -807,6 +940,7 @@ int main(void)
         cmocka_unit_test(test_cli_monitor_decodes_a_candump_log_per_joint),
         cmocka_unit_test(test_cli_sigint_every_state_exits_promptly_status_0),
         cmocka_unit_test(test_cli_sigterm_every_state_exits_promptly_status_0),
+        cmocka_unit_test(test_cli_replay_of_a_lockstep_log_same_transitions_and_commands),
     };
     return cmocka_run_group_tests_name("e2e_cli", tests, NULL, NULL);
 }

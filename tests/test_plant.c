@@ -100,7 +100,7 @@ static void build_robot(ps_robot_cfg_t *r)
     r->control =
         (ps_control_cfg_t){1000, 50, 1.0f, 2.0f, 0.05f, 0.01f, 0.005f, 0.0005f, 5, 1.0f, 10.0f};
     r->servo_common.damping_kd_nm_s_rad = 2.0f;
-    r->imu = (ps_imu_cfg_t){3, 0x080, 1};
+    r->imu = (ps_imu_cfg_t){.bus_idx = 3, .base_id = 0x080, .rate_div = 1};
     r->kin = KIN;
     r->n_joints = (uint32_t)N_JOINTS;
     for (int i = 0; i < N_JOINTS; i++) {
