@@ -35,12 +35,25 @@ static int64_t now_ns(clockid_t id)
 
 /* ---- error frames ------------------------------------------------------ */
 
+/* Leaving bus-off: a controller that reports a state again (passive,
+ * warning, back to active: drivers with automatic recovery) or "restarted",
+ * or that hands over a data frame (a bus-off controller receives nothing),
+ * is on the bus again. Without these a lost RESTARTED frame, or an
+ * `ip link set down/up`, would leave the bus off for good. */
+static void leave_bus_off(ps_can_state_t *st)
+{
+    if (st->mode == PS_CAN_BUS_OFF)
+        st->n_restarts++;
+    st->mode = PS_CAN_BUS_ERROR_ACTIVE;
+}
+
 static void apply_ctrl_error(ps_can_state_t *st, uint8_t ctrl)
 {
     if (ctrl & (CAN_ERR_CRTL_RX_OVERFLOW | CAN_ERR_CRTL_TX_OVERFLOW))
         st->n_ctrl_overflow++;
-    if (st->mode == PS_CAN_BUS_OFF)
-        return; /* only RESTARTED leaves bus-off */
+    if (ctrl & (CAN_ERR_CRTL_RX_PASSIVE | CAN_ERR_CRTL_TX_PASSIVE | CAN_ERR_CRTL_RX_WARNING |
+                CAN_ERR_CRTL_TX_WARNING | CAN_ERR_CRTL_ACTIVE))
+        leave_bus_off(st);
     if (ctrl & (CAN_ERR_CRTL_RX_PASSIVE | CAN_ERR_CRTL_TX_PASSIVE))
         st->mode = PS_CAN_BUS_ERROR_PASSIVE;
     else if (ctrl & (CAN_ERR_CRTL_RX_WARNING | CAN_ERR_CRTL_TX_WARNING))
@@ -59,8 +72,9 @@ void ps_can_socket_apply_error(ps_can_state_t *st, uint32_t can_id, const uint8_
     if (can_id & CAN_ERR_ACK)
         st->n_no_ack++;
     if (can_id & CAN_ERR_RESTARTED) {
-        st->n_restarts++;
-        st->mode = PS_CAN_BUS_ERROR_ACTIVE;
+        if (st->mode != PS_CAN_BUS_OFF)
+            st->n_restarts++; /* leave_bus_off counts it otherwise */
+        leave_bus_off(st);
     }
     if (can_id & CAN_ERR_BUSOFF) {
         if (st->mode != PS_CAN_BUS_OFF)
@@ -116,7 +130,7 @@ static int configure(ps_can_socket_t *s, const ps_can_socket_cfg_t *cfg, const c
     *what = "CAN_RAW_ERR_FILTER";
     if ((rc = set_opt(s->fd, SOL_CAN_RAW, CAN_RAW_ERR_FILTER, &err_mask, sizeof(err_mask))) < 0)
         return rc;
-    *what = "CAN_RAW_FD_FRAMES (is the interface in FD mode? mtu 72)";
+    *what = "CAN_RAW_FD_FRAMES";
     if (cfg->is_fd && (rc = set_opt(s->fd, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &on, sizeof(on))) < 0)
         return rc;
     *what = "SO_TIMESTAMPNS";
@@ -146,6 +160,7 @@ int ps_can_socket_open(ps_can_socket_t *s, const ps_can_socket_cfg_t *cfg, char 
     s->fd = socket(PF_CAN, SOCK_RAW | SOCK_NONBLOCK | SOCK_CLOEXEC, CAN_RAW);
     if (s->fd < 0)
         return fail(s, err, err_len, "socket(PF_CAN)", errno);
+    s->is_open = true;
     const char *what = "";
     int rc = configure(s, cfg, &what);
     if (rc < 0)
@@ -159,9 +174,10 @@ int ps_can_socket_open(ps_can_socket_t *s, const ps_can_socket_cfg_t *cfg, char 
 
 void ps_can_socket_close(ps_can_socket_t *s)
 {
-    if (s->fd >= 0)
-        close(s->fd);
+    if (s->is_open && s->fd >= 0)
+        close(s->fd); /* is_open: a zeroed struct's fd 0 is not ours */
     s->fd = -1;
+    s->is_open = false;
 }
 
 /* ---- frames ------------------------------------------------------------ */
@@ -247,6 +263,8 @@ static int from_kernel(ps_can_socket_t *s, const struct canfd_frame *k, size_t s
     }
     if ((k->can_id & CAN_RTR_FLAG) || (size != CAN_MTU && size != CANFD_MTU))
         return 0;
+    if (s->state.mode == PS_CAN_BUS_OFF)
+        leave_bus_off(&s->state);
     const bool is_fd = size == CANFD_MTU;
     out->is_ext = (k->can_id & CAN_EFF_FLAG) != 0;
     out->id = k->can_id & (out->is_ext ? CAN_EFF_MASK : CAN_SFF_MASK);
@@ -518,7 +536,7 @@ int ps_can_socket_check_iface(const ps_canbus_bus_cfg_t *bus, const ps_can_socke
         else
             add(&n, "%s: virtual (%s), bitrate not checked", bus->ifname,
                 info->kind[0] ? info->kind : "unknown kind");
-        if (bus->is_fd && info->mtu != CANFD_MTU)
+        if (bus->is_fd && info->mtu < CANFD_MTU) /* larger: CAN XL, carries FD too */
             add(&e, "; %s has mtu %u, CAN FD needs %u: `sudo ip link set %s mtu %u`", bus->ifname,
                 info->mtu, (unsigned)CANFD_MTU, bus->ifname, (unsigned)CANFD_MTU);
         if (!info->is_up) {

@@ -8,12 +8,17 @@
  * blocks. A send that meets a full queue (ENOBUFS: the qdisc is at
  * txqueuelen; EAGAIN: the socket's send buffer) takes what it can, counts one
  * n_tx_saturated event and the rest as n_tx_dropped, and returns: no retry.
+ * (Any short send counts so: a sendmmsg that stopped at frame k > 0 on
+ * another error reports no errno, and a batch beyond PS_CAN_SOCKET_BATCH
+ * frames is cut there; the next call reports a persisting error.)
  *
  * Error frames are enabled (CAN_RAW_ERR_FILTER, every class) and decoded
  * into the state (ps_can_socket_apply_error): error-warning, error-passive,
  * bus-off, restarted, back to error-active, controller overflows, protocol
  * violations and missing ACKs, and the TX/RX error counters when the driver
  * reports them (CAN_ERR_CNT). The loop turns bus-off into an e-stop condition.
+ * Bus-off ends with a "restarted" report, any controller state report, or a
+ * data frame received (a bus-off controller receives nothing).
  *
  * CAN FD (CAN_RAW_FD_FRAMES) where the bus is configured FD; classical frames
  * on an FD socket still arrive as classical frames (by their size).
@@ -29,7 +34,8 @@
  * kept as n_rx_dropped. The kernel attaches the count to each frame it
  * queues, so drops show with the first frame that arrives after them.
  *
- * Start-up check (ps_can_socket_check): through rtnetlink (libmnl), the
+ * Start-up check (ps_can_socket_query, ps_can_socket_check_iface): through
+ * rtnetlink (libmnl), the
  * interface exists, is a CAN device, is up, and for real controllers
  * (kind "can") runs the configured bitrate, FD mode and data bitrate, is not
  * bus-off or stopped, has restart-ms set, and has txqueuelen of at least what
@@ -80,7 +86,8 @@ typedef struct {
 } ps_can_socket_slot_t;
 
 typedef struct {
-    int fd; /**< -1 when closed */
+    int fd;       /**< -1 when closed */
+    bool is_open; /**< fd is ours: close on a zeroed struct touches nothing */
     int ifindex;
     bool is_fd;
     uint32_t bitrate;
@@ -102,7 +109,7 @@ int ps_can_socket_open(ps_can_socket_t *s, const ps_can_socket_cfg_t *cfg, char 
 /** @pre s opened  @return the transport port over s (name: the interface)  @rt INIT */
 ps_can_port_t ps_can_socket_port(ps_can_socket_t *s);
 
-/** Close the socket. Safe twice.  @rt INIT */
+/** Close the socket. Safe twice and on a zeroed struct.  @rt INIT */
 void ps_can_socket_close(ps_can_socket_t *s);
 
 /** Fold one error frame's report into the state (mode, counters).

@@ -26,7 +26,8 @@
 #define CONSUMER_LED       "pushstep-led"
 /* The kernel's event FIFO holds 16; gpiod_line_event_read_fd_multiple reads
  * at most that many per call. */
-#define EVENT_BATCH 16u
+#define MAX_EVENT_READS 4u /* reads of EVENT_BATCH events per read_estop call at most */
+#define EVENT_BATCH     16u
 /* The kernel's internal ENOTSUPP, which some GPIO drivers let through to
  * user space for a configuration they lack (bias). */
 #define ENOTSUPP_KERNEL 524
@@ -126,7 +127,14 @@ static int read_estop(void *ctx, bool *out_pressed_since_last_read)
     if (g->chip == NULL)
         return -EBADF;
     struct gpiod_line_event ev[EVENT_BATCH];
-    for (;;) {
+    /* Bounded: a line bouncing fast enough to refill the kernel's queue
+     * between reads must not keep the tick here. What is left waits for the
+     * next tick; the level check below puts the state right meanwhile. */
+    for (unsigned pass = 0;; pass++) {
+        if (pass == MAX_EVENT_READS) {
+            g->n_event_reads_capped++;
+            break;
+        }
         const int n = gpiod_line_event_read_fd_multiple(g->estop_fd, ev, EVENT_BATCH);
         if (n < 0) {
             if (errno == EAGAIN || errno == EWOULDBLOCK)

@@ -8,10 +8,12 @@
  * "pushstep-heartbeat" and "pushstep-led".
  *
  * E-stop: requested for both-edge events, with the configured active-low
- * flag and bias. The event fd is non-blocking; each read_estop drains every
- * queued event (gpiod_line_event_read_fd_multiple, 16 a read: the kernel's
- * FIFO size) and feeds them with their kernel timestamps to the debounce
- * below, then reads the line's level once (an ioctl).
+ * flag and bias. The event fd is non-blocking; each read_estop drains the
+ * queued events (gpiod_line_event_read_fd_multiple, 16 a read: the kernel's
+ * FIFO size; at most 4 reads a call, so a line bouncing faster than the tick
+ * cannot hold the tick: the rest waits, counted in n_event_reads_capped) and
+ * feeds them with their kernel timestamps to the debounce below, then reads
+ * the line's level once (an ioctl).
  *
  * How events are taken: with both edges requested, the v1 uAPI stamps an
  * event in the hard IRQ handler but sets its type (rising/falling) from the
@@ -46,7 +48,10 @@
  *
  * Threads: the port is used by one thread (the loop). Allocation: open
  * allocates (libgpiod's chip and line structs); read_estop, set_heartbeat and
- * set_led allocate nothing, take no lock, print nothing and never block.
+ * set_led allocate nothing, take no lock, print nothing and never block on
+ * a SoC's own GPIO block (the boards' e-stop and enable lines). On lines of
+ * an I2C or SPI GPIO expander each get/set ioctl is a bus transfer under the
+ * expander driver's mutex: keep the loop's lines on the SoC.
  * The caller owns ps_gpio_gpiod_t.
  */
 #ifndef PS_GPIO_GPIOD_H
@@ -121,13 +126,14 @@ typedef struct {
     int estop_fd;               /**< the e-stop's event fd, O_NONBLOCK; -1 when closed */
     bool is_event_ts_monotonic; /**< kernel >= 5.7: event stamps are CLOCK_MONOTONIC */
     ps_gpio_debounce_t debounce;
-    uint32_t estop_offset;     /**< read-only: the lines as resolved at open */
-    uint32_t heartbeat_offset; /**< read-only */
-    uint32_t led_offset;       /**< read-only */
-    int64_t level_fix_ns;      /**< the last level fix (or open): older events are counted */
-    uint64_t n_estop_events;   /**< read-only: edge events read */
-    uint64_t n_events_covered; /**< read-only: events skipped, stamped before a level fix */
-    uint64_t n_level_fixes;    /**< read-only: times the level disagreed with the events */
+    uint32_t estop_offset;         /**< read-only: the lines as resolved at open */
+    uint32_t heartbeat_offset;     /**< read-only */
+    uint32_t led_offset;           /**< read-only */
+    int64_t level_fix_ns;          /**< the last level fix (or open): older events are counted */
+    uint64_t n_estop_events;       /**< read-only: edge events read */
+    uint64_t n_event_reads_capped; /**< read_estop calls that left events for the next tick */
+    uint64_t n_events_covered;     /**< read-only: events skipped, stamped before a level fix */
+    uint64_t n_level_fixes;        /**< read-only: times the level disagreed with the events */
 } ps_gpio_gpiod_t;
 
 /** Open the chip, resolve the three lines (by name where cfg gives one),

@@ -87,14 +87,22 @@ void ps_imu_xsens_rx_init(ps_imu_xsens_rx_t *rx, uint32_t base_id)
     rx->base_id = base_id;
 }
 
+/* A group's SampleTime comes before its GroupCounter and its StatusWord
+ * after: the counter takes the time that came just before it (and no older
+ * one: has_pending_time is used once) and starts the status afresh, so a
+ * group that lost a frame lends nothing to the next. */
 static int open_group(ps_imu_xsens_rx_t *rx, const ps_can_frame_t *f)
 {
     if (rx->is_open)
         rx->n_incomplete++; /* the previous group never got its acceleration */
     rx->is_open = true;
     rx->has_gyro = false;
+    rx->has_status = false;
+    rx->has_time = rx->has_pending_time;
+    rx->has_pending_time = false;
+    rx->sample_time = rx->pending_time;
     rx->counter = get_be16(f->data);
-    rx->t_ns = rx->has_time ? rx->t_ns : f->t_ns;
+    rx->t_ns = rx->has_time ? rx->pending_t_ns : f->t_ns;
     return 0;
 }
 
@@ -164,14 +172,14 @@ int ps_imu_xsens_rx_feed(ps_imu_xsens_rx_t *rx, const ps_can_frame_t *f, ps_imu_
         return -ENOENT;
     if (f->len != LEN[ofs] || f->is_fd) {
         rx->is_open = false; /* the stream is broken: do not mix two samples */
-        rx->has_time = rx->has_status = false;
+        rx->has_time = rx->has_status = rx->has_pending_time = false;
         return -PS_ERR_PROTOCOL;
     }
     switch (ofs) {
     case PS_IMU_XSENS_OFS_SAMPLE_TIME:
-        rx->sample_time = get_be32(f->data);
-        rx->has_time = true;
-        rx->t_ns = f->t_ns; /* SampleTime comes first: the group's time */
+        rx->pending_time = get_be32(f->data);
+        rx->has_pending_time = true;
+        rx->pending_t_ns = f->t_ns; /* SampleTime comes first: the group's time */
         return 0;
     case PS_IMU_XSENS_OFS_COUNTER:
         return open_group(rx, f);

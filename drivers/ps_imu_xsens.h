@@ -70,6 +70,9 @@ typedef struct {
     bool has_last_counter;
     uint16_t last_counter;
     uint32_t sample_time, last_sample_time;
+    uint32_t pending_time; /* a SampleTime not yet claimed by a GroupCounter */
+    bool has_pending_time;
+    int64_t pending_t_ns;
     bool has_last_time;
     uint32_t status_word;
     float gyro_body_rad_s[3];

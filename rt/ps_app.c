@@ -274,6 +274,10 @@ static int open_bus(ps_app_t *app, uint32_t b, char *err, size_t len)
     return rc;
 }
 
+/* One send call takes a bus's whole tick: the loop's batch fits the
+ * socket's (a longer one would be cut and counted as a full queue). */
+_Static_assert(PS_LOOP_MAX_TX <= PS_CAN_SOCKET_BATCH, "a tick's frames fit one sendmmsg");
+
 static int wire_linux(ps_app_t *app, ps_loop_cfg_t *lc, char *err, size_t len)
 {
     for (uint32_t b = 0; b < app->board.n_buses; b++) {

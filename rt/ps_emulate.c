@@ -238,10 +238,13 @@ static int open_lines(char *err, size_t len)
     e.is_powered = e.o.heartbeat_path == NULL; /* no relay to play: always on */
     if (e.o.estop_path != NULL) {
         e.estop_fd = open(e.o.estop_path, O_WRONLY | O_CLOEXEC);
-        if (e.estop_fd < 0 ||
-            write(e.estop_fd, e.board.gpio.is_estop_active_low ? "1" : "0", 1) != 1) {
-            snprintf(err, len, "--estop-file %s: %s", e.o.estop_path, strerror(errno));
-            return -errno;
+        const ssize_t w = e.estop_fd < 0
+                              ? -1
+                              : write(e.estop_fd, e.board.gpio.is_estop_active_low ? "1" : "0", 1);
+        if (w != 1) {
+            const int er = w < 0 ? errno : EIO; /* a short write sets no errno */
+            snprintf(err, len, "--estop-file %s: %s", e.o.estop_path, strerror(er));
+            return -er;
         }
     }
     if (e.o.heartbeat_path != NULL) {
@@ -329,6 +332,11 @@ static void serve_bus(uint32_t b)
     ps_can_port_t port = ps_can_socket_port(&e.sock[b]);
     ps_can_frame_t rx[PS_CAN_SOCKET_BATCH], tx[PS_CAN_SOCKET_BATCH];
     int n = ps_can_recv_batch(&port, rx, PS_CAN_SOCKET_BATCH);
+    if (n < 0) { /* the interface went down or away: say so, stop */
+        fprintf(stderr, "pushstep emulate: bus %u %s: %s\n", b, e.o.ifaces[b], strerror(-n));
+        g_stop = 1;
+        return;
+    }
     size_t n_tx = 0;
     int reply_joint[PS_CAN_SOCKET_BATCH];
     for (int i = 0; i < n; i++) {
@@ -420,8 +428,8 @@ static void run(void)
         const struct timespec timeout = {.tv_sec = 0, .tv_nsec = (long)(wake_ns - now)};
         if (ppoll(pfd, e.n_open, &timeout, NULL) <= 0)
             continue;
-        for (uint32_t b = 0; b < e.n_open; b++)
-            if (pfd[b].revents & POLLIN)
+        for (uint32_t b = 0; b < e.n_open && !g_stop; b++)
+            if (pfd[b].revents & (POLLIN | POLLERR | POLLHUP | POLLNVAL))
                 serve_bus(b);
     }
 }
@@ -459,7 +467,8 @@ static void report(FILE *out, double elapsed_s)
             elapsed_s, (unsigned long long)e.hoist.n_frames, (unsigned long long)e.hoist.n_replies,
             (unsigned long long)e.hoist.n_unclaimed, (unsigned long long)e.hoist.n_bad_frames);
     for (uint32_t b = 0; b < e.n_open; b++)
-        fprintf(out, "emulate: bus %u %s: %llu commands, %.1f/s while the runtime sent, %llu replies\n",
+        fprintf(out,
+                "emulate: bus %u %s: %llu commands, %.1f/s while the runtime sent, %llu replies\n",
                 b, e.o.ifaces[b], (unsigned long long)e.n_cmd[b], cmd_rate(b),
                 (unsigned long long)e.n_reply[b]);
     fprintf(out, "emulate: late commands: %llu\n", (unsigned long long)late);

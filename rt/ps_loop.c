@@ -685,11 +685,13 @@ void ps_loop_tick(ps_loop_t *loop, int64_t deadline_ns)
     int64_t t3 = ps_clock_now_ns(clk);
     stage_servo(loop, tick);
     int64_t t4 = ps_clock_now_ns(clk);
+    const uint64_t n_sent_before = loop->counters.n_tx_frames;
     stage_write(loop);
     int64_t t5 = ps_clock_now_ns(clk);
     /* Reply in to commands out, on the clock the receive stamps are on (the
-     * kernel's CLOCK_MONOTONIC on SocketCAN, simulated time on the sim). */
-    if (loop->newest_reply_rx_ns > 0)
+     * kernel's CLOCK_MONOTONIC on SocketCAN, simulated time on the sim); only
+     * on ticks that sent something. */
+    if (loop->newest_reply_rx_ns > 0 && loop->counters.n_tx_frames > n_sent_before)
         ps_perf_record(&loop->perf[PS_STAGE_REACTION],
                        ps_clock_now_ns(loop->cfg.clock) - loop->newest_reply_rx_ns);
 

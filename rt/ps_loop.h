@@ -93,7 +93,8 @@ typedef enum {
     PS_STAGE_TICK_PLAIN,  /**< PS_STAGE_TICK of ticks without a policy run */
     PS_STAGE_TICK_POLICY, /**< PS_STAGE_TICK of ticks with a policy run */
     PS_STAGE_REACTION,    /**< receive stamp of the newest reply taken to the end of the
-                               write stage, on the loop's clock; ticks that took a reply */
+                               write stage, on the loop's clock; ticks that took a reply
+                               and sent frames */
     PS_STAGE_COUNT
 } ps_stage_t;
 

@@ -325,10 +325,16 @@ static int run_live(double *out_span_s)
         if (poll(pfd, g.n_open, 100) <= 0)
             continue;
         for (uint32_t b = 0; b < g.n_open && !g_stop; b++) {
+            if (!(pfd[b].revents & (POLLIN | POLLERR | POLLHUP | POLLNVAL)))
+                continue;
             ps_can_port_t port = ps_can_socket_port(&g.sock[b]);
             ps_can_frame_t rx[PS_CAN_SOCKET_BATCH];
-            const int n =
-                (pfd[b].revents & POLLIN) ? ps_can_recv_batch(&port, rx, PS_CAN_SOCKET_BATCH) : 0;
+            const int n = ps_can_recv_batch(&port, rx, PS_CAN_SOCKET_BATCH);
+            if (n < 0) { /* the interface went down or away */
+                fprintf(stderr, "pushstep monitor: %s: %s\n", g.board_cfg.buses[b].ifname,
+                        strerror(-n));
+                return 1;
+            }
             for (int i = 0; i < n && !g_stop; i++)
                 take(b, &rx[i]);
         }

@@ -43,18 +43,24 @@ static void test_error_frames_walk_the_fault_confinement_states(void **state)
     apply(&st, CAN_ERR_BUSOFF, 0, 0, 0);
     assert_int_equal(st.mode, PS_CAN_BUS_OFF);
     assert_int_equal(st.n_bus_off, 1);
-    /* Only a restart leaves bus-off: a late "back to active" does not. */
-    apply(&st, CAN_ERR_CRTL, CAN_ERR_CRTL_ACTIVE, 0, 0);
-    assert_int_equal(st.mode, PS_CAN_BUS_OFF);
     apply(&st, CAN_ERR_BUSOFF, 0, 0, 0); /* repeated report, one episode */
     assert_int_equal(st.n_bus_off, 1);
+    apply(&st, CAN_ERR_PROT, 0, 0, 0); /* a protocol error says nothing of the state */
+    assert_int_equal(st.mode, PS_CAN_BUS_OFF);
     apply(&st, CAN_ERR_RESTARTED, 0, 0, 0);
     assert_int_equal(st.mode, PS_CAN_BUS_ERROR_ACTIVE);
     assert_int_equal(st.n_restarts, 1);
+    /* A controller that recovers by itself reports "back to active": also
+     * the end of bus-off (else a lost RESTARTED would keep it off for good). */
+    apply(&st, CAN_ERR_BUSOFF, 0, 0, 0);
+    apply(&st, CAN_ERR_CRTL, CAN_ERR_CRTL_ACTIVE, 0, 0);
+    assert_int_equal(st.mode, PS_CAN_BUS_ERROR_ACTIVE);
+    assert_int_equal(st.n_bus_off, 2);
+    assert_int_equal(st.n_restarts, 2);
     apply(&st, CAN_ERR_CRTL, CAN_ERR_CRTL_TX_PASSIVE, 0, 0);
     apply(&st, CAN_ERR_CRTL, CAN_ERR_CRTL_ACTIVE, 0, 0);
     assert_int_equal(st.mode, PS_CAN_BUS_ERROR_ACTIVE);
-    assert_int_equal(st.n_err_frames, 8);
+    assert_int_equal(st.n_err_frames, 10);
     /* Without CAN_ERR_CNT the counters in data[6..7] are not the driver's. */
     apply(&st, CAN_ERR_CRTL, CAN_ERR_CRTL_RX_WARNING, 77, 77);
     assert_int_equal(st.tx_error_count, 100);

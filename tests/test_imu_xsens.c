@@ -192,6 +192,18 @@ static void test_missing_and_malformed_frames_drop_the_group(void **state)
     const uint64_t before = rx.n_incomplete;
     assert_int_equal(feed_all(&rx, f, 5, &out), 1);
     assert_int_equal(rx.n_incomplete, before + 1);
+    /* A group that lost its acceleration lends its time and status to no
+     * later group: here the next one has neither, and a failed self-test in
+     * the lost group must not show. */
+    const ps_imu_sample_t bad = {.status = PS_IMU_STATUS_SELFTEST_FAIL};
+    ps_can_frame_t g[5];
+    ps_imu_xsens_encode(BASE, &bad, 5, 99, g);
+    for (int i = 0; i < 4; i++) /* SampleTime .. RateOfTurn, no Acceleration */
+        (void)ps_imu_xsens_rx_feed(&rx, &g[i], &out);
+    ps_imu_xsens_encode(BASE, &s, 6, 99, f);
+    const ps_can_frame_t bare[3] = {f[1], f[3], f[4]};
+    assert_int_equal(feed_all(&rx, bare, 3, &out), 1); /* not refused as frozen at 99 */
+    assert_int_equal(out.status, 0);
     ps_can_frame_t ext = f[4];
     ext.is_ext = 1;
     assert_int_equal(ps_imu_xsens_rx_feed(&rx, &ext, &out), -ENOENT);

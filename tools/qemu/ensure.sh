@@ -11,10 +11,13 @@ kver() { apt-cache depends linux-image-amd64 2>/dev/null | awk '/Depends: linux-
 want=$(kver || true)
 if [ -z "$want" ] && [ "$(id -u)" -eq 0 ]; then apt-get update -qq; want=$(kver || true); fi
 # A new kernel or a changed recipe (module list, init) makes a new VM.
-want="$want $(cat "$D/setup-all.sh" "$D/mkinitramfs.sh" "$D/init-hostshare" | sha256sum | cut -c1-16)"
+recipe=$(cat "$D/setup-all.sh" "$D/mkinitramfs.sh" "$D/init-hostshare" | sha256sum | cut -c1-16)
+want="$want $recipe"
 have=$(cat "$W/stamp" 2>/dev/null || true)
+# Where apt cannot name the kernel (no root, no lists) a VM built from this
+# recipe is still good: compare the recipe alone then.
 if command -v qemu-system-x86_64 >/dev/null && [ -r "$W/vmlinuz" ] && [ -r "$W/initrd-share.cpio.gz" ] &&
-    [ "$want" = "$have" ]; then
+    { [ "$want" = "$have" ] || { [ -z "${want%% *}" ] && [ "${have##* }" = "$recipe" ]; }; }; then
     exit 0
 fi
 [ "$(id -u)" -eq 0 ] || { echo "ensure: the VM is not set up and this is not root" >&2; exit 1; }
