@@ -314,6 +314,12 @@ static int socket_get_state(void *ctx, ps_can_state_t *out)
     if (s->fd < 0)
         return -EBADF;
     *out = s->state;
+    /* A bus-off that began and ended within one receive batch (the error
+     * frame, then data frames) is still reported once: the loop reads the
+     * state once a tick and must see every episode. */
+    if (s->state.n_bus_off != s->n_bus_off_reported)
+        out->mode = PS_CAN_BUS_OFF;
+    s->n_bus_off_reported = s->state.n_bus_off;
     const int64_t elapsed_ns = now_ns(CLOCK_MONOTONIC) - s->open_ns;
     out->load = (s->bitrate > 0 && elapsed_ns > 0)
                     ? (double)s->state.n_bits / ((double)s->bitrate * (double)elapsed_ns * 1e-9)

@@ -18,7 +18,9 @@
  * violations and missing ACKs, and the TX/RX error counters when the driver
  * reports them (CAN_ERR_CNT). The loop turns bus-off into an e-stop condition.
  * Bus-off ends with a "restarted" report, any controller state report, or a
- * data frame received (a bus-off controller receives nothing).
+ * data frame received (a bus-off controller receives nothing); get_state
+ * reports every bus-off episode at least once, even one that ended within a
+ * single receive batch.
  *
  * CAN FD (CAN_RAW_FD_FRAMES) where the bus is configured FD; classical frames
  * on an FD socket still arrive as classical frames (by their size).
@@ -94,6 +96,7 @@ typedef struct {
     char ifname[PS_NAME_LEN];
     int64_t open_ns;
     ps_can_state_t state;
+    uint64_t n_bus_off_reported; /**< bus-off episodes get_state has shown */
     ps_can_socket_slot_t rx[PS_CAN_SOCKET_BATCH];
     ps_can_socket_slot_t tx[PS_CAN_SOCKET_BATCH];
 } ps_can_socket_t;

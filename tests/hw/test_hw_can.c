@@ -255,6 +255,21 @@ static void test_error_frames_reach_the_bus_state(void **state)
     assert_int_equal(st.mode, PS_CAN_BUS_ERROR_ACTIVE);
     assert_int_equal(st.n_bus_off, 1);
     assert_int_equal(st.n_restarts, 1);
+    /* A bus-off and a data frame right behind it, taken in one batch: the
+     * frame ends the episode, but the next state read still reports it. */
+    ps_can_socket_close(&g_sock);
+    const ps_can_socket_filter_t all = {0, 0, false};
+    open_sock(&g_sock, "vcan0", false, 1, &all);
+    p = ps_can_socket_port(&g_sock);
+    e.can_id = CAN_ERR_FLAG | CAN_ERR_BUSOFF;
+    assert_int_equal(write(peer, &e, sizeof e), (ssize_t)sizeof e);
+    peer_send(peer, 0x12, 1, false);
+    assert_int_equal(recv_some(&g_sock, rx, 4, 1), 1);
+    assert_int_equal(ps_can_get_state(&p, &st), 0);
+    assert_int_equal(st.mode, PS_CAN_BUS_OFF);
+    assert_int_equal(ps_can_get_state(&p, &st), 0);
+    assert_int_equal(st.mode, PS_CAN_BUS_ERROR_ACTIVE); /* once */
+    assert_int_equal(st.n_bus_off, 1);
     close(peer);
     ps_can_socket_close(&g_sock);
 }
