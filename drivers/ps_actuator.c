@@ -187,6 +187,14 @@ int ps_act_encode_request(const ps_act_cfg_t *a, ps_act_request_t req, ps_can_fr
     return p->encode_request(a, req, out, max);
 }
 
+int ps_act_decode_fault(const ps_act_cfg_t *a, const ps_can_frame_t *f, uint32_t *out_fault_bits)
+{
+    const ps_act_proto_t *p = a != NULL ? ps_act_proto_get(a->protocol) : NULL;
+    if (p == NULL || f == NULL || out_fault_bits == NULL)
+        return -EINVAL;
+    return p->decode_fault != NULL ? p->decode_fault(a, f, out_fault_bits) : -ENOENT;
+}
+
 int ps_act_decode_reply(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_act_meas_t *out_joint)
 {
     const ps_act_proto_t *p = a != NULL ? ps_act_proto_get(a->protocol) : NULL;

@@ -157,6 +157,17 @@ typedef struct {
     /** @post *out motor side, t_ns untouched  @return 0 | -PS_ERR_PROTOCOL malformed */
     int (*decode_reply)(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_act_meas_t *out);
 
+    /** Optional (NULL in protocols without one): a fault report the drive sends
+     *  on its own when a fault latches, apart from its replies (RobStride
+     *  type 21). fault_filter: the receive filter for drive a's reports, as
+     *  reply_filter. decode_fault: @post *out_fault_bits ps_act_fault_t bits
+     *  @return 0 | -ENOENT not drive a's report | -PS_ERR_PROTOCOL malformed.
+     *  encode_fault (device side): @return frames written | -ENOSPC */
+    void (*fault_filter)(const ps_act_cfg_t *a, uint32_t *out_id, uint32_t *out_mask);
+    int (*decode_fault)(const ps_act_cfg_t *a, const ps_can_frame_t *f, uint32_t *out_fault_bits);
+    int (*encode_fault)(const ps_act_cfg_t *a, uint32_t fault_bits, ps_can_frame_t *out,
+                        size_t max);
+
     /** Device side (emulated drives). @return true if f is addressed to drive a */
     bool (*is_for_drive)(const ps_act_cfg_t *a, const ps_can_frame_t *f);
     /** @return the request f carries (0..PS_ACT_REQ_COUNT-1) | -ENOENT f is a
@@ -222,6 +233,11 @@ int ps_act_encode_request(const ps_act_cfg_t *a, ps_act_request_t req, ps_can_fr
  *  @return 0 | -ENOENT not this drive's reply | -PS_ERR_PROTOCOL malformed
  *  @rt RT-SAFE O(1) */
 int ps_act_decode_reply(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_act_meas_t *out_joint);
+
+/** A fault report of drive a (the protocol's decode_fault).
+ *  @return 0 | -ENOENT not its report, or its protocol has none
+ *          | -PS_ERR_PROTOCOL malformed  @rt RT-SAFE O(1) */
+int ps_act_decode_fault(const ps_act_cfg_t *a, const ps_can_frame_t *f, uint32_t *out_fault_bits);
 
 /** @return name of the lowest set fault bit, e.g. "MOTOR_OVERTEMP"; "none" for 0
  *  @rt RT-SAFE */

@@ -60,8 +60,9 @@
 #include "ps_can.h"
 #include "ps_canbus.h"
 
-/** Kernel filters of one socket: every drive, the IMU's frames (up to 5), spares. */
-#define PS_CAN_SOCKET_MAX_FILTERS (PS_MAX_JOINTS + 8u)
+/** Kernel filters of one socket: every drive's replies and fault reports,
+ *  the IMU's frames (up to 5), spares. */
+#define PS_CAN_SOCKET_MAX_FILTERS (2u * PS_MAX_JOINTS + 8u)
 /** Frames one recvmmsg/sendmmsg call moves at most. */
 #define PS_CAN_SOCKET_BATCH 64u
 

@@ -31,6 +31,23 @@ static const struct {
 };
 #define N_FAULTS (sizeof(FAULT_MAP) / sizeof(FAULT_MAP[0]))
 
+/* Fault report (type 21) fault value, bytes 0..3 <-> neutral fault bits
+ * (CyberGear manual 4.1.10). Bits 8..15 are the overload fault's. */
+static const struct {
+    uint32_t mask;
+    uint32_t fault;
+} REPORT_MAP[] = {
+    {1u << 0, PS_ACT_FAULT_MOTOR_OVERTEMP}, {1u << 1, PS_ACT_FAULT_OTHER}, /* driver chip */
+    {1u << 2, PS_ACT_FAULT_UNDERVOLTAGE},   {1u << 3, PS_ACT_FAULT_OVERVOLTAGE},
+    {1u << 4, PS_ACT_FAULT_OVERCURRENT}, /* phase B current sampling */
+    {1u << 5, PS_ACT_FAULT_OVERCURRENT}, /* phase C */
+    {1u << 7, PS_ACT_FAULT_ENCODER},     /* encoder not calibrated */
+    {0xffu << 8, PS_ACT_FAULT_OVERLOAD},    {1u << 16, PS_ACT_FAULT_OVERCURRENT}, /* phase A */
+};
+#define N_REPORT (sizeof(REPORT_MAP) / sizeof(REPORT_MAP[0]))
+/* Bits the manual names; any other set bit is still a fault: OTHER. */
+#define REPORT_KNOWN 0x0001ffbfu
+
 uint32_t ps_robstride_fault_bits(uint32_t id)
 {
     uint32_t bits = 0u;
@@ -154,6 +171,77 @@ static void rs_reply_filter(const ps_act_cfg_t *a, uint32_t *out_id, uint32_t *o
     *out_mask = ps_robstride_id(0x1fu, 0xffu, 0xffu);
 }
 
+/* Type 21, as the manual's table 4.1.10 lays it out: data area 2 bits 15..8
+ * = the host's id, target = the drive's id (the other way round from the
+ * feedback frame); fault value in bytes 0..3 and warning value in 4..7,
+ * little-endian (the drive's MCU stores them so: the manual's own parameter
+ * write example memcpy's a float into the data). */
+static uint32_t report_id(const ps_act_cfg_t *a)
+{
+    return ps_robstride_id(PS_ROBSTRIDE_TYPE_FAULT, a->reply_id & 0xffu, a->can_id);
+}
+
+static void rs_fault_filter(const ps_act_cfg_t *a, uint32_t *out_id, uint32_t *out_mask)
+{
+    *out_id = report_id(a);
+    *out_mask = ps_robstride_id(0x1fu, 0xffffu, 0xffu);
+}
+
+static uint32_t get_le32(const uint8_t *p)
+{
+    return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
+}
+
+static void put_le32(uint8_t *p, uint32_t v)
+{
+    for (unsigned i = 0; i < 4; i++)
+        p[i] = (uint8_t)(v >> (8u * i));
+}
+
+uint32_t ps_robstride_report_fault_bits(uint32_t fault_value)
+{
+    uint32_t bits = (fault_value & ~REPORT_KNOWN) ? PS_ACT_FAULT_OTHER : 0u;
+    for (size_t i = 0; i < N_REPORT; i++)
+        if (fault_value & REPORT_MAP[i].mask)
+            bits |= REPORT_MAP[i].fault;
+    return bits;
+}
+
+static int rs_decode_fault(const ps_act_cfg_t *a, const ps_can_frame_t *f, uint32_t *out_fault_bits)
+{
+    if (!f->is_ext || f->is_fd || f->id != report_id(a))
+        return -ENOENT;
+    if (f->len != LEN)
+        return -PS_ERR_PROTOCOL;
+    /* The warning value (bytes 4..7: over-temperature warning) is no fault. */
+    *out_fault_bits = ps_robstride_report_fault_bits(get_le32(f->data));
+    return 0;
+}
+
+static int rs_encode_fault(const ps_act_cfg_t *a, uint32_t fault_bits, ps_can_frame_t *out,
+                           size_t max)
+{
+    if (max < 1)
+        return -ENOSPC;
+    /* Each neutral bit as the first wire bit the table gives it (OTHER as
+     * the driver-chip fault); bits no entry has (COMMS_LOST: a drive does
+     * not report its own timeout so) are left out. */
+    uint32_t value = 0, done = 0;
+    for (size_t i = 0; i < N_REPORT; i++) {
+        const uint32_t fault = REPORT_MAP[i].fault;
+        if ((fault_bits & fault) && !(done & fault)) {
+            value |= REPORT_MAP[i].mask & (0u - REPORT_MAP[i].mask); /* its lowest bit */
+            done |= fault;
+        }
+    }
+    memset(out, 0, sizeof(*out));
+    out->id = report_id(a);
+    out->is_ext = 1;
+    out->len = LEN;
+    put_le32(out->data, value);
+    return 1;
+}
+
 static int rs_decode_reply(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_act_meas_t *out)
 {
     if (f->len != LEN)
@@ -239,6 +327,9 @@ const ps_act_proto_t ps_robstride_proto = {
     .encode_request = rs_encode_request,
     .match_reply = rs_match_reply,
     .reply_filter = rs_reply_filter,
+    .fault_filter = rs_fault_filter,
+    .decode_fault = rs_decode_fault,
+    .encode_fault = rs_encode_fault,
     .decode_reply = rs_decode_reply,
     .is_for_drive = rs_is_for_drive,
     .classify_request = rs_classify_request,

@@ -26,8 +26,16 @@
  * id (0..255, the same for every drive of a host): replies are told apart by
  * the drive id inside them, so only can_id must be unique on a bus.
  *
- * Not handled yet: the fault report frame (type 21), parameter reads and
- * writes (types 17, 18), the other run modes.
+ *   type 21 fault report (drive -> host, when a fault latches): area 2 bits
+ *          15..8 = host id, target = drive id (as the manual's table 4.1.10
+ *          has it); bytes 0..3 fault value, 4..7 warning value, little-
+ *          endian: bit 0 motor over-temperature, 1 driver chip, 2 under-
+ *          voltage, 3 over-voltage, 4/5/16 phase B/C/A over-current, 7
+ *          encoder not calibrated, 8..15 overload; warning bit 0: motor
+ *          over-temperature warning (not a fault)
+ *
+ * Not handled yet: parameter reads and writes (types 17, 18), the other run
+ * modes.
  *
  * Threads: any (pure functions). Allocation: none.
  */
@@ -43,6 +51,7 @@
 #define PS_ROBSTRIDE_TYPE_ENABLE   3u
 #define PS_ROBSTRIDE_TYPE_STOP     4u
 #define PS_ROBSTRIDE_TYPE_ZERO     6u
+#define PS_ROBSTRIDE_TYPE_FAULT    21u
 
 /** The 29-bit identifier of a frame: type, data area 2, target.  @rt RT-SAFE */
 static inline uint32_t ps_robstride_id(uint32_t type, uint32_t area2, uint32_t target)
@@ -52,6 +61,10 @@ static inline uint32_t ps_robstride_id(uint32_t type, uint32_t area2, uint32_t t
 
 /** The protocol table: see ps_actuator.h for the ops' contracts. */
 extern const ps_act_proto_t ps_robstride_proto;
+
+/** @return ps_act_fault_t bits for a type-21 report's fault value (bytes 0..3);
+ *  a bit the manual does not name counts as PS_ACT_FAULT_OTHER  @rt RT-SAFE */
+uint32_t ps_robstride_report_fault_bits(uint32_t fault_value);
 
 /** @return ps_act_fault_t bits for the feedback frame's fault field
  *  (identifier bits 21..16)  @rt RT-SAFE */

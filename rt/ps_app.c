@@ -223,6 +223,11 @@ void ps_app_bus_filters(const ps_robot_cfg_t *r, uint32_t bus_idx, ps_can_socket
         ps_can_socket_filter_t *f = &out->filters[out->n_filters++];
         p->reply_filter(&r->act[j], &f->id, &f->mask);
         f->is_ext = p->id_bits > 11u;
+        if (p->fault_filter != NULL && out->n_filters < PS_CAN_SOCKET_MAX_FILTERS) {
+            ps_can_socket_filter_t *g = &out->filters[out->n_filters++];
+            p->fault_filter(&r->act[j], &g->id, &g->mask);
+            g->is_ext = f->is_ext;
+        }
     }
     uint32_t ids[PS_IMU_MAX_FRAMES];
     uint8_t lens[PS_IMU_MAX_FRAMES];

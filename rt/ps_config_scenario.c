@@ -30,6 +30,7 @@ static const cyaml_strval_t EVENT_KINDS[] = {
     {"reset", PS_EVENT_RESET},
     {"harness_release", PS_EVENT_HARNESS_RELEASE},
     {"drop_replies", PS_EVENT_DROP_REPLIES},
+    {"drive_fault", PS_EVENT_DRIVE_FAULT},
 };
 static_assert(sizeof(EVENT_KINDS) / sizeof(EVENT_KINDS[0]) == PS_EVENT_COUNT,
               "one YAML name per event kind");
@@ -105,13 +106,16 @@ static int check_scenario(ps_cfg_ctx_t *c, const ps_scenario_cfg_t *s)
     for (uint32_t i = 0; i < s->n_events; i++) {
         const ps_event_cfg_t *e = &s->events[i];
         const bool is_drop = e->kind == PS_EVENT_DROP_REPLIES;
-        if (is_drop && e->joint[0] == '\0') {
+        const bool has_joint = is_drop || e->kind == PS_EVENT_DRIVE_FAULT;
+        if (has_joint && e->joint[0] == '\0') {
             (void)snprintf(field, sizeof(field), "events[%u]", i);
-            return ps_cfg_fail_field(c, field, "drop_replies needs a \"joint\"");
+            return ps_cfg_fail_field(c, field, "%s needs a \"joint\"",
+                                     ps_config_event_name(e->kind));
         }
-        if (!is_drop && e->joint[0] != '\0') {
+        if (!has_joint && e->joint[0] != '\0') {
             (void)snprintf(field, sizeof(field), "events[%u].joint", i);
-            return ps_cfg_fail_field(c, field, "only drop_replies takes a joint, not %s",
+            return ps_cfg_fail_field(c, field,
+                                     "only drop_replies and drive_fault take a joint, not %s",
                                      ps_config_event_name(e->kind));
         }
         if (!is_drop && e->duration_s != 0.0f) {
@@ -206,7 +210,8 @@ int ps_config_check_scenario(const ps_robot_cfg_t *r, const ps_scenario_cfg_t *s
         err[0] = '\0';
     for (uint32_t i = 0; i < s->n_events && i < PS_MAX_EVENTS; i++) {
         const ps_event_cfg_t *e = &s->events[i];
-        if (e->kind != PS_EVENT_DROP_REPLIES || ps_config_find_joint(r, e->joint) >= 0)
+        if ((e->kind != PS_EVENT_DROP_REPLIES && e->kind != PS_EVENT_DRIVE_FAULT) ||
+            ps_config_find_joint(r, e->joint) >= 0)
             continue;
         if (s->path[0] == '\0')
             ps_err_format(err, err_len,

@@ -388,6 +388,13 @@ static void step(int64_t now)
         send_error_report(CAN_ERR_RESTARTED);
     ps_can_frame_t imu[PS_IMU_MAX_FRAMES];
     const int n_imu = ps_hoist_step(&e.hoist, now, (double)e.period_ns * 1e-9, imu);
+    for (uint32_t j = 0; j < e.hoist.n_joints; j++) {
+        ps_can_frame_t report;
+        if (ps_devices_take_fault_report(&e.hoist.act[j], now, &report) == 1) {
+            ps_can_port_t port = ps_can_socket_port(&e.sock[e.hoist.act[j].act.bus_idx]);
+            (void)ps_can_send_batch(&port, &report, 1);
+        }
+    }
     if (n_imu > 0) {
         ps_can_port_t port = ps_can_socket_port(&e.sock[e.hoist.imu_bus_idx]);
         (void)ps_can_send_batch(&port, imu, (size_t)n_imu);

@@ -125,8 +125,22 @@ static bool take_reply(ps_loop_t *loop, uint32_t bus_idx, const ps_can_frame_t *
         const uint32_t j = loop->bus_joint[bus_idx][k];
         ps_act_meas_t m = {0};
         const int rc = ps_act_decode_reply(&r->act[j], f, &m);
-        if (rc == -ENOENT)
-            continue;
+        if (rc == -ENOENT) {
+            /* Not a reply: perhaps the drive's own fault report. Its bits
+             * stay until the drives are enabled again after ESTOP: the next
+             * reply may not carry them (docs/safety.md). */
+            uint32_t bits = 0;
+            const int frc = ps_act_decode_fault(&r->act[j], f, &bits);
+            if (frc == -ENOENT)
+                continue;
+            if (frc < 0)
+                loop->counters.n_rx_bad++;
+            else {
+                loop->fault_report_bits[j] |= bits;
+                loop->counters.n_fault_reports++;
+            }
+            return true;
+        }
         if (rc < 0 || !isfinite(m.q_rad)) {
             loop->counters.n_rx_bad++;
             return true;
@@ -338,7 +352,7 @@ static uint32_t watchdog_conditions(const ps_loop_t *loop)
         if (is_stale(m->t_ns, now, reply_timeout + (int64_t)a->rate_div * loop->period_ns))
             cond |= PS_SM_C_REPLY_STALE;
         else if (now >= loop->fault_grace_until_ns[j] &&
-                 (m->fault_bits != 0u || m->temp_c > a->temp_max_c))
+                 ((m->fault_bits | loop->fault_report_bits[j]) != 0u || m->temp_c > a->temp_max_c))
             cond |= PS_SM_C_DRIVE_FAULT;
     }
     if (is_stale(loop->meas.imu.t_ns, now,
@@ -422,6 +436,7 @@ static void enter_state(ps_loop_t *loop, ps_sm_state_t to)
         /* Only replies after the drives' new enable count (docs/safety.md). */
         for (uint32_t j = 0; j < loop->meas.n_joints; j++) {
             loop->meas.joints[j].fault_bits = 0u;
+            loop->fault_report_bits[j] = 0u;
             loop->meas.joints[j].t_ns = 0;
             loop->fault_grace_until_ns[j] = INT64_MAX; /* until its enable is sent */
         }

@@ -164,11 +164,12 @@ typedef struct {
     uint64_t n_policy_runs;
     uint64_t n_policy_late;
     uint64_t n_rx_frames;
-    uint64_t n_rx_unknown;   /**< frames with an id nobody expects */
-    uint64_t n_rx_bad;       /**< malformed replies or IMU frames */
-    uint64_t n_imu_rejected; /**< IMU samples with a saturated gyro or failed self-test */
-    uint64_t n_rx_capped;    /**< ticks a bus still had frames after PS_LOOP_MAX_RX_BATCHES */
-    uint64_t n_imu_repeated; /**< IMU samples whose seq did not advance (ignored) */
+    uint64_t n_rx_unknown;    /**< frames with an id nobody expects */
+    uint64_t n_fault_reports; /**< drives' own fault reports taken (RobStride type 21) */
+    uint64_t n_rx_bad;        /**< malformed replies or IMU frames */
+    uint64_t n_imu_rejected;  /**< IMU samples with a saturated gyro or failed self-test */
+    uint64_t n_rx_capped;     /**< ticks a bus still had frames after PS_LOOP_MAX_RX_BATCHES */
+    uint64_t n_imu_repeated;  /**< IMU samples whose seq did not advance (ignored) */
     uint64_t n_tx_frames;
     uint64_t n_tx_refused; /**< frames a bus would not queue */
     uint64_t n_bus_errors; /**< -errno from a port */
@@ -207,6 +208,8 @@ typedef struct {
     uint32_t n_overrun_times;                        /**< entries written (ring index base) */
     bool is_entered[PS_MAX_JOINTS];                  /**< enable sent since the last disable */
     int64_t fault_grace_until_ns[PS_MAX_JOINTS];     /**< drive faults ignored until (enable) */
+    uint32_t fault_report_bits[PS_MAX_JOINTS]; /**< faults the drive reported on its own, kept until
+                                                  the next enable after ESTOP */
     bool has_policy_late;
     bool has_target_invalid;
     bool has_cmd_fault; /**< a command had to be replaced (TARGET_INVALID) */

@@ -82,6 +82,22 @@ static int describe_joint(const ps_robot_cfg_t *r, uint32_t bus_idx, const ps_ca
             }
             return 1;
         }
+        uint32_t fault_bits = 0;
+        const int frc = p->decode_fault != NULL ? p->decode_fault(a, f, &fault_bits) : -ENOENT;
+        if (frc != -ENOENT) {
+            *out_joint = (int)j;
+            if (frc < 0) {
+                snprintf(out, len, "%s malformed fault report (%s, %u bytes)", r->joint_name[j],
+                         p->name, f->len);
+                *kind = PS_MONITOR_MALFORMED;
+            } else {
+                snprintf(out, len, "%s fault report: %s%s", r->joint_name[j],
+                         ps_act_fault_name(fault_bits),
+                         fault_bits & (fault_bits - 1u) ? " and more" : "");
+                *kind = PS_MONITOR_FAULT;
+            }
+            return 1;
+        }
         if (p->is_for_drive(a, f)) {
             *out_joint = (int)j;
             *kind = describe_drive_frame(r, j, f, out, len);
@@ -250,7 +266,8 @@ static void take(uint32_t bus_idx, const ps_can_frame_t *f)
     if (j >= 0) {
         g.count[j].n_cmd += kind == PS_MONITOR_COMMAND;
         g.count[j].n_reply += kind == PS_MONITOR_REPLY;
-        g.count[j].n_other += kind == PS_MONITOR_REQUEST || kind == PS_MONITOR_MALFORMED;
+        g.count[j].n_other +=
+            kind == PS_MONITOR_REQUEST || kind == PS_MONITOR_MALFORMED || kind == PS_MONITOR_FAULT;
     }
     if (!g.is_rates)
         printf("(%lld.%06lld) %s %s\n", (long long)(f->t_ns / 1000000000LL),

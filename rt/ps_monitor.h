@@ -3,7 +3,8 @@
  * frame on the board's buses (live, through SocketCAN; or from a candump -L
  * log, for offline analysis) is printed as what it means for the robot file:
  * which joint's command (set-points, joint side) or mode request, which
- * joint's reply (position, velocity, torque, temperature, faults), which IMU
+ * joint's reply (position, velocity, torque, temperature, faults) or fault
+ * report, which IMU
  * half or sample; anything else as raw bytes, marked unknown. With --rates
  * it prints, per joint, commands and replies per second instead.
  *
@@ -29,6 +30,7 @@ typedef enum {
     PS_MONITOR_REPLY,
     PS_MONITOR_IMU,
     PS_MONITOR_MALFORMED, /**< addressed to a joint or the IMU, but not decodable */
+    PS_MONITOR_FAULT,     /**< a drive's own fault report (RobStride type 21) */
 } ps_monitor_kind_t;
 
 /** State the decoder keeps: the IMU's half samples. */

@@ -275,3 +275,17 @@ int ps_devices_route_frame(ps_devices_actuator_t *acts, uint32_t n_joints, uint3
     }
     return -ENOENT;
 }
+
+int ps_devices_take_fault_report(ps_devices_actuator_t *a, int64_t now_ns, ps_can_frame_t *out)
+{
+    const ps_act_proto_t *p = ps_act_proto_get(a->act.protocol);
+    a->fault_bits_reported &= a->fault_bits; /* cleared faults may come back */
+    if (p == NULL || p->encode_fault == NULL || (a->fault_bits & ~a->fault_bits_reported) == 0u)
+        return 0;
+    if (p->encode_fault(&a->act, a->fault_bits, out, 1) != 1)
+        return 0;
+    out->t_ns = now_ns;
+    a->fault_bits_reported = a->fault_bits;
+    a->n_fault_reports++;
+    return 1;
+}

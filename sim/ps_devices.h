@@ -85,6 +85,8 @@ typedef struct {
     int64_t last_cmd_ns;           /**< arrival of the last command or ENTER */
     double temp_c;                 /**< winding temperature */
     uint32_t fault_bits;           /**< ps_act_fault_t bits, latched */
+    uint32_t fault_bits_reported;  /**< of those, sent in a fault report (read-only) */
+    uint64_t n_fault_reports;      /**< fault reports produced */
     double tau_nm;                 /**< torque of the last step */
     int64_t drop_replies_until_ns; /**< user may modify: fault injection */
     uint64_t n_cmd_frames;         /**< command frames decoded (obeyed or not) */
@@ -128,6 +130,13 @@ int ps_devices_handle_frame(ps_devices_actuator_t *a, const ps_can_frame_t *f, d
  *  @rt RT-SAFE O(1), plant thread */
 double ps_devices_step_actuator(ps_devices_actuator_t *a, double q_rad, double qd_rad_s,
                                 int64_t now_ns, double dt_s);
+
+/** A drive whose protocol has a fault report (RobStride type 21) sends one
+ *  when a fault latches that it has not reported yet, as a real one does
+ *  on its own; faults cleared by an enable can be reported again.
+ *  @post *out written (t_ns = now_ns) when 1 is returned
+ *  @return 1 report due | 0 none  @rt RT-SAFE O(1), plant thread */
+int ps_devices_take_fault_report(ps_devices_actuator_t *a, int64_t now_ns, ps_can_frame_t *out);
 
 /** Offer one frame from bus bus_idx to the drives on that bus (acts[j] is
  *  joint j, at q_rad[j], qd_rad_s[j]), the first that it addresses takes it.

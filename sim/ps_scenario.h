@@ -30,13 +30,16 @@ typedef enum {
     PS_EVENT_RESET,           /**< operator resets a latched e-stop */
     PS_EVENT_HARNESS_RELEASE, /**< sim harness lets go of the pelvis */
     PS_EVENT_DROP_REPLIES,    /**< `joint` stops replying for duration_s */
+    PS_EVENT_DRIVE_FAULT,     /**< `joint`'s drive latches an over-voltage fault and goes
+                                   limp: its replies carry it where their fault field can,
+                                   and its own fault report (RobStride type 21) does */
     PS_EVENT_COUNT
 } ps_event_kind_t;
 
 typedef struct {
     float t_s;
     ps_event_kind_t kind;
-    char joint[PS_NAME_LEN]; /**< for DROP_REPLIES */
+    char joint[PS_NAME_LEN]; /**< for DROP_REPLIES and DRIVE_FAULT */
     float duration_s;
     uint32_t joint_line; /**< line of `joint` in the scenario file, 0: unknown */
 } ps_event_cfg_t;

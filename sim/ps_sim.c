@@ -124,6 +124,12 @@ static void run_scenario(ps_sim_t *s, int64_t rel_ns)
             s->act[s->event_joint_idx[e]].drop_replies_until_ns =
                 s->start_ns + s->event_t_ns[e] + ps_s_to_ns((double)ev->duration_s);
             break;
+        case PS_EVENT_DRIVE_FAULT: {
+            ps_devices_actuator_t *a = &s->act[s->event_joint_idx[e]];
+            a->fault_bits |= PS_ACT_FAULT_OVERVOLTAGE;
+            a->is_motor_mode = false; /* a faulted drive gives no torque */
+            break;
+        }
         case PS_EVENT_COUNT:
         default:
             break;
@@ -195,6 +201,9 @@ static void substep(ps_sim_t *s, int64_t t_dev_ns, int64_t rel_ns)
     for (uint32_t j = 0; j < s->robot.n_joints; j++) {
         const double tau =
             ps_devices_step_actuator(&s->act[j], s->q_rad[j], s->qd_rad_s[j], t_dev_ns, s->dt_s);
+        ps_can_frame_t report;
+        if (ps_devices_take_fault_report(&s->act[j], t_dev_ns, &report) == 1)
+            send_dev(s, s->robot.act[j].bus_idx, &report, 1);
         s->tau_nm[j] = is_power_on ? tau : 0.0;
         s->tau_abs_sum_nm += fabs(s->tau_nm[j]);
     }
@@ -389,7 +398,7 @@ static int setup_scenario(ps_sim_t *s, char *err, size_t err_len)
         const ps_event_cfg_t *ev = &sc->events[e];
         s->event_t_ns[e] = ps_s_to_ns((double)ev->t_s);
         s->event_joint_idx[e] = -1;
-        if (ev->kind == PS_EVENT_DROP_REPLIES) {
+        if (ev->kind == PS_EVENT_DROP_REPLIES || ev->kind == PS_EVENT_DRIVE_FAULT) {
             const int j = find_joint(&s->robot, ev->joint);
             if (j < 0 && sc->path[0] != '\0' && ev->joint_line > 0) {
                 ps_err_format(err, err_len,

@@ -1047,7 +1047,7 @@ static void test_load_scenario_unknown_event_kind_rejected(void **state)
     edit(f, SCENARIO_OK, "kind: start}", "kind: begin}");
     want(f,
          "%s:%d: events[0].kind: unknown value \"begin\" (allowed: start, stop, estop_press, "
-         "estop_release, reset, harness_release, drop_replies)",
+         "estop_release, reset, harness_release, drop_replies, drive_fault)",
          f->path, line_of(f, "begin"));
     expect_scenario_error(f);
 }
@@ -1086,6 +1086,15 @@ static void test_load_scenario_drop_without_joint_rejected(void **state)
     edit(f, SCENARIO_OK, "kind: start}", "kind: start, duration_s: 1}");
     want(f, "%s:%d: events[0].duration_s: only drop_replies takes a duration, not start", f->path,
          line_of(f, "kind: start"));
+    expect_scenario_error(f);
+    edit(f, SCENARIO_OK, "kind: drop_replies, joint: l_knee", "kind: drive_fault");
+    want(f, "%s:%d: events[1]: drive_fault needs a \"joint\"", f->path,
+         line_of(f, "kind: drive_fault"));
+    expect_scenario_error(f);
+
+    edit(f, SCENARIO_OK, "kind: start}", "kind: start, joint: l_knee}");
+    want(f, "%s:%d: events[0].joint: only drop_replies and drive_fault take a joint, not start",
+         f->path, line_of(f, "kind: start"));
     expect_scenario_error(f);
 }
 
@@ -1453,9 +1462,9 @@ static void test_find_joint_name_index_or_enoent(void **state)
 static void test_event_name_every_kind_named(void **state)
 {
     (void)state;
-    static const char *const NAMES[PS_EVENT_COUNT] = {"start",         "stop",  "estop_press",
-                                                      "estop_release", "reset", "harness_release",
-                                                      "drop_replies"};
+    static const char *const NAMES[PS_EVENT_COUNT] = {
+        "start",           "stop",         "estop_press", "estop_release", "reset",
+        "harness_release", "drop_replies", "drive_fault"};
     for (int k = 0; k < (int)PS_EVENT_COUNT; k++)
         assert_string_equal(ps_config_event_name((ps_event_kind_t)k), NAMES[k]);
     assert_string_equal(ps_config_event_name(PS_EVENT_COUNT), "unknown");

@@ -726,6 +726,33 @@ static void test_lockstep_moteus_fd_robot_stands(void **state)
     assert_int_equal(app.loop.counters.n_transitions, 2);
 }
 
+/* A RobStride drive latches an over-voltage fault, which its feedback frame
+ * has no bit for: only its own fault report (type 21) says so. The loop
+ * takes the report and e-stops within two ticks. */
+static void test_lockstep_robstride_fault_report_estops(void **state)
+{
+    (void)state;
+    char err[PS_ERR_MSG_LEN] = "";
+    ps_app_opts_t o = {.data_dir = ".",
+                       .board = "sim",
+                       .robot = "tests/data/robots/ps1-mixed.yaml",
+                       .scenario = "tests/data/scenarios/drive-fault.yaml",
+                       .is_lockstep = true};
+    int rc = ps_app_init(&app, &o, err, sizeof(err));
+    if (rc != 0)
+        fail_msg("ps_app_init: %s (%s)", err, ps_strerror(rc));
+    assert_int_equal(ps_sim_start(app.sim, START_NS), 0);
+    assert_int_equal(ps_loop_start(&app.loop, START_NS), 0);
+    step_until(2.99);
+    assert_int_equal(app.loop.state, PS_SM_ACTIVE);
+    assert_int_equal(app.loop.counters.n_fault_reports, 0);
+    step_until(3.002);
+    assert_int_equal(app.loop.state, PS_SM_ESTOP);
+    assert_true(app.loop.counters.n_fault_reports >= 1);
+    assert_int_equal(app.loop.counters.n_rx_unknown, 0);
+    assert_int_equal(app.loop.counters.n_rx_bad, 0);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -745,6 +772,7 @@ int main(void)
         cmocka_unit_test_teardown(test_lockstep_mixed_protocols_robot_stands, teardown),
         cmocka_unit_test_teardown(test_lockstep_moteus_fd_robot_stands, teardown),
         cmocka_unit_test_teardown(test_lockstep_xsens_imu_robot_stands, teardown),
+        cmocka_unit_test_teardown(test_lockstep_robstride_fault_report_estops, teardown),
         cmocka_unit_test_teardown(test_lockstep_subtick_estop_press_reaches_estop, teardown),
     };
     return cmocka_run_group_tests_name("e2e_lockstep", tests, NULL, NULL);

@@ -11,12 +11,14 @@
 #include <setjmp.h>
 #include <cmocka.h>
 
+#include <errno.h>
 #include <math.h>
 #include <string.h>
 
 #include "../drivers/ps_actuator.h"
 #include "../drivers/ps_robstride.h"
 #include "../rt/ps_err.h"
+#include "../sim/ps_devices.h"
 
 #define PI_F 3.14159265f
 
@@ -221,6 +223,81 @@ static void test_ps_robstride_encode_reply_round_trip(void **state)
     assert_int_equal((f[0].id >> 22) & 3u, 2); /* run mode */
 }
 
+/* ---- fault report (type 21), CyberGear manual 4.1.10 -------------------- */
+
+/* Drive 0x01, host 0xFD: id = 21 << 24 | 0xFD << 8 | 0x01 = 0x1500FD01;
+ * fault value 0x00000005 (bit 0 motor over-temperature, bit 2 under-voltage)
+ * little-endian in bytes 0..3; warning 0x00000001 in 4..7. */
+static void test_robstride_fault_report_hand_vector(void **state)
+{
+    (void)state;
+    const ps_act_cfg_t a = cybergear();
+    ps_can_frame_t f = {.id = 0x1500FD01u,
+                        .is_ext = 1,
+                        .len = 8,
+                        .data = {0x05, 0x00, 0x00, 0x00, 0x01, 0x00, 0x00, 0x00}};
+    uint32_t bits = 0;
+    assert_int_equal(ps_act_decode_fault(&a, &f, &bits), 0);
+    assert_int_equal(bits, PS_ACT_FAULT_MOTOR_OVERTEMP | PS_ACT_FAULT_UNDERVOLTAGE);
+    /* overload (bits 8..15), phase A over-current (bit 16), a bit the manual
+     * does not name (6): OVERLOAD, OVERCURRENT, OTHER */
+    f.data[0] = 0x40;
+    f.data[1] = 0x03;
+    f.data[2] = 0x01;
+    assert_int_equal(ps_act_decode_fault(&a, &f, &bits), 0);
+    assert_int_equal(bits, PS_ACT_FAULT_OVERLOAD | PS_ACT_FAULT_OVERCURRENT | PS_ACT_FAULT_OTHER);
+    /* the warning alone is no fault */
+    memset(f.data, 0, 8);
+    f.data[4] = 0x01;
+    assert_int_equal(ps_act_decode_fault(&a, &f, &bits), 0);
+    assert_int_equal(bits, 0u);
+    /* another host, another drive, a feedback frame, a short frame */
+    ps_can_frame_t g = f;
+    g.id = 0x1500FE01u;
+    assert_int_equal(ps_act_decode_fault(&a, &g, &bits), -ENOENT);
+    g.id = 0x1500FD02u;
+    assert_int_equal(ps_act_decode_fault(&a, &g, &bits), -ENOENT);
+    g.id = 0x020001FDu;
+    assert_int_equal(ps_act_decode_fault(&a, &g, &bits), -ENOENT);
+    g = f;
+    g.len = 4;
+    assert_int_equal(ps_act_decode_fault(&a, &g, &bits), -PS_ERR_PROTOCOL);
+    /* the receive filter passes the report, not a neighbour's */
+    uint32_t id, mask;
+    ps_robstride_proto.fault_filter(&a, &id, &mask);
+    assert_int_equal(f.id & mask, id & mask);
+    assert_int_not_equal(0x1500FD02u & mask, id & mask);
+}
+
+/* The emulated drive: MOTOR_OVERTEMP | OVERVOLTAGE -> bits 0 and 3 = 0x09;
+ * reported once per newly latched fault, again after a clear. */
+static void test_robstride_emulated_drive_reports_each_new_fault_once(void **state)
+{
+    (void)state;
+    const ps_act_cfg_t a = cybergear();
+    const ps_act_limits_t lim = {.pos_min_rad = -1, .pos_max_rad = 1};
+    const ps_sim_devices_cfg_t sim = {.ambient_c = 25};
+    ps_devices_actuator_t d;
+    ps_devices_init_actuator(&d, &a, &lim, &sim);
+    ps_can_frame_t f;
+    assert_int_equal(ps_devices_take_fault_report(&d, 100, &f), 0);
+    d.fault_bits = PS_ACT_FAULT_MOTOR_OVERTEMP | PS_ACT_FAULT_OVERVOLTAGE;
+    assert_int_equal(ps_devices_take_fault_report(&d, 100, &f), 1);
+    assert_int_equal(f.id, 0x1500FD01u);
+    assert_true(f.is_ext && f.len == 8 && f.t_ns == 100);
+    static const uint8_t want[8] = {0x09, 0, 0, 0, 0, 0, 0, 0};
+    assert_memory_equal(f.data, want, 8);
+    uint32_t bits = 0;
+    assert_int_equal(ps_act_decode_fault(&a, &f, &bits), 0);
+    assert_int_equal(bits, PS_ACT_FAULT_MOTOR_OVERTEMP | PS_ACT_FAULT_OVERVOLTAGE);
+    assert_int_equal(ps_devices_take_fault_report(&d, 200, &f), 0); /* nothing new */
+    d.fault_bits = 0;                                               /* an enable cleared it */
+    assert_int_equal(ps_devices_take_fault_report(&d, 300, &f), 0);
+    d.fault_bits = PS_ACT_FAULT_MOTOR_OVERTEMP;
+    assert_int_equal(ps_devices_take_fault_report(&d, 400, &f), 1);
+    assert_int_equal(d.n_fault_reports, 2);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -230,6 +307,8 @@ int main(void)
         cmocka_unit_test(test_ps_act_encode_request_robstride_frames),
         cmocka_unit_test(test_ps_act_decode_reply_robstride_hand_vector),
         cmocka_unit_test(test_ps_robstride_encode_reply_round_trip),
+        cmocka_unit_test(test_robstride_fault_report_hand_vector),
+        cmocka_unit_test(test_robstride_emulated_drive_reports_each_new_fault_once),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
