@@ -9,7 +9,7 @@
 # Writes $OUT/estop-N.json, $OUT/load-emu.json, $OUT/load-summary.json.
 set -u
 N=${1:-10}; LOAD_S=${2:-20}; OUT=${3:-build/hw-bench}
-B=tests/data/boards/vm-vxcan.yaml; R=tests/data/robots/ps1-mixed-250hz.yaml
+B=tests/data/boards/vm-vxcan.yaml; R=tests/data/robots/ps1-mixed-vm.yaml
 I=vxcan1,vxcan3,vxcan5,vxcan7; G=/sys/kernel/debug/gpio-mockup/gpiochip0
 BIN=build/pushstep
 mkdir -p "$OUT"

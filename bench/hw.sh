@@ -41,7 +41,7 @@ emu = load(os.path.join(out, "load-emu.json")) or {}
 summ = load(os.path.join(out, "load-summary.json")) or {}
 lat = summ.get("latency", {})
 res = {
-    "where": "qemu TCG VM (no KVM), 2 vCPUs; robot tests/data/robots/ps1-mixed-250hz.yaml at 250 Hz on 4 vxcan buses",
+    "where": "qemu TCG VM (no KVM), 2 vCPUs; robot tests/data/robots/ps1-mixed-vm.yaml at 100 Hz on 4 vxcan buses",
     "command": "make bench-hw (bench/hw.sh -> bench/hw-in-vm.sh)",
     "wall_s": wall,
     "estop_to_limp_ms": {"n": len(est), "of_trials": n, "min": pct(est, 0), "p50": pct(est, 50),
@@ -63,7 +63,7 @@ e = res["estop_to_limp_ms"]; r = res["loop_reaction_us"] or {}
 import time
 lines = ["## Real drivers in the VM (bench/results/hw.json)", "",
          "Measured %s with `make bench-hw` (%d e-stop trials, %d s load run)." % (time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), n, load_s), "",
-         "qemu TCG, no KVM: a VM several times slower than a board; 250 Hz servo.", "",
+         "qemu TCG, no KVM: a VM several times slower than a board; 100 Hz servo.", "",
          "- e-stop edge to first limp command: n=%s of %s trials, min %s, p50 %s, p90 %s, max %s ms"
          % (e["n"], n, e["min"], e["p50"], e["p90"], e["max"]),
          "- loop reaction (newest reply in to commands out): p50 %s, p99 %s, p99.9 %s, max %s us"

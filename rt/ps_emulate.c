@@ -277,8 +277,12 @@ static void watch_heartbeat(int64_t now)
         e.hb_last_change_ns = now;
         e.hb_changes_ns[e.hb_n_changes++ % 8u] = now;
     }
-    const bool is_beating =
-        e.hb_first_ns != 0 && now - e.hb_last_change_ns <= PS_GPIO_HEARTBEAT_TIMEOUT_NS;
+    /* The relay's timeout is 10 periods of a 1 kHz loop; a slower loop (the
+     * VM's robot) beats once a tick, so the relay waits 3 of its ticks. */
+    const int64_t timeout_ns = PS_GPIO_HEARTBEAT_TIMEOUT_NS > 3 * e.period_ns
+                                   ? PS_GPIO_HEARTBEAT_TIMEOUT_NS
+                                   : 3 * e.period_ns;
+    const bool is_beating = e.hb_first_ns != 0 && now - e.hb_last_change_ns <= timeout_ns;
     if (!is_beating && e.is_powered && e.hb_first_ns != 0 && e.hb_stopped_ns == 0)
         e.hb_stopped_ns = e.hb_last_change_ns; /* the first stop; later beats do not hide it */
     if (is_beating != e.is_powered) {

@@ -4,7 +4,7 @@
  * four vxcan pairs through SocketCAN and gpio-mockup's lines through
  * libgpiod; `pushstep emulate` answers on the far ends as the robot on a
  * hoist (RobStride legs, MIT waist and arms: tests/data/robots/
- * ps1-mixed-250hz.yaml), presses the e-stop, plays the heartbeat's watchdog
+ * ps1-mixed-vm.yaml), presses the e-stop, plays the heartbeat's watchdog
  * relay and injects controller error reports. The figures each test prints
  * are the VM's (qemu TCG: several times slower than a board).
  */
@@ -26,11 +26,11 @@
 
 #define BIN     "build/pushstep"
 #define BOARD   "tests/data/boards/vm-vxcan.yaml"
-#define ROBOT   "tests/data/robots/ps1-mixed-250hz.yaml"
+#define ROBOT   "tests/data/robots/ps1-mixed-vm.yaml"
 #define IFACES  "vxcan1,vxcan3,vxcan5,vxcan7"
 #define GPIO    "/sys/kernel/debug/gpio-mockup/gpiochip0/"
 #define OUT_DIR "build/hw"
-#define TICK_MS 4.0 /* 250 Hz */
+#define TICK_MS 10.0 /* 100 Hz */
 
 static int64_t mono_ns(void)
 {
@@ -170,7 +170,7 @@ static void test_the_loop_runs_standby_ramp_active_damping_over_socketcan(void *
         BIN,          "--board", BOARD,       "--robot",           ROBOT, "--start-after", "1",
         "--duration", "4",       "--summary", OUT_DIR "/run.json", NULL};
     pid_t rt = spawn(argv, OUT_DIR "/run.out");
-    sleep(2); /* in ACTIVE: watch the live buses from the runtime's side */
+    sleep(3); /* in ACTIVE: watch the live buses from the runtime's side */
     char *mon_argv[] = {BIN,   "monitor",    "--board", BOARD,     "--robot",
                         ROBOT, "--duration", "1.5",     "--rates", NULL};
     /* can-utils' candump on two of the runtime's buses, beside it */
@@ -189,7 +189,7 @@ static void test_the_loop_runs_standby_ramp_active_damping_over_socketcan(void *
     double cmd_hz, reply_hz;
     assert_int_equal(
         sscanf(strstr(mon, "\nl_knee "), " l_knee %u %lf %lf", &bus, &cmd_hz, &reply_hz), 3);
-    assert_true(cmd_hz > 100.0 && reply_hz > 100.0); /* 250 Hz on a board; the VM lags */
+    assert_true(cmd_hz > 50.0 && reply_hz > 50.0); /* 100 Hz planned; the VM lags */
     /* Every frame candump saw is one the runtime's own decoder names. */
     char *dec_argv[] = {BIN,       "monitor", "--board", BOARD,
                         "--robot", ROBOT,     "--log",   OUT_DIR "/candump.log",
@@ -261,11 +261,7 @@ static void test_sigkill_stops_the_heartbeat_within_a_few_ticks(void **state)
     char *argv[] = {BIN, "--board",    BOARD, "--robot", ROBOT, "--start-after",
                     "1", "--duration", "0",   NULL};
     pid_t rt = spawn(argv, OUT_DIR "/kill.out");
-    /* Kill it in ACTIVE: wait for the transition rather than a fixed time,
-     * the VM's start-up takes from 0.5 to 2 s. */
-    for (int i = 0; i < 100 && strstr(slurp(OUT_DIR "/kill.out"), "RAMP -> ACTIVE") == NULL; i++)
-        usleep(100000);
-    usleep(300000);
+    sleep(4); /* ACTIVE by now: start-up (up to 2 s in the VM), START at 1 s, 1 s ramp */
     const int64_t kill_ns = mono_ns();
     assert_int_equal(kill(rt, SIGKILL), 0);
     assert_int_equal(wait_exit(rt), 128 + SIGKILL);
