@@ -345,12 +345,8 @@ static void serve_bus(uint32_t b)
     int reply_joint[PS_CAN_SOCKET_BATCH];
     for (int i = 0; i < n; i++) {
         const int j = joint_of(b, &rx[i]);
-        const int trc = ps_hoist_take_frame(&e.hoist, b, &rx[i], &tx[n_tx]);
-        if (trc == 1)
+        if (ps_hoist_take_frame(&e.hoist, b, &rx[i], &tx[n_tx]) == 1)
             reply_joint[n_tx++] = j;
-        if (trc == -ENOENT && e.hoist.n_unclaimed < 10 && getenv("EMU_DEBUG"))
-            fprintf(stderr, "unclaimed bus %u id %x ext %d len %d d0 %02x\n", b, rx[i].id,
-                    rx[i].is_ext, rx[i].len, rx[i].data[0]);
         if (j >= 0)
             account((uint32_t)j, &rx[i], 0);
     }

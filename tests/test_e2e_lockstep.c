@@ -585,6 +585,59 @@ static void test_lockstep_slow_policy_in_active_holds_policy_late(void **state)
     assert_true(app.loop.counters.n_policy_late >= 1);
 }
 
+/* Start the system in lockstep from board, robot and scenario files. */
+static void start_lockstep(const char *board, const char *robot, const char *scenario)
+{
+    char err[PS_ERR_MSG_LEN] = "";
+    ps_app_opts_t o = {
+        .data_dir = ".", .board = board, .robot = robot, .scenario = scenario, .is_lockstep = true};
+    int rc = ps_app_init(&app, &o, err, sizeof(err));
+    if (rc != 0)
+        fail_msg("ps_app_init: %s (%s)", err, ps_strerror(rc));
+}
+
+/* The robot files below stand like ps1: ACTIVE at 3 s, then guarded from 3
+ * to 8 s: nothing allocated, freed, faulted or locked, still ACTIVE, not
+ * fallen, no bad or unknown frame, two transitions only.
+ * @post *out the plant's truth at 8 s */
+static void stands_3_to_8_s_guarded(const char *what, ps_sim_truth_t *out)
+{
+    assert_int_equal(ps_sim_start(app.sim, START_NS), 0);
+    assert_int_equal(ps_loop_start(&app.loop, START_NS), 0);
+    step_until(3.0);
+    assert_int_equal(app.loop.state, PS_SM_ACTIVE);
+    if (ps_rtsetup_lock_memory() < 0)
+        (void)ps_rtsetup_prefault_maps();
+    ps_rtsetup_prefault_stack(256 * 1024);
+    ps_guard_counts_t c;
+    step_guarded_until(8.0, &c);
+    assert_no_alloc_lock_fault(&c, what);
+    assert_int_equal(app.loop.state, PS_SM_ACTIVE);
+    ps_sim_get_truth(app.sim, out);
+    assert_false(out->is_fallen);
+    assert_true(out->min_com_height_active_m > 0.6);
+    assert_int_equal(app.loop.counters.n_rx_bad, 0);
+    assert_int_equal(app.loop.counters.n_rx_unknown, 0);
+    assert_int_equal(app.loop.counters.n_transitions, 2);
+}
+
+/* ... and every command reached its drive inside its limits. */
+static void assert_commands_clean(const ps_sim_truth_t *t)
+{
+    assert_true(t->n_cmd_frames > 5000u * app.robot.n_joints / 10u);
+    assert_int_equal(t->n_cmd_out_of_limits, 0);
+    assert_int_equal(t->n_bad_frames, 0);
+    assert_int_equal(app.loop.counters.n_cmd_replaced, 0);
+}
+
+static unsigned n_joints_on(ps_act_proto_id_t proto)
+{
+    unsigned n = 0;
+    for (uint32_t j = 0; j < app.robot.n_joints; j++)
+        n += app.robot.act[j].protocol == proto;
+    return n;
+}
+
 /* One robot file mixing protocols per joint: the legs on RobStride drives
  * (29-bit ids), the waist and arms MIT mode. The emulated drives speak each
  * joint's protocol, and the robot stands 6 s after the harness lets go with
@@ -593,44 +646,12 @@ static void test_lockstep_slow_policy_in_active_holds_policy_late(void **state)
 static void test_lockstep_mixed_protocols_robot_stands(void **state)
 {
     (void)state;
-    char err[PS_ERR_MSG_LEN] = "";
-    ps_app_opts_t o = {.data_dir = ".",
-                       .board = "sim",
-                       .robot = "tests/data/robots/ps1-mixed.yaml",
-                       .scenario = "scenarios/stand.yaml",
-                       .is_lockstep = true};
-    int rc = ps_app_init(&app, &o, err, sizeof(err));
-    if (rc != 0)
-        fail_msg("ps_app_init: %s (%s)", err, ps_strerror(rc));
-    unsigned n_robstride = 0, n_mit = 0;
-    for (uint32_t j = 0; j < app.robot.n_joints; j++) {
-        n_robstride += app.robot.act[j].protocol == PS_ACT_PROTO_ROBSTRIDE;
-        n_mit += app.robot.act[j].protocol == PS_ACT_PROTO_MIT;
-    }
-    assert_int_equal(n_robstride, 12);
-    assert_int_equal(n_mit, app.robot.n_joints - 12);
-    assert_int_equal(ps_sim_start(app.sim, START_NS), 0);
-    assert_int_equal(ps_loop_start(&app.loop, START_NS), 0);
-    step_until(3.0);
-    assert_int_equal(app.loop.state, PS_SM_ACTIVE);
-    if (ps_rtsetup_lock_memory() < 0)
-        (void)ps_rtsetup_prefault_maps();
-    ps_rtsetup_prefault_stack(256 * 1024);
-    ps_guard_counts_t c;
-    step_guarded_until(8.0, &c);
-    assert_no_alloc_lock_fault(&c, "mixed protocols 3..8 s");
-    assert_int_equal(app.loop.state, PS_SM_ACTIVE);
+    start_lockstep("sim", "tests/data/robots/ps1-mixed.yaml", "scenarios/stand.yaml");
+    assert_int_equal(n_joints_on(PS_ACT_PROTO_ROBSTRIDE), 12);
+    assert_int_equal(n_joints_on(PS_ACT_PROTO_MIT), app.robot.n_joints - 12);
     ps_sim_truth_t t;
-    ps_sim_get_truth(app.sim, &t);
-    assert_false(t.is_fallen);
-    assert_true(t.min_com_height_active_m > 0.6);
-    assert_true(t.n_cmd_frames > 5000u * app.robot.n_joints / 10u);
-    assert_int_equal(t.n_cmd_out_of_limits, 0);
-    assert_int_equal(t.n_bad_frames, 0);
-    assert_int_equal(app.loop.counters.n_rx_bad, 0);
-    assert_int_equal(app.loop.counters.n_rx_unknown, 0);
-    assert_int_equal(app.loop.counters.n_cmd_replaced, 0);
-    assert_int_equal(app.loop.counters.n_transitions, 2);
+    stands_3_to_8_s_guarded("mixed protocols 3..8 s", &t);
+    assert_commands_clean(&t);
 }
 
 /* A commercial IMU: the Xsens MTi-630's CAN output, five frames a sample at
@@ -639,40 +660,16 @@ static void test_lockstep_mixed_protocols_robot_stands(void **state)
 static void test_lockstep_xsens_imu_robot_stands(void **state)
 {
     (void)state;
-    char err[PS_ERR_MSG_LEN] = "";
-    ps_app_opts_t o = {.data_dir = ".",
-                       .board = "sim",
-                       .robot = "tests/data/robots/ps1-xsens.yaml",
-                       .scenario = "scenarios/stand.yaml",
-                       .is_lockstep = true};
-    int rc = ps_app_init(&app, &o, err, sizeof(err));
-    if (rc != 0)
-        fail_msg("ps_app_init: %s (%s)", err, ps_strerror(rc));
+    start_lockstep("sim", "tests/data/robots/ps1-xsens.yaml", "scenarios/stand.yaml");
     assert_int_equal(app.robot.imu.protocol, PS_IMU_PROTO_XSENS);
-    assert_int_equal(ps_sim_start(app.sim, START_NS), 0);
-    assert_int_equal(ps_loop_start(&app.loop, START_NS), 0);
-    step_until(3.0);
-    assert_int_equal(app.loop.state, PS_SM_ACTIVE);
-    if (ps_rtsetup_lock_memory() < 0)
-        (void)ps_rtsetup_prefault_maps();
-    ps_rtsetup_prefault_stack(256 * 1024);
-    ps_guard_counts_t c;
-    step_guarded_until(8.0, &c);
-    assert_no_alloc_lock_fault(&c, "xsens IMU 3..8 s");
-    assert_int_equal(app.loop.state, PS_SM_ACTIVE);
     ps_sim_truth_t t;
-    ps_sim_get_truth(app.sim, &t);
-    assert_false(t.is_fallen);
-    assert_true(t.min_com_height_active_m > 0.6);
-    assert_int_equal(app.loop.counters.n_rx_bad, 0);
-    assert_int_equal(app.loop.counters.n_rx_unknown, 0);
+    stands_3_to_8_s_guarded("xsens IMU 3..8 s", &t);
     assert_int_equal(app.loop.counters.n_imu_rejected, 0);
     assert_int_equal(app.loop.counters.n_imu_repeated, 0);
     const ps_imu_xsens_rx_t *rx = &app.loop.imu_rx.u.xsens;
     assert_int_equal(rx->n_gaps, 0);
     assert_int_equal(rx->n_incomplete, 0);
     assert_int_equal(rx->n_frozen, 0);
-    assert_int_equal(app.loop.counters.n_transitions, 2);
 }
 
 /* Three protocols in one robot on CAN FD buses: the legs on moteus drives
@@ -682,48 +679,16 @@ static void test_lockstep_xsens_imu_robot_stands(void **state)
 static void test_lockstep_moteus_fd_robot_stands(void **state)
 {
     (void)state;
-    char err[PS_ERR_MSG_LEN] = "";
-    ps_app_opts_t o = {.data_dir = ".",
-                       .board = "tests/data/boards/sim-fd.yaml",
-                       .robot = "tests/data/robots/ps1-moteus.yaml",
-                       .scenario = "scenarios/stand.yaml",
-                       .is_lockstep = true};
-    int rc = ps_app_init(&app, &o, err, sizeof(err));
-    if (rc != 0)
-        fail_msg("ps_app_init: %s (%s)", err, ps_strerror(rc));
-    unsigned n_moteus = 0, n_robstride = 0, n_mit = 0;
-    for (uint32_t j = 0; j < app.robot.n_joints; j++) {
-        n_moteus += app.robot.act[j].protocol == PS_ACT_PROTO_MOTEUS;
-        n_robstride += app.robot.act[j].protocol == PS_ACT_PROTO_ROBSTRIDE;
-        n_mit += app.robot.act[j].protocol == PS_ACT_PROTO_MIT;
-    }
-    assert_int_equal(n_moteus, 12);
-    assert_int_equal(n_robstride, 1);
-    assert_int_equal(n_mit, app.robot.n_joints - 13);
+    start_lockstep("tests/data/boards/sim-fd.yaml", "tests/data/robots/ps1-moteus.yaml",
+                   "scenarios/stand.yaml");
+    assert_int_equal(n_joints_on(PS_ACT_PROTO_MOTEUS), 12);
+    assert_int_equal(n_joints_on(PS_ACT_PROTO_ROBSTRIDE), 1);
+    assert_int_equal(n_joints_on(PS_ACT_PROTO_MIT), app.robot.n_joints - 13);
     for (uint32_t b = 0; b < app.board.n_buses; b++)
         assert_true(app.board.buses[b].is_fd);
-    assert_int_equal(ps_sim_start(app.sim, START_NS), 0);
-    assert_int_equal(ps_loop_start(&app.loop, START_NS), 0);
-    step_until(3.0);
-    assert_int_equal(app.loop.state, PS_SM_ACTIVE);
-    if (ps_rtsetup_lock_memory() < 0)
-        (void)ps_rtsetup_prefault_maps();
-    ps_rtsetup_prefault_stack(256 * 1024);
-    ps_guard_counts_t c;
-    step_guarded_until(8.0, &c);
-    assert_no_alloc_lock_fault(&c, "moteus FD robot 3..8 s");
-    assert_int_equal(app.loop.state, PS_SM_ACTIVE);
     ps_sim_truth_t t;
-    ps_sim_get_truth(app.sim, &t);
-    assert_false(t.is_fallen);
-    assert_true(t.min_com_height_active_m > 0.6);
-    assert_true(t.n_cmd_frames > 5000u * app.robot.n_joints / 10u);
-    assert_int_equal(t.n_cmd_out_of_limits, 0);
-    assert_int_equal(t.n_bad_frames, 0);
-    assert_int_equal(app.loop.counters.n_rx_bad, 0);
-    assert_int_equal(app.loop.counters.n_rx_unknown, 0);
-    assert_int_equal(app.loop.counters.n_cmd_replaced, 0);
-    assert_int_equal(app.loop.counters.n_transitions, 2);
+    stands_3_to_8_s_guarded("moteus FD robot 3..8 s", &t);
+    assert_commands_clean(&t);
 }
 
 /* A RobStride drive latches an over-voltage fault, which its feedback frame
@@ -732,15 +697,8 @@ static void test_lockstep_moteus_fd_robot_stands(void **state)
 static void test_lockstep_robstride_fault_report_estops(void **state)
 {
     (void)state;
-    char err[PS_ERR_MSG_LEN] = "";
-    ps_app_opts_t o = {.data_dir = ".",
-                       .board = "sim",
-                       .robot = "tests/data/robots/ps1-mixed.yaml",
-                       .scenario = "tests/data/scenarios/drive-fault.yaml",
-                       .is_lockstep = true};
-    int rc = ps_app_init(&app, &o, err, sizeof(err));
-    if (rc != 0)
-        fail_msg("ps_app_init: %s (%s)", err, ps_strerror(rc));
+    start_lockstep("sim", "tests/data/robots/ps1-mixed.yaml",
+                   "tests/data/scenarios/drive-fault.yaml");
     assert_int_equal(ps_sim_start(app.sim, START_NS), 0);
     assert_int_equal(ps_loop_start(&app.loop, START_NS), 0);
     step_until(2.99);
