@@ -320,17 +320,6 @@ static void account(uint32_t j, const ps_can_frame_t *f, int64_t now)
     (void)now;
 }
 
-static int joint_of(uint32_t bus, const ps_can_frame_t *f)
-{
-    for (uint32_t j = 0; j < e.hoist.n_joints; j++) {
-        const ps_devices_actuator_t *a = &e.hoist.act[j];
-        const ps_act_proto_t *p = ps_act_proto_get(a->act.protocol);
-        if (a->act.bus_idx == bus && p != NULL && p->is_for_drive(&a->act, f))
-            return (int)j;
-    }
-    return -1;
-}
-
 static void serve_bus(uint32_t b)
 {
     ps_can_port_t port = ps_can_socket_port(&e.sock[b]);
@@ -344,8 +333,8 @@ static void serve_bus(uint32_t b)
     size_t n_tx = 0;
     int reply_joint[PS_CAN_SOCKET_BATCH];
     for (int i = 0; i < n; i++) {
-        const int j = joint_of(b, &rx[i]);
-        if (ps_hoist_take_frame(&e.hoist, b, &rx[i], &tx[n_tx]) == 1)
+        int j = -1;
+        if (ps_hoist_take_frame(&e.hoist, b, &rx[i], &tx[n_tx], &j) == 1)
             reply_joint[n_tx++] = j;
         if (j >= 0)
             account((uint32_t)j, &rx[i], 0);

@@ -264,14 +264,19 @@ int ps_devices_tick_imu(ps_devices_imu_t *imu, uint64_t tick, const double gyro_
 
 int ps_devices_route_frame(ps_devices_actuator_t *acts, uint32_t n_joints, uint32_t bus_idx,
                            const ps_can_frame_t *f, const double *q_rad, const double *qd_rad_s,
-                           ps_can_frame_t *out_reply)
+                           ps_can_frame_t *out_reply, int *out_joint)
 {
+    if (out_joint != NULL)
+        *out_joint = -1;
     for (uint32_t j = 0; j < n_joints; j++) {
         if (acts[j].act.bus_idx != bus_idx)
             continue;
         const int rc = ps_devices_handle_frame(&acts[j], f, q_rad[j], qd_rad_s[j], out_reply);
-        if (rc != -ENOENT)
+        if (rc != -ENOENT) {
+            if (out_joint != NULL)
+                *out_joint = (int)j;
             return rc;
+        }
     }
     return -ENOENT;
 }

@@ -140,11 +140,12 @@ int ps_devices_take_fault_report(ps_devices_actuator_t *a, int64_t now_ns, ps_ca
 
 /** Offer one frame from bus bus_idx to the drives on that bus (acts[j] is
  *  joint j, at q_rad[j], qd_rad_s[j]), the first that it addresses takes it.
+ *  @post *out_joint the joint that took it, -1 when none (out_joint may be NULL)
  *  @return as ps_devices_handle_frame; -ENOENT when no drive on the bus is
  *          addressed  @rt RT-SAFE O(n_joints) */
 int ps_devices_route_frame(ps_devices_actuator_t *acts, uint32_t n_joints, uint32_t bus_idx,
                            const ps_can_frame_t *f, const double *q_rad, const double *qd_rad_s,
-                           ps_can_frame_t *out_reply);
+                           ps_can_frame_t *out_reply, int *out_joint);
 
 /** @pre cfg->rate_div >= 1  @post biases drawn from seed  @rt INIT */
 void ps_devices_init_imu(ps_devices_imu_t *imu, const ps_imu_cfg_t *cfg,

@@ -20,11 +20,11 @@ void ps_hoist_init(ps_hoist_t *h, const ps_sim_robot_t *robot, uint64_t seed)
 }
 
 int ps_hoist_take_frame(ps_hoist_t *h, uint32_t bus_idx, const ps_can_frame_t *f,
-                        ps_can_frame_t *out_reply)
+                        ps_can_frame_t *out_reply, int *out_joint)
 {
     h->n_frames++;
-    const int rc =
-        ps_devices_route_frame(h->act, h->n_joints, bus_idx, f, h->q_rad, h->qd_rad_s, out_reply);
+    const int rc = ps_devices_route_frame(h->act, h->n_joints, bus_idx, f, h->q_rad, h->qd_rad_s,
+                                          out_reply, out_joint);
     if (rc == -ENOENT)
         h->n_unclaimed++;
     else if (rc == -PS_ERR_PROTOCOL)

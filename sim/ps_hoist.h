@@ -50,12 +50,13 @@ typedef struct {
 void ps_hoist_init(ps_hoist_t *h, const ps_sim_robot_t *robot, uint64_t seed);
 
 /** One frame that arrived on bus bus_idx at f->t_ns.
- *  @post *out_reply written when 1 is returned
+ *  @post *out_reply written when 1 is returned; *out_joint the joint whose
+ *        drive took it, -1 when none
  *  @return 1 a drive answered | 0 taken, no answer | -ENOENT no drive on
  *          that bus is addressed | -PS_ERR_PROTOCOL malformed for the drive
  *  @rt RT-SAFE O(joints) */
 int ps_hoist_take_frame(ps_hoist_t *h, uint32_t bus_idx, const ps_can_frame_t *f,
-                        ps_can_frame_t *out_reply);
+                        ps_can_frame_t *out_reply, int *out_joint);
 
 /** Advance every joint by dt_s ending at now_ns; on IMU ticks write its
  *  frames (bus: h->imu_bus_idx).  @return IMU frames written | 0

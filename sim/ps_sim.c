@@ -163,7 +163,7 @@ static void route_frames(ps_sim_t *s)
             size_t n_tx = 0;
             for (int i = 0; i < n; i++) {
                 const int rc = ps_devices_route_frame(s->act, s->robot.n_joints, b, &rx[i],
-                                                      s->q_rad, s->qd_rad_s, &tx[n_tx]);
+                                                      s->q_rad, s->qd_rad_s, &tx[n_tx], NULL);
                 if (rc == -ENOENT)
                     s->n_unrouted++;
                 else if (rc == 1)
