@@ -1,5 +1,7 @@
 #include "ps_plant.h"
 
+#include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -9,6 +11,7 @@
 
 #include "../rt/ps_err.h"
 #include "../rt/ps_limits.h"
+#include "ps_scene.h"
 
 /* Harness gains: a gantry holding the limp 38 kg robot. 343 N of weight on
  * 20 kN/m sags 1.7 cm at worst; the damping is near critical for the whole
@@ -23,6 +26,7 @@
 #define IMU_ACCEL_NAME   "imu_accel"
 #define HEAD_BODY_NAME   "head"
 #define FOOT_NAME_SUFFIX "foot"
+#define SCENE_VFS_NAME   "pushstep-scene.xml"
 
 struct ps_plant {
     mjModel *m;
@@ -45,6 +49,7 @@ struct ps_plant {
     int n_bad_warnings;      /**< MuJoCo's bad-qpos/qvel/qacc count at last check */
     int n_full_warnings;     /**< MuJoCo's contact/constraint-full count at last check */
     const char *err_reason;  /**< why the last failing step failed (static), NULL: none */
+    ps_crowd_t *crowd;       /**< NULL: no crowd */
 };
 
 /* MuJoCo's parser messages span lines; logs want one line. */
@@ -277,10 +282,11 @@ static void place_in_stance(ps_plant_t *p, const ps_plant_cfg_t *robot)
     for (int i = 0; i < p->n_joints; i++)
         d->qpos[p->qpos_adr[i]] = robot->stance_rad[i];
     mjtNum *root = d->qpos + p->root_qpos_adr;
-    root[0] = 0.0;
-    root[1] = 0.0;
-    root[3] = 1.0;
-    root[4] = root[5] = root[6] = 0.0;
+    root[0] = robot->spawn_xy_m[0];
+    root[1] = robot->spawn_xy_m[1];
+    root[3] = cos(robot->spawn_yaw_rad / 2.0);
+    root[4] = root[5] = 0.0;
+    root[6] = sin(robot->spawn_yaw_rad / 2.0);
     mj_kinematics(m, d);
     root[2] -= foot_min_z(p);
     mj_forward(m, d); /* consistent positions, contacts and sensors at t = 0 */
@@ -288,6 +294,55 @@ static void place_in_stance(ps_plant_t *p, const ps_plant_cfg_t *robot)
         p->anchor_pos_m[k] = root[k];
     for (int k = 0; k < 4; k++)
         p->anchor_quat[k] = root[3 + k];
+}
+
+/* The robot model (p->m, loaded) plus the crowd: place the agents, write the
+ * scene that includes the model file, load it from memory in place of the
+ * robot model. */
+static int load_scene(ps_plant_t *p, const ps_plant_cfg_t *robot, ps_crowd_agent_spec_t *agents,
+                      uint32_t *out_n, char *err, size_t err_len)
+{
+    int rc = ps_scene_place(robot->crowd, robot->seed, robot->spawn_xy_m, agents,
+                            PS_CROWD_MAX_AGENTS, out_n, err, err_len);
+    if (rc < 0)
+        return rc;
+    char abs_path[PATH_MAX];
+    if (realpath(robot->model_path, abs_path) == NULL) {
+        ps_err_format(err, err_len, "%s: %s", robot->model_path, strerror(errno));
+        return -PS_ERR_PLANT;
+    }
+    char *xml = NULL;
+    rc = ps_scene_write_mjcf(robot->crowd, agents, *out_n, abs_path, p->m->nconmax, p->m->njmax,
+                             &xml, err, err_len);
+    if (rc < 0)
+        return rc;
+    mjVFS *vfs = calloc(1, sizeof(*vfs));
+    if (vfs == NULL) {
+        free(xml);
+        return -ENOMEM;
+    }
+    mj_defaultVFS(vfs);
+    const int len = (int)strlen(xml);
+    if (mj_makeEmptyFileVFS(vfs, SCENE_VFS_NAME, len) != 0) {
+        free(xml);
+        free(vfs);
+        return -ENOMEM;
+    }
+    memcpy(vfs->filedata[mj_findFileVFS(vfs, SCENE_VFS_NAME)], xml, (size_t)len);
+    free(xml);
+    char mj_err[512] = "";
+    mjModel *scene = mj_loadXML(SCENE_VFS_NAME, vfs, mj_err, (int)sizeof(mj_err));
+    mj_deleteVFS(vfs);
+    free(vfs);
+    if (scene == NULL) {
+        one_line(mj_err);
+        ps_err_format(err, err_len, "crowd scene around %s (%u agents): %s", robot->model_path,
+                      *out_n, mj_err[0] ? mj_err : "load failed");
+        return -PS_ERR_PLANT;
+    }
+    mj_deleteModel(p->m);
+    p->m = scene;
+    return 0;
 }
 
 int ps_plant_create(const ps_plant_cfg_t *robot, ps_plant_t **out, char *err, size_t err_len)
@@ -302,6 +357,9 @@ int ps_plant_create(const ps_plant_cfg_t *robot, ps_plant_t **out, char *err, si
         mju_user_warning = quiet_warning;
 
     int rc;
+    const bool has_crowd = robot->crowd != NULL && robot->crowd->is_enabled;
+    ps_crowd_agent_spec_t *agents = NULL;
+    uint32_t n_agents = 0;
     ps_plant_t *p = calloc(1, sizeof(*p));
     if (p == NULL)
         return -ENOMEM;
@@ -314,6 +372,12 @@ int ps_plant_create(const ps_plant_cfg_t *robot, ps_plant_t **out, char *err, si
         prefix_robot_source(robot, robot->model_line, "model", err, err_len);
         rc = -PS_ERR_PLANT;
         goto fail;
+    }
+    if (has_crowd) {
+        agents = calloc(PS_CROWD_MAX_AGENTS, sizeof(*agents));
+        rc = agents != NULL ? load_scene(p, robot, agents, &n_agents, err, err_len) : -ENOMEM;
+        if (rc < 0)
+            goto fail;
     }
     p->d = mj_makeData(p->m);
     p->ext_force_n = calloc((size_t)p->m->nbody * 3u, sizeof(double));
@@ -334,12 +398,20 @@ int ps_plant_create(const ps_plant_cfg_t *robot, ps_plant_t **out, char *err, si
     }
 
     place_in_stance(p, robot);
+    if (has_crowd) {
+        rc = ps_crowd_create(robot->crowd, agents, n_agents, p->m, p->is_robot, p->root_body,
+                             &p->crowd, err, err_len);
+        if (rc < 0)
+            goto fail;
+    }
     if (full_warning_count(p->d) != 0) {
         ps_err_format(err, err_len, "%s: at the stance: %s", model_path,
                       warning_reason(p->d, 0, 0));
         rc = -PS_ERR_PLANT;
         goto fail;
     }
+    free(agents);
+    agents = NULL;
     p->is_harness_engaged = true;
     p->n_bad_warnings = bad_warning_count(p->d);
     p->n_full_warnings = 0;
@@ -347,8 +419,29 @@ int ps_plant_create(const ps_plant_cfg_t *robot, ps_plant_t **out, char *err, si
     return 0;
 
 fail:
+    free(agents);
     ps_plant_destroy(p);
     return rc;
+}
+
+ps_crowd_t *ps_plant_crowd(ps_plant_t *p)
+{
+    return p->crowd;
+}
+
+const mjModel *ps_plant_model(const ps_plant_t *p)
+{
+    return p->m;
+}
+
+const mjData *ps_plant_data(const ps_plant_t *p)
+{
+    return p->d;
+}
+
+int ps_plant_root_body(const ps_plant_t *p)
+{
+    return p->root_body;
 }
 
 double ps_plant_timestep_s(const ps_plant_t *p)
@@ -450,9 +543,13 @@ int ps_plant_step(ps_plant_t *p)
             x[3 + k] += t[k];
         }
     }
+    if (p->crowd != NULL)
+        ps_crowd_before_step(p->crowd, m, d, d->time);
     const int contact_full = d->warning[mjWARN_CONTACTFULL].number;
     const int cnstr_full = d->warning[mjWARN_CNSTRFULL].number;
     mj_step(m, d);
+    if (p->crowd != NULL)
+        ps_crowd_after_step(p->crowd, m, d, m->opt.timestep);
 
     /* MuJoCo resets the data itself when qpos/qvel/qacc go bad and only
      * warns, so the warning counters catch what a NaN scan would miss; it
@@ -527,6 +624,7 @@ void ps_plant_destroy(ps_plant_t *p)
 {
     if (p == NULL)
         return;
+    ps_crowd_destroy(p->crowd);
     if (p->d != NULL)
         mj_deleteData(p->d);
     if (p->m != NULL)

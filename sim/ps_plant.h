@@ -18,6 +18,12 @@
  * the floor do not); a site "imu" with a gyro sensor "imu_gyro" and an
  * accelerometer "imu_accel" on it.
  *
+ * Crowd: with robot->crowd enabled the plant places the agents
+ * (sim/ps_scene.h, from robot->seed), writes the scene around the robot's
+ * model file (which it loads unchanged), loads it through MuJoCo's virtual
+ * file system and steps the crowd (sim/ps_crowd.h) with the physics: its
+ * forces before each step, its measurements after.
+ *
  * Harness: spring 20 kN/m + 1.5 kN s/m and 1.5 kN m/rad + 100 N m s/rad on
  * the pelvis toward its pose at create (holds the limp robot within ~2 cm).
  *
@@ -39,6 +45,7 @@
 #include <stdint.h>
 
 #include "../rt/ps_limits.h"
+#include "ps_crowd.h"
 
 /** Name of the robot's root body, whose free joint is the floating base. */
 #define PS_PLANT_ROOT_BODY_NAME "pelvis"
@@ -57,6 +64,11 @@ typedef struct {
     const char *src_path;
     const uint32_t *joint_name_line; /**< by joint */
     uint32_t model_line;
+    /* Scene: where the robot stands, and the crowd around it. */
+    double spawn_xy_m[2];           /**< robot's start on the floor */
+    double spawn_yaw_rad;           /**< robot's heading, 0: facing +x */
+    const ps_crowd_cfg_t *crowd;    /**< NULL or !is_enabled: the robot model alone */
+    uint32_t seed;                  /**< agent placement and sizes */
 } ps_plant_cfg_t;
 
 typedef struct {
@@ -68,8 +80,9 @@ typedef struct {
 } ps_plant_truth_t;
 
 /** Load the model and place the robot in its stance (robot->stance_rad)
- *  with the soles on the floor (lowest foot point at z = 0), upright at the
- *  world origin facing +x, at rest; the harness is engaged.
+ *  with the soles on the floor (lowest foot point at z = 0), upright at
+ *  spawn_xy_m facing spawn_yaw_rad, at rest; the harness is engaged. With a
+ *  crowd, the scene is the robot's model plus the crowd (see above).
  *  @pre robot->n_joints <= PS_MAX_JOINTS  @post *out set only on success;
  *       err holds a one-line message on failure
  *  @return 0 | -PS_ERR_PLANT (model fails to load, err has MuJoCo's message;
@@ -131,6 +144,18 @@ double ps_plant_total_mass_kg(const ps_plant_t *p);
  *  @pre created  @return height above the floor plane z = 0  @units m
  *  @rt RT-SAFE O(ngeom) */
 double ps_plant_foot_min_z_m(const ps_plant_t *p);
+
+/** @return the crowd, NULL when the plant has none  @rt RT-SAFE */
+ps_crowd_t *ps_plant_crowd(ps_plant_t *p);
+
+/** The loaded model and data, for offscreen rendering and tests: read-only,
+ *  and only while the plant is not stepping (or on the stepping thread).
+ *  @rt RT-SAFE */
+const struct mjModel_ *ps_plant_model(const ps_plant_t *p);
+const struct mjData_ *ps_plant_data(const ps_plant_t *p);
+
+/** @return the robot's root body index  @rt RT-SAFE */
+int ps_plant_root_body(const ps_plant_t *p);
 
 /** Safe on NULL. */
 void ps_plant_destroy(ps_plant_t *p);

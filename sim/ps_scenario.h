@@ -1,6 +1,7 @@
 /*
  * ps_scenario: what a simulated run does over time (scenarios/<name>.yaml):
- * pushes on bodies of the plant, operator requests, e-stop presses, the
+ * the crowd around the robot (sim/ps_crowd.h), pushes on bodies of the plant,
+ * operator requests, e-stop presses, the
  * harness, injected faults. Plain data consumed by sim/ps_sim.c; the config
  * loader (rt/ps_config.c) fills it.
  *
@@ -13,12 +14,14 @@
 #include <stdint.h>
 
 #include "../rt/ps_limits.h"
+#include "ps_crowd.h"
 
 typedef struct {
     float t_s; /**< start, simulated seconds since start */
     float duration_s;
     char body[PS_NAME_LEN]; /**< body of the model the force acts on */
-    float force_n[3];       /**< world frame */
+    float force_n[3];       /**< world frame; the peak for a half_sine profile */
+    ps_crowd_profile_t profile; /**< constant (default) or half_sine */
     uint32_t body_line;     /**< line of `body` in the scenario file, 0: unknown */
 } ps_push_cfg_t;
 
@@ -53,6 +56,9 @@ typedef struct {
     uint32_t n_events;
     ps_event_cfg_t events[PS_MAX_EVENTS];
     char path[PATH_MAX]; /**< file it was loaded from, for messages; "": unknown */
+    float robot_xy_m[2]; /**< where the robot starts on the floor */
+    float robot_yaw_rad; /**< its heading, 0: facing +x */
+    ps_crowd_cfg_t crowd; /**< the crowd (crowd.is_enabled false: none) */
 } ps_scenario_cfg_t;
 
 #endif /* PS_SCENARIO_H */

@@ -141,8 +141,12 @@ static void run_scenario(ps_sim_t *s, int64_t rel_ns)
     memset(f, 0, sizeof f);
     for (uint32_t p = 0; p < sc->n_pushes; p++) {
         if (rel_ns >= s->push_t0_ns[p] && rel_ns < s->push_t1_ns[p]) {
+            double k = 1.0;
+            if (sc->pushes[p].profile == PS_CROWD_PROFILE_HALF_SINE)
+                k = sin(M_PI * (double)(rel_ns - s->push_t0_ns[p]) /
+                        (double)(s->push_t1_ns[p] - s->push_t0_ns[p]));
             for (unsigned a = 0; a < 3; a++)
-                f[s->push_slot[p]][a] += (double)sc->pushes[p].force_n[a];
+                f[s->push_slot[p]][a] += k * (double)sc->pushes[p].force_n[a];
         }
     }
     for (int b = 0; b < s->n_push_bodies; b++) {
@@ -497,6 +501,10 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
         .src_path = s->robot.src_path,
         .joint_name_line = s->robot.joint_name_line,
         .model_line = s->robot.model_line,
+        .spawn_xy_m = {s->scenario.robot_xy_m[0], s->scenario.robot_xy_m[1]},
+        .spawn_yaw_rad = s->scenario.robot_yaw_rad,
+        .crowd = &s->scenario.crowd,
+        .seed = s->scenario.seed,
     };
     rc = ps_plant_create(&plant_cfg, &s->plant, err, err_len);
     if (rc < 0)

@@ -1,0 +1,365 @@
+#include "ps_scene.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../rt/ps_err.h"
+
+#define SQRT3          1.7320508075688772
+#define JITTER_FRAC    0.05 /* lattice jitter, fraction of the spacing */
+#define RANDOM_GAP_M   0.02 /* random layout: free gap between bodies */
+#define RANDOM_TRIES   20000u
+#define WALL_HALF_T_M  0.05
+#define WALL_HEIGHT_M  2.0
+#define OBST_HEIGHT_M  1.5
+#define PIVOT_MASS_FRAC 0.15 /* feet and shanks: the base */
+
+/* ---- seeded generator (splitmix64) --------------------------------------- */
+
+typedef struct {
+    uint64_t s;
+} rng_t;
+
+static uint64_t rng_next(rng_t *r)
+{
+    uint64_t z = (r->s += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+}
+
+static double rng_uniform(rng_t *r)
+{
+    return (double)(rng_next(r) >> 11) * (1.0 / 9007199254740992.0);
+}
+
+/* Standard normal (Box-Muller), clamped to +-2.5 sd. */
+static double rng_normal(rng_t *r)
+{
+    double u1 = rng_uniform(r);
+    const double u2 = rng_uniform(r);
+    u1 = u1 < 1e-12 ? 1e-12 : u1;
+    double z = sqrt(-2.0 * log(u1)) * cos(2.0 * M_PI * u2);
+    return z < -2.5 ? -2.5 : (z > 2.5 ? 2.5 : z);
+}
+
+/* ---- placement ------------------------------------------------------------ */
+
+static bool is_blocked(const ps_crowd_cfg_t *cfg, const ps_crowd_group_cfg_t *g,
+                       const double robot_xy[2], double x, double y, double r)
+{
+    const double dx = x - robot_xy[0], dy = y - robot_xy[1];
+    if (sqrt(dx * dx + dy * dy) < (double)g->clear_m)
+        return true;
+    for (uint32_t k = 0; k < cfg->n_obstacles; k++) {
+        const ps_crowd_obstacle_cfg_t *o = &cfg->obstacles[k];
+        const double ox = x - o->x_m, oy = y - o->y_m;
+        if (sqrt(ox * ox + oy * oy) < (double)o->radius_m + r)
+            return true;
+    }
+    return false;
+}
+
+static void draw_body(const ps_crowd_cfg_t *cfg, const ps_crowd_group_cfg_t *g, rng_t *rng,
+                      uint32_t group_idx, ps_crowd_agent_spec_t *a)
+{
+    a->height_m = g->height_m + g->height_sd_m * rng_normal(rng);
+    a->mass_kg = g->mass_kg + g->mass_sd_kg * rng_normal(rng);
+    a->radius_m = g->radius_m + g->radius_sd_m * rng_normal(rng);
+    const double v0 = g->speed_m_s > 0.0f ? g->speed_m_s : cfg->social.v0_m_s;
+    a->v0_m_s = v0 + g->speed_sd_m_s * rng_normal(rng);
+    a->v0_m_s = a->v0_m_s < 0.0 ? 0.0 : a->v0_m_s;
+    a->group_idx = group_idx;
+}
+
+static double rect_area(const ps_crowd_rect_t *r)
+{
+    return ((double)r->x_max_m - r->x_min_m) * ((double)r->y_max_m - r->y_min_m);
+}
+
+static int place_lattice(const ps_crowd_cfg_t *cfg, uint32_t gi, rng_t *rng,
+                         const double robot_xy[2], ps_crowd_agent_spec_t *out, uint32_t room,
+                         uint32_t *out_n)
+{
+    const ps_crowd_group_cfg_t *g = &cfg->groups[gi];
+    const ps_crowd_rect_t *r = &g->region;
+    const double area = rect_area(r);
+    const double density = g->density_m2 > 0.0f ? (double)g->density_m2 : (double)g->count / area;
+    const double a = sqrt(2.0 / (SQRT3 * density)); /* hexagonal spacing */
+    const double row = a * SQRT3 / 2.0;
+    uint32_t n = 0;
+    int k = 0;
+    for (double y = r->y_min_m + row / 2.0; y < r->y_max_m; y += row, k++) {
+        for (double x = r->x_min_m + (k % 2 ? a : a / 2.0); x < r->x_max_m; x += a) {
+            if (g->count > 0 && n >= g->count)
+                break;
+            const double jx = x + JITTER_FRAC * a * (2.0 * rng_uniform(rng) - 1.0);
+            const double jy = y + JITTER_FRAC * a * (2.0 * rng_uniform(rng) - 1.0);
+            if (is_blocked(cfg, g, robot_xy, jx, jy, g->radius_m))
+                continue;
+            if (n >= room)
+                return -ENOSPC;
+            out[n].x_m = jx;
+            out[n].y_m = jy;
+            draw_body(cfg, g, rng, gi, &out[n]);
+            n++;
+        }
+    }
+    *out_n = n;
+    return 0;
+}
+
+static int place_random(const ps_crowd_cfg_t *cfg, uint32_t gi, rng_t *rng,
+                        const double robot_xy[2], const ps_crowd_agent_spec_t *placed,
+                        uint32_t n_placed, ps_crowd_agent_spec_t *out, uint32_t room,
+                        uint32_t *out_n)
+{
+    const ps_crowd_group_cfg_t *g = &cfg->groups[gi];
+    const ps_crowd_rect_t *r = &g->region;
+    const uint32_t want = g->count > 0 ? g->count
+                                       : (uint32_t)lround((double)g->density_m2 * rect_area(r));
+    if (want > room)
+        return -ENOSPC;
+    uint32_t n = 0;
+    for (uint32_t tries = 0; n < want && tries < RANDOM_TRIES * (want + 1u); tries++) {
+        ps_crowd_agent_spec_t a;
+        draw_body(cfg, g, rng, gi, &a);
+        a.x_m = r->x_min_m + rng_uniform(rng) * ((double)r->x_max_m - r->x_min_m);
+        a.y_m = r->y_min_m + rng_uniform(rng) * ((double)r->y_max_m - r->y_min_m);
+        if (is_blocked(cfg, g, robot_xy, a.x_m, a.y_m, a.radius_m))
+            continue;
+        bool is_free = true;
+        for (uint32_t k = 0; k < n_placed + n && is_free; k++) {
+            const ps_crowd_agent_spec_t *o = k < n_placed ? &placed[k] : &out[k - n_placed];
+            const double dx = a.x_m - o->x_m, dy = a.y_m - o->y_m;
+            is_free = sqrt(dx * dx + dy * dy) >= a.radius_m + o->radius_m + RANDOM_GAP_M;
+        }
+        if (is_free)
+            out[n++] = a;
+    }
+    *out_n = n;
+    return n == want ? 0 : -ERANGE;
+}
+
+static void place_line(const ps_crowd_cfg_t *cfg, uint32_t gi, rng_t *rng,
+                       ps_crowd_agent_spec_t *out, uint32_t n)
+{
+    const ps_crowd_group_cfg_t *g = &cfg->groups[gi];
+    const ps_crowd_rect_t *r = &g->region;
+    double u[2] = {(double)r->x_max_m - r->x_min_m, (double)r->y_max_m - r->y_min_m};
+    const double len = sqrt(u[0] * u[0] + u[1] * u[1]);
+    u[0] = len > 0.0 ? u[0] / len : 1.0;
+    u[1] = len > 0.0 ? u[1] / len : 0.0;
+    for (uint32_t k = 0; k < n; k++) {
+        out[k].x_m = r->x_min_m + (double)k * g->spacing_m * u[0];
+        out[k].y_m = r->y_min_m + (double)k * g->spacing_m * u[1];
+        draw_body(cfg, g, rng, gi, &out[k]);
+    }
+}
+
+int ps_scene_place(const ps_crowd_cfg_t *cfg, uint32_t seed, const double robot_xy[2],
+                   ps_crowd_agent_spec_t *out, uint32_t max, uint32_t *out_n, char *err,
+                   size_t err_len)
+{
+    rng_t rng = {.s = 0x5eed0000ull ^ (uint64_t)seed};
+    uint32_t n = 0;
+    for (uint32_t gi = 0; gi < cfg->n_groups; gi++) {
+        const ps_crowd_group_cfg_t *g = &cfg->groups[gi];
+        uint32_t got = 0;
+        int rc = 0;
+        if (g->layout == PS_CROWD_LAYOUT_LINE) {
+            if (g->count > max - n)
+                rc = -ENOSPC;
+            else
+                place_line(cfg, gi, &rng, out + n, g->count);
+            got = g->count;
+        } else if (g->layout == PS_CROWD_LAYOUT_RANDOM) {
+            rc = place_random(cfg, gi, &rng, robot_xy, out, n, out + n, max - n, &got);
+        } else {
+            rc = place_lattice(cfg, gi, &rng, robot_xy, out + n, max - n, &got);
+            if (rc == 0 && g->count > 0 && got < g->count)
+                rc = -ERANGE;
+        }
+        if (rc == -ENOSPC) {
+            ps_err_format(err, err_len, "crowd.groups[%u] (%s): more than %u agents in all", gi,
+                          g->name, max);
+            return -PS_ERR_CONFIG;
+        }
+        if (rc < 0) {
+            ps_err_format(err, err_len,
+                          "crowd.groups[%u] (%s): its region holds only %u of its %u agents", gi,
+                          g->name, got, g->count);
+            return -PS_ERR_CONFIG;
+        }
+        n += got;
+    }
+    *out_n = n;
+    return 0;
+}
+
+/* ---- MJCF ------------------------------------------------------------------ */
+
+void ps_scene_sizes(uint32_t n_agents, int robot_nconmax, int robot_njmax, int *out_nconmax,
+                    int *out_njmax)
+{
+    /* A packed agent touches about six others and the robot: some three
+     * contacts of its own, four rows each under a pyramidal cone, plus two
+     * tilt limits when it lies down. Measured on concert-6 (200 agents):
+     * fewer than 1.5 contacts and 6 rows per agent. */
+    *out_nconmax = robot_nconmax + 50 + 4 * (int)n_agents;
+    *out_njmax = robot_njmax + 200 + 12 * (int)n_agents;
+}
+
+static const float GROUP_RGBA[][3] = {
+    {0.20f, 0.45f, 0.80f}, {0.85f, 0.55f, 0.15f}, {0.30f, 0.65f, 0.30f}, {0.60f, 0.35f, 0.70f},
+    {0.75f, 0.70f, 0.25f}, {0.25f, 0.65f, 0.70f}, {0.70f, 0.40f, 0.45f}, {0.50f, 0.50f, 0.50f},
+};
+
+static void write_box(FILE *f, const char *name, double x0, double y0, double x1, double y1,
+                      double h, const char *rgba)
+{
+    const double cx = (x0 + x1) / 2.0, cy = (y0 + y1) / 2.0;
+    const double len = sqrt((x1 - x0) * (x1 - x0) + (y1 - y0) * (y1 - y0));
+    const double ang = atan2(y1 - y0, x1 - x0);
+    fprintf(f,
+            "    <geom name=\"%s\" type=\"box\" pos=\"%.4f %.4f %.4f\" "
+            "quat=\"%.6f 0 0 %.6f\" size=\"%.4f %.4f %.4f\" contype=\"16\" conaffinity=\"3\" "
+            "condim=\"3\" priority=\"2\" friction=\"0.5 0.005 0.0001\" solref=\"0.004 1\" "
+            "solimp=\"0.9 0.95 0.001 0.5 2\" margin=\"0\" gap=\"0\" rgba=\"%s\"/>\n",
+            name, cx, cy, h / 2.0, cos(ang / 2.0), sin(ang / 2.0), len / 2.0 + WALL_HALF_T_M,
+            WALL_HALF_T_M, h / 2.0, rgba);
+}
+
+static void write_agent(FILE *f, const ps_crowd_cfg_t *cfg, const ps_crowd_agent_spec_t *a,
+                        uint32_t i)
+{
+    const double r = a->radius_m;
+    const double len = a->height_m - 2.0 * r; /* capsule segment; pivot at height r */
+    const double m_base = PIVOT_MASS_FRAC * a->mass_kg;
+    const double m_torso = a->mass_kg - m_base;
+    /* Tilt damping: about 0.7 of critical for the torso on the ankle spring
+     * net of gravity, inertia about the pivot m (l^2 + len^2/12). */
+    const double l = len / 2.0;
+    const double inertia = m_torso * (l * l + len * len / 12.0);
+    const double k_net = ((double)cfg->body.ankle_k_ratio - 1.0) * m_torso * 9.81 * l;
+    const double c = 1.4 * sqrt((k_net > 1.0 ? k_net : 1.0) * inertia);
+    const float *rgb = GROUP_RGBA[a->group_idx % (sizeof(GROUP_RGBA) / sizeof(GROUP_RGBA[0]))];
+    fprintf(f,
+            "    <body name=\"agent%u\" pos=\"%.4f %.4f 0\">\n"
+            "      <joint name=\"agent%u_x\" type=\"slide\" axis=\"1 0 0\" limited=\"false\" "
+            "armature=\"0\" damping=\"0\" stiffness=\"0\" frictionloss=\"0\"/>\n"
+            "      <joint name=\"agent%u_y\" type=\"slide\" axis=\"0 1 0\" limited=\"false\" "
+            "armature=\"0\" damping=\"0\" stiffness=\"0\" frictionloss=\"0\"/>\n"
+            "      <inertial pos=\"0 0 %.4f\" mass=\"%.3f\" diaginertia=\"0.05 0.05 0.05\"/>\n"
+            "      <geom name=\"agent%u_feet\" type=\"cylinder\" pos=\"0 0 0.01\" size=\"%.3f 0.01\" "
+            "contype=\"0\" conaffinity=\"0\" mass=\"0\" rgba=\"0.15 0.15 0.15 1\"/>\n"
+            "      <body name=\"agent%u_torso\" pos=\"0 0 %.4f\">\n"
+            "        <joint name=\"agent%u_tx\" type=\"hinge\" axis=\"1 0 0\" limited=\"true\" "
+            "range=\"-1.5708 1.5708\" armature=\"0\" damping=\"%.2f\" stiffness=\"0\" "
+            "frictionloss=\"0\"/>\n"
+            "        <joint name=\"agent%u_ty\" type=\"hinge\" axis=\"0 1 0\" limited=\"true\" "
+            "range=\"-1.5708 1.5708\" armature=\"0\" damping=\"%.2f\" stiffness=\"0\" "
+            "frictionloss=\"0\"/>\n"
+            "        <geom name=\"agent%u_body\" type=\"capsule\" fromto=\"0 0 0 0 0 %.4f\" "
+            "size=\"%.4f\" mass=\"%.3f\" contype=\"8\" conaffinity=\"18\" condim=\"3\" "
+            "priority=\"1\" friction=\"%.3f 0.005 0.0001\" solref=\"0.02 1\" "
+            "solimp=\"0.9 0.9 0.001 0.5 2\" margin=\"0\" gap=\"0\" rgba=\"%.2f %.2f %.2f 1\"/>\n"
+            "        <geom name=\"agent%u_ring\" type=\"sphere\" pos=\"0 0 %.4f\" size=\"%.4f\" "
+            "mass=\"0\" contype=\"4\" conaffinity=\"4\" condim=\"1\" priority=\"1\" "
+            "friction=\"%.3f 0.005 0.0001\" solref=\"0.02 1\" solimp=\"0.9 0.9 0.001 0.5 2\" "
+            "margin=\"0\" gap=\"0\" group=\"3\" rgba=\"%.2f %.2f %.2f 1\"/>\n"
+            "      </body>\n"
+            "    </body>\n",
+            i, a->x_m, a->y_m, i, i, r / 2.0, m_base, i, r * 0.8, i, r, i, c, i, c, i, len, r,
+            m_torso, (double)cfg->body.friction, (double)rgb[0], (double)rgb[1], (double)rgb[2],
+            i, l, r, (double)cfg->body.friction, (double)rgb[0], (double)rgb[1], (double)rgb[2]);
+}
+
+static void write_walls(FILE *f, const ps_crowd_cfg_t *cfg)
+{
+    char name[32];
+    if (cfg->has_arena_walls) {
+        const ps_crowd_rect_t *a = &cfg->arena;
+        const double x0 = a->x_min_m - WALL_HALF_T_M, x1 = a->x_max_m + WALL_HALF_T_M;
+        const double y0 = a->y_min_m - WALL_HALF_T_M, y1 = a->y_max_m + WALL_HALF_T_M;
+        const double seg[4][4] = {{x0, y0, x1, y0}, {x1, y0, x1, y1}, {x1, y1, x0, y1},
+                                  {x0, y1, x0, y0}};
+        for (int k = 0; k < 4; k++) {
+            (void)snprintf(name, sizeof(name), "arena_wall%d", k);
+            write_box(f, name, seg[k][0], seg[k][1], seg[k][2], seg[k][3], 1.2,
+                      "0.55 0.55 0.6 0.35");
+        }
+    }
+    for (uint32_t k = 0; k < cfg->n_walls; k++) {
+        const ps_crowd_wall_cfg_t *w = &cfg->walls[k];
+        (void)snprintf(name, sizeof(name), "wall%u", k);
+        write_box(f, name, w->x0_m, w->y0_m, w->x1_m, w->y1_m, WALL_HEIGHT_M, "0.5 0.5 0.55 1");
+    }
+    for (uint32_t k = 0; k < cfg->n_obstacles; k++) {
+        const ps_crowd_obstacle_cfg_t *o = &cfg->obstacles[k];
+        fprintf(f,
+                "    <geom name=\"obstacle%u\" type=\"cylinder\" pos=\"%.4f %.4f %.4f\" "
+                "size=\"%.4f %.4f\" contype=\"16\" conaffinity=\"3\" condim=\"3\" priority=\"2\" "
+                "friction=\"0.5 0.005 0.0001\" solref=\"0.004 1\" margin=\"0\" gap=\"0\" "
+                "rgba=\"0.45 0.4 0.35 1\"/>\n",
+                k, o->x_m, o->y_m, OBST_HEIGHT_M / 2.0, o->radius_m, OBST_HEIGHT_M / 2.0);
+    }
+    for (uint32_t e = 0; e < cfg->n_events; e++) {
+        const ps_crowd_event_cfg_t *ev = &cfg->events[e];
+        if (ev->kind != PS_CROWD_EVENT_WALL)
+            continue;
+        const double cx = (ev->wall[0] + ev->wall[2]) / 2.0, cy = (ev->wall[1] + ev->wall[3]) / 2.0;
+        fprintf(f, "    <body name=\"crowd_wall%u\" mocap=\"true\" pos=\"%.4f %.4f 0\">\n", e, cx,
+                cy);
+        (void)snprintf(name, sizeof(name), "crowd_wall%u_geom", e);
+        write_box(f, name, ev->wall[0] - cx, ev->wall[1] - cy, ev->wall[2] - cx, ev->wall[3] - cy,
+                  WALL_HEIGHT_M, "0.8 0.3 0.2 1");
+        fprintf(f, "    </body>\n");
+    }
+}
+
+int ps_scene_write_mjcf(const ps_crowd_cfg_t *cfg, const ps_crowd_agent_spec_t *agents,
+                        uint32_t n_agents, const char *robot_model_path, int robot_nconmax,
+                        int robot_njmax, char **out_xml, char *err, size_t err_len)
+{
+    if (cfg == NULL || (agents == NULL && n_agents > 0) || robot_model_path == NULL ||
+        out_xml == NULL) {
+        ps_err_format(err, err_len, "scene: NULL argument");
+        return -EINVAL;
+    }
+    char *buf = NULL;
+    size_t size = 0;
+    FILE *f = open_memstream(&buf, &size);
+    if (f == NULL) {
+        ps_err_format(err, err_len, "scene: out of memory");
+        return -ENOMEM;
+    }
+    int nconmax, njmax;
+    ps_scene_sizes(n_agents, robot_nconmax, robot_njmax, &nconmax, &njmax);
+    fprintf(f,
+            "<mujoco model=\"pushstep-scene\">\n"
+            "  <include file=\"%s\"/>\n"
+            "  <size nconmax=\"%d\" njmax=\"%d\"/>\n"
+            "  <visual>\n"
+            "    <global offwidth=\"1280\" offheight=\"720\"/>\n"
+            "    <map force=\"0.004\"/>\n"
+            "    <scale forcewidth=\"0.03\" contactwidth=\"0.05\" contactheight=\"0.01\"/>\n"
+            "  </visual>\n"
+            "  <worldbody>\n",
+            robot_model_path, nconmax, njmax);
+    write_walls(f, cfg);
+    for (uint32_t i = 0; i < n_agents; i++)
+        write_agent(f, cfg, &agents[i], i);
+    fprintf(f, "  </worldbody>\n</mujoco>\n");
+    const bool is_bad = ferror(f) != 0;
+    if (fclose(f) != 0 || is_bad || buf == NULL) {
+        free(buf);
+        ps_err_format(err, err_len, "scene: out of memory");
+        return -ENOMEM;
+    }
+    *out_xml = buf;
+    return 0;
+}

@@ -1,0 +1,54 @@
+/*
+ * ps_scene: the scene the plant loads when a scenario has a crowd. MuJoCo
+ * 2.2.2 cannot add bodies to a loaded model, so at start-up this module
+ * places the agents (from the scenario's groups and seed) and writes one MJCF
+ * document that <include>s the robot's model file unchanged and adds the
+ * agents, the arena's walls, the obstacles and the moving walls, with
+ * contact and constraint capacity (<size nconmax njmax>) derived from the
+ * agent count. The plant loads it through MuJoCo's virtual file system.
+ *
+ * Names in the scene (sim/ps_crowd.c binds them): bodies "agentI" (base, slide
+ * joints "agentI_x", "agentI_y") and "agentI_torso" (hinges "agentI_tx",
+ * "agentI_ty", capsule geom "agentI_body"); world geoms "arena_wallK",
+ * "wallK", "obstacleK"; mocap bodies "crowd_wallE" for moving-wall event E.
+ * Collision bits: agents contype 4, conaffinity 2|4 (each other and the
+ * robot, not the floor); walls contype 4, conaffinity 1|2|4. The robot model
+ * keeps its own (ps1: robot 2/1, floor 1/1).
+ *
+ * Threads: any (INIT). Allocation: ps_scene_write_mjcf returns a malloc'd
+ * string.
+ */
+#ifndef PS_SCENE_H
+#define PS_SCENE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "ps_crowd.h"
+
+/** Place every group's agents: lattice, random or line layouts, sizes drawn
+ *  from the group's distributions with a generator seeded by seed; none
+ *  closer than the group's clear_m to robot_xy, none inside an obstacle, none
+ *  overlapping another (random layout). Same cfg and seed, same agents.
+ *  @post out[0..*out_n) written
+ *  @return 0 | -PS_ERR_CONFIG (more agents than max, or a group whose region
+ *          cannot hold its count; err names the group)  @rt INIT */
+int ps_scene_place(const ps_crowd_cfg_t *cfg, uint32_t seed, const double robot_xy[2],
+                   ps_crowd_agent_spec_t *out, uint32_t max, uint32_t *out_n, char *err,
+                   size_t err_len);
+
+/** nconmax and njmax for a scene of n agents over the robot model's own
+ *  (2.2.2 allocates njmax^2 doubles: kept to what a packed crowd uses).
+ *  @rt any */
+void ps_scene_sizes(uint32_t n_agents, int robot_nconmax, int robot_njmax, int *out_nconmax,
+                    int *out_njmax);
+
+/** The scene document: robot model (by absolute path) plus crowd.
+ *  @pre robot_model_path readable; robot_nconmax/njmax the robot model's
+ *  @post *out_xml malloc'd, NUL-terminated; the caller frees it
+ *  @return 0 | -ENOMEM | -EINVAL  @rt INIT */
+int ps_scene_write_mjcf(const ps_crowd_cfg_t *cfg, const ps_crowd_agent_spec_t *agents,
+                        uint32_t n_agents, const char *robot_model_path, int robot_nconmax,
+                        int robot_njmax, char **out_xml, char *err, size_t err_len);
+
+#endif /* PS_SCENE_H */
