@@ -12,8 +12,8 @@
 
 #define G_M_S2          9.81
 #define SOLIMP_D        0.9  /* constant impedance the scene sets on agent geoms */
-#define STAND_OMEGA     6.0  /* base follows the centre of mass: ~0.17 s */
-#define STEP_OMEGA      15.0 /* base tracks a reflex step's path */
+#define STAND_OMEGA     10.0 /* base follows the centre of mass: ~0.1 s */
+#define STEP_OMEGA      20.0 /* base tracks a reflex step's path */
 #define FALLEN_DRAG_N_S 400.0
 #define SLOW_FRAC       0.25 /* ahead and slower than this share of v0: in the way */
 
@@ -563,22 +563,38 @@ static void sliding_friction(ps_crowd_t *c, const mjModel *m, const mjData *d)
     (void)m;
 }
 
+/* Periodic corridor: an agent past an end re-enters at the other, unless
+ * someone stands where it would land (it tries again next update). */
+static void wrap_x(ps_crowd_t *c, mjData *d)
+{
+    const double w = (double)c->cfg.arena.x_max_m - c->cfg.arena.x_min_m;
+    for (uint32_t i = 0; i < c->n; i++) {
+        agent_t *a = &c->a[i];
+        const double x = a->x0 + d->qpos[a->qx];
+        const double shift = x > c->cfg.arena.x_max_m   ? -w
+                             : x < c->cfg.arena.x_min_m ? w
+                                                        : 0.0;
+        if (shift == 0.0 || a->is_fallen)
+            continue;
+        bool is_free = true;
+        for (uint32_t j = 0; j < c->n && is_free; j++) {
+            const agent_t *b = &c->a[j];
+            const double dx = b->x0 + d->qpos[b->qx] - (x + shift);
+            const double dy = b->y0 + d->qpos[b->qy] - (a->y0 + d->qpos[a->qy]);
+            is_free = j == i || dx * dx + dy * dy > 4.0 * 0.25 * 0.25;
+        }
+        if (is_free)
+            d->qpos[a->qx] += shift;
+    }
+}
+
 static void update(ps_crowd_t *c, const mjModel *m, mjData *d, double t_s)
 {
     const mjtNum *rp = d->xpos + 3 * c->robot_root;
     c->robot_xy[0] = rp[0];
     c->robot_xy[1] = rp[1];
-    if (c->cfg.is_periodic_x) {
-        const double w = (double)c->cfg.arena.x_max_m - c->cfg.arena.x_min_m;
-        for (uint32_t i = 0; i < c->n; i++) {
-            agent_t *a = &c->a[i];
-            const double x = a->x0 + d->qpos[a->qx];
-            if (x > c->cfg.arena.x_max_m)
-                d->qpos[a->qx] -= w;
-            else if (x < c->cfg.arena.x_min_m)
-                d->qpos[a->qx] += w;
-        }
-    }
+    if (c->cfg.is_periodic_x)
+        wrap_x(c, d);
     for (uint32_t i = 0; i < c->n; i++) {
         read_agent(&c->a[i], d);
         if (c->cfg.is_periodic_x) { /* the kinematics lag the wrap by one step */

@@ -147,6 +147,7 @@ typedef struct {
     float robot_radius_m; /**< the robot as a neighbour in the social force (0.2 m) */
     float robot_a_n;      /**< its repulsion strength; 0: agents do not shy from it */
     float crowd_dt_s;     /**< crowd update period (0.002 s) */
+    float timestep_s;     /**< physics step of the scene; 0: the robot model's own */
     uint32_t n_groups;
     ps_crowd_group_cfg_t groups[PS_CROWD_MAX_GROUPS];
     uint32_t n_walls;

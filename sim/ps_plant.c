@@ -6,6 +6,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include <mujoco/mujoco.h>
 
@@ -50,7 +51,16 @@ struct ps_plant {
     int n_full_warnings;     /**< MuJoCo's contact/constraint-full count at last check */
     const char *err_reason;  /**< why the last failing step failed (static), NULL: none */
     ps_crowd_t *crowd;       /**< NULL: no crowd */
+    int64_t crowd_ns;        /**< time in the crowd's work, all steps */
+    int64_t mujoco_ns;       /**< time in mj_step, all steps */
 };
+
+static int64_t mono_ns(void)
+{
+    struct timespec ts;
+    (void)clock_gettime(CLOCK_MONOTONIC, &ts); /* cannot fail for this clock */
+    return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+}
 
 /* MuJoCo's parser messages span lines; logs want one line. */
 static void one_line(char *s)
@@ -439,6 +449,12 @@ const mjData *ps_plant_data(const ps_plant_t *p)
     return p->d;
 }
 
+void ps_plant_get_timing(const ps_plant_t *p, int64_t *out_crowd_ns, int64_t *out_mujoco_ns)
+{
+    *out_crowd_ns = p->crowd_ns;
+    *out_mujoco_ns = p->mujoco_ns;
+}
+
 int ps_plant_root_body(const ps_plant_t *p)
 {
     return p->root_body;
@@ -543,13 +559,19 @@ int ps_plant_step(ps_plant_t *p)
             x[3 + k] += t[k];
         }
     }
+    const int64_t t0 = mono_ns();
     if (p->crowd != NULL)
         ps_crowd_before_step(p->crowd, m, d, d->time);
     const int contact_full = d->warning[mjWARN_CONTACTFULL].number;
     const int cnstr_full = d->warning[mjWARN_CNSTRFULL].number;
+    const int64_t t1 = mono_ns();
     mj_step(m, d);
+    const int64_t t2 = mono_ns();
     if (p->crowd != NULL)
         ps_crowd_after_step(p->crowd, m, d, m->opt.timestep);
+    const int64_t t3 = mono_ns();
+    p->crowd_ns += (t1 - t0) + (t3 - t2);
+    p->mujoco_ns += t2 - t1;
 
     /* MuJoCo resets the data itself when qpos/qvel/qacc go bad and only
      * warns, so the warning counters catch what a NaN scan would miss; it

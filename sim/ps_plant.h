@@ -154,6 +154,10 @@ ps_crowd_t *ps_plant_crowd(ps_plant_t *p);
 const struct mjModel_ *ps_plant_model(const ps_plant_t *p);
 const struct mjData_ *ps_plant_data(const ps_plant_t *p);
 
+/** Time spent so far in the crowd's work (forces, decisions, measurements)
+ *  and in mj_step, CLOCK_MONOTONIC, for the bench.  @rt RT-SAFE */
+void ps_plant_get_timing(const ps_plant_t *p, int64_t *out_crowd_ns, int64_t *out_mujoco_ns);
+
 /** @return the robot's root body index  @rt RT-SAFE */
 int ps_plant_root_body(const ps_plant_t *p);
 

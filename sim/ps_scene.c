@@ -10,7 +10,7 @@
 
 #define SQRT3          1.7320508075688772
 #define JITTER_FRAC    0.05 /* lattice jitter, fraction of the spacing */
-#define RANDOM_GAP_M   0.02 /* random layout: free gap between bodies */
+#define RANDOM_GAP_M   0.15 /* random layout: free gap between bodies (A exp(-gap/B) stays ~300 N) */
 #define RANDOM_TRIES   20000u
 #define WALL_HALF_T_M  0.05
 #define WALL_HEIGHT_M  2.0
@@ -80,35 +80,69 @@ static double rect_area(const ps_crowd_rect_t *r)
     return ((double)r->x_max_m - r->x_min_m) * ((double)r->y_max_m - r->y_min_m);
 }
 
+/* Lattice points of spacing a in the region (half a cell from its edges),
+ * outside the robot's clearance and the obstacles; at most max of them. */
+static uint32_t lattice_points(const ps_crowd_cfg_t *cfg, const ps_crowd_group_cfg_t *g,
+                               const double robot_xy[2], double a, double *out_xy, uint32_t max)
+{
+    const ps_crowd_rect_t *r = &g->region;
+    const double row = a * SQRT3 / 2.0;
+    uint32_t n = 0;
+    int k = 0;
+    for (double y = r->y_min_m + row / 2.0; y <= r->y_max_m - row / 2.0 + 1e-9; y += row, k++) {
+        for (double x = r->x_min_m + (k % 2 ? a : a / 2.0); x <= r->x_max_m - a / 2.0 + 1e-9;
+             x += a) {
+            if (is_blocked(cfg, g, robot_xy, x, y, g->radius_m))
+                continue;
+            if (n < max) {
+                out_xy[2 * n] = x;
+                out_xy[2 * n + 1] = y;
+            }
+            n++;
+        }
+    }
+    return n;
+}
+
+/* A hexagonal lattice holding the group's count (or density x area) in its
+ * region: the nominal spacing sqrt(2 / (sqrt(3) density)) shrunk in 1 %
+ * steps until the region's edges and the robot's clearance leave room, so
+ * the region as a whole holds the density asked for. */
 static int place_lattice(const ps_crowd_cfg_t *cfg, uint32_t gi, rng_t *rng,
                          const double robot_xy[2], ps_crowd_agent_spec_t *out, uint32_t room,
                          uint32_t *out_n)
 {
     const ps_crowd_group_cfg_t *g = &cfg->groups[gi];
-    const ps_crowd_rect_t *r = &g->region;
-    const double area = rect_area(r);
-    const double density = g->density_m2 > 0.0f ? (double)g->density_m2 : (double)g->count / area;
-    const double a = sqrt(2.0 / (SQRT3 * density)); /* hexagonal spacing */
-    const double row = a * SQRT3 / 2.0;
+    const double area = rect_area(&g->region);
+    const uint32_t want =
+        g->count > 0 ? g->count : (uint32_t)lround((double)g->density_m2 * area);
+    const double density = (double)want / area;
+    if (want > room)
+        return -ENOSPC;
+    double *xy = malloc(2u * (size_t)(want + 1u) * sizeof(double));
+    if (xy == NULL)
+        return -ENOMEM;
+    const double a0 = sqrt(2.0 / (SQRT3 * density));
+    double a = a0;
     uint32_t n = 0;
-    int k = 0;
-    for (double y = r->y_min_m + row / 2.0; y < r->y_max_m; y += row, k++) {
-        for (double x = r->x_min_m + (k % 2 ? a : a / 2.0); x < r->x_max_m; x += a) {
-            if (g->count > 0 && n >= g->count)
-                break;
-            const double jx = x + JITTER_FRAC * a * (2.0 * rng_uniform(rng) - 1.0);
-            const double jy = y + JITTER_FRAC * a * (2.0 * rng_uniform(rng) - 1.0);
-            if (is_blocked(cfg, g, robot_xy, jx, jy, g->radius_m))
-                continue;
-            if (n >= room)
-                return -ENOSPC;
-            out[n].x_m = jx;
-            out[n].y_m = jy;
-            draw_body(cfg, g, rng, gi, &out[n]);
-            n++;
-        }
+    for (int shrink = 0; shrink <= 30; shrink++) {
+        a = a0 * (1.0 - 0.01 * shrink);
+        n = lattice_points(cfg, g, robot_xy, a, xy, want);
+        if (n >= want)
+            break;
     }
-    *out_n = n;
+    if (n < want) {
+        free(xy);
+        *out_n = n;
+        return -ERANGE;
+    }
+    for (uint32_t i = 0; i < want; i++) {
+        out[i].x_m = xy[2 * i] + JITTER_FRAC * a * (2.0 * rng_uniform(rng) - 1.0);
+        out[i].y_m = xy[2 * i + 1] + JITTER_FRAC * a * (2.0 * rng_uniform(rng) - 1.0);
+        draw_body(cfg, g, rng, gi, &out[i]);
+    }
+    free(xy);
+    *out_n = want;
     return 0;
 }
 
@@ -127,8 +161,10 @@ static int place_random(const ps_crowd_cfg_t *cfg, uint32_t gi, rng_t *rng,
     for (uint32_t tries = 0; n < want && tries < RANDOM_TRIES * (want + 1u); tries++) {
         ps_crowd_agent_spec_t a;
         draw_body(cfg, g, rng, gi, &a);
-        a.x_m = r->x_min_m + rng_uniform(rng) * ((double)r->x_max_m - r->x_min_m);
-        a.y_m = r->y_min_m + rng_uniform(rng) * ((double)r->y_max_m - r->y_min_m);
+        /* the body inside the region, a gap from its edges */
+        const double e = a.radius_m + RANDOM_GAP_M;
+        a.x_m = r->x_min_m + e + rng_uniform(rng) * ((double)r->x_max_m - r->x_min_m - 2.0 * e);
+        a.y_m = r->y_min_m + e + rng_uniform(rng) * ((double)r->y_max_m - r->y_min_m - 2.0 * e);
         if (is_blocked(cfg, g, robot_xy, a.x_m, a.y_m, a.radius_m))
             continue;
         bool is_free = true;
@@ -180,18 +216,23 @@ int ps_scene_place(const ps_crowd_cfg_t *cfg, uint32_t seed, const double robot_
             rc = place_random(cfg, gi, &rng, robot_xy, out, n, out + n, max - n, &got);
         } else {
             rc = place_lattice(cfg, gi, &rng, robot_xy, out + n, max - n, &got);
-            if (rc == 0 && g->count > 0 && got < g->count)
-                rc = -ERANGE;
         }
         if (rc == -ENOSPC) {
             ps_err_format(err, err_len, "crowd.groups[%u] (%s): more than %u agents in all", gi,
                           g->name, max);
             return -PS_ERR_CONFIG;
         }
+        if (rc == -ENOMEM) {
+            ps_err_format(err, err_len, "crowd: out of memory");
+            return rc;
+        }
         if (rc < 0) {
+            const uint32_t want = g->count > 0 ? g->count
+                                               : (uint32_t)lround((double)g->density_m2 *
+                                                                  rect_area(&g->region));
             ps_err_format(err, err_len,
                           "crowd.groups[%u] (%s): its region holds only %u of its %u agents", gi,
-                          g->name, got, g->count);
+                          g->name, got, want);
             return -PS_ERR_CONFIG;
         }
         n += got;
@@ -282,15 +323,31 @@ static void write_walls(FILE *f, const ps_crowd_cfg_t *cfg)
 {
     char name[32];
     if (cfg->has_arena_walls) {
+        /* Planes facing into the arena: a plane-capsule test is analytic and
+         * cheap, where a long box would be tested against every agent (the
+         * world body's geoms all pass the broadphase). A plane is a half
+         * space, so these bound the crowd only (conaffinity 0): the robot
+         * may stand anywhere, inside the arena or not. */
         const ps_crowd_rect_t *a = &cfg->arena;
-        const double x0 = a->x_min_m - WALL_HALF_T_M, x1 = a->x_max_m + WALL_HALF_T_M;
-        const double y0 = a->y_min_m - WALL_HALF_T_M, y1 = a->y_max_m + WALL_HALF_T_M;
-        const double seg[4][4] = {{x0, y0, x1, y0}, {x1, y0, x1, y1}, {x1, y1, x0, y1},
-                                  {x0, y1, x0, y0}};
-        for (int k = 0; k < 4; k++) {
-            (void)snprintf(name, sizeof(name), "arena_wall%d", k);
-            write_box(f, name, seg[k][0], seg[k][1], seg[k][2], seg[k][3], 1.2,
-                      "0.55 0.55 0.6 0.35");
+        const double cx = (a->x_min_m + a->x_max_m) / 2.0, cy = (a->y_min_m + a->y_max_m) / 2.0;
+        const double hw = (a->x_max_m - a->x_min_m) / 2.0, hh = (a->y_max_m - a->y_min_m) / 2.0;
+        /* pos, half extent along the wall, and the quaternion turning the
+         * plane's +z normal to point inward */
+        const double walls[4][7] = {
+            {a->x_min_m, cy, hh, 0.7071068, 0.0, 0.7071068, 0.0},   /* normal +x */
+            {a->x_max_m, cy, hh, 0.7071068, 0.0, -0.7071068, 0.0},  /* normal -x */
+            {cx, a->y_min_m, hw, 0.7071068, -0.7071068, 0.0, 0.0},  /* normal +y */
+            {cx, a->y_max_m, hw, 0.7071068, 0.7071068, 0.0, 0.0},   /* normal -y */
+        };
+        for (int k = cfg->is_periodic_x ? 2 : 0; k < 4; k++) { /* periodic: no end walls */
+            const double *w = walls[k];
+            const bool is_x = k < 2;
+            fprintf(f,
+                    "    <geom name=\"arena_wall%d\" type=\"plane\" pos=\"%.4f %.4f 0.6\" "
+                    "quat=\"%.7f %.7f %.7f %.7f\" size=\"%.4f %.4f 0.5\" contype=\"16\" "
+                    "conaffinity=\"0\" condim=\"3\" priority=\"2\" friction=\"0.5 0.005 0.0001\" "
+                    "solref=\"0.004 1\" margin=\"0\" gap=\"0\" rgba=\"0.55 0.55 0.6 0.35\"/>\n",
+                    k, w[0], w[1], w[3], w[4], w[5], w[6], is_x ? 0.6 : w[2], is_x ? w[2] : 0.6);
         }
     }
     for (uint32_t k = 0; k < cfg->n_walls; k++) {
@@ -337,19 +394,24 @@ int ps_scene_write_mjcf(const ps_crowd_cfg_t *cfg, const ps_crowd_agent_spec_t *
         ps_err_format(err, err_len, "scene: out of memory");
         return -ENOMEM;
     }
+    char timestep[64] = "";
+    if (cfg->timestep_s > 0.0f)
+        (void)snprintf(timestep, sizeof(timestep), "  <option timestep=\"%g\"/>\n",
+                       (double)cfg->timestep_s);
     int nconmax, njmax;
     ps_scene_sizes(n_agents, robot_nconmax, robot_njmax, &nconmax, &njmax);
     fprintf(f,
             "<mujoco model=\"pushstep-scene\">\n"
             "  <include file=\"%s\"/>\n"
             "  <size nconmax=\"%d\" njmax=\"%d\"/>\n"
+            "%s"
             "  <visual>\n"
             "    <global offwidth=\"1280\" offheight=\"720\"/>\n"
             "    <map force=\"0.004\"/>\n"
             "    <scale forcewidth=\"0.03\" contactwidth=\"0.05\" contactheight=\"0.01\"/>\n"
             "  </visual>\n"
             "  <worldbody>\n",
-            robot_model_path, nconmax, njmax);
+            robot_model_path, nconmax, njmax, timestep);
     write_walls(f, cfg);
     for (uint32_t i = 0; i < n_agents; i++)
         write_agent(f, cfg, &agents[i], i);

@@ -149,6 +149,13 @@ static void expect_robot_error(fx_t *f)
     assert_string_equal(f->err, f->want);
 }
 
+static void expect_scenario_error_any(fx_t *f)
+{
+    assert_int_equal(ps_config_load_scenario(f->path, &f->scenario, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    assert_non_null(strstr(f->err, f->path));
+}
+
 static void expect_scenario_error(fx_t *f)
 {
     assert_int_equal(ps_config_load_scenario(f->path, &f->scenario, f->err, sizeof(f->err)),
@@ -283,6 +290,108 @@ static void test_load_scenario_fixture_defaults_applied(void **state)
     assert_true(s->pushes[0].force_n[0] == 10.0f);
     assert_true(s->pushes[0].force_n[1] == -20.5f);
     assert_true(s->pushes[0].force_n[2] == 0.0f);
+}
+
+#define CROWD_OK "tests/data/config/crowd_ok.yaml"
+
+static void test_load_scenario_crowd_fixture_values_and_defaults(void **state)
+{
+    fx_t *f = *state;
+    ps_scenario_cfg_t *s = &f->scenario;
+    assert_int_equal(ps_config_load_scenario(CROWD_OK, s, f->err, sizeof(f->err)), 0);
+    const ps_crowd_cfg_t *c = &s->crowd;
+    assert_true(c->is_enabled);
+    assert_true(s->robot_xy_m[0] == 0.5f && s->robot_xy_m[1] == -0.25f);
+    assert_true(s->robot_yaw_rad == 0.3f);
+    assert_true(c->has_arena_walls);
+    assert_true(c->robot_a_n == 0.0f);   /* given as 0: kept, not defaulted */
+    assert_true(c->social.v0_m_s == 1.1f);
+    assert_true(c->social.a_n == 500.0f);
+    assert_true(c->social.tau_s == 0.54f); /* default: thesis 004, Table 6.1 */
+    assert_true(c->social.b_m == 0.08f);   /* default: Helbing 2000 */
+    assert_true(c->body.body_k_n_m == 60000.0f);
+    assert_true(c->body.step_max_m == 0.73f);
+    assert_true(c->measure.x_min_m == -4.0f && c->measure.y_max_m == 3.0f); /* = arena */
+    assert_int_equal(c->n_groups, 2);
+    assert_int_equal(c->groups[0].layout, PS_CROWD_LAYOUT_LATTICE);
+    assert_int_equal(c->groups[0].goal, PS_CROWD_GOAL_HOLD);
+    assert_true(c->groups[0].height_m == 1.70f && c->groups[0].radius_m == 0.17f);
+    assert_true(c->groups[1].height_m == 1.8f);
+    assert_int_equal(c->groups[1].layout, PS_CROWD_LAYOUT_LINE);
+    assert_int_equal(c->n_walls, 1);
+    assert_int_equal(c->n_obstacles, 1);
+    assert_int_equal(c->n_events, 3);
+    assert_int_equal(c->events[0].agent, 3);
+    assert_int_equal(c->events[0].profile, PS_CROWD_PROFILE_HALF_SINE);
+    assert_int_equal(c->events[1].agent, -1); /* absent: the whole group */
+    assert_true(c->events[1].direction[0] == 0.0f && c->events[1].direction[1] == 1.0f);
+    assert_int_equal(c->events[2].kind, PS_CROWD_EVENT_WALL);
+
+    /* a scenario without a crowd section has none */
+    assert_int_equal(ps_config_load_scenario("scenarios/stand.yaml", s, f->err, sizeof(f->err)),
+                     0);
+    assert_false(s->crowd.is_enabled);
+}
+
+static void test_load_scenario_crowd_rejections(void **state)
+{
+    fx_t *f = *state;
+    edit(f, CROWD_OK, "density_m2: 3", "density_m2: 9");
+    want(f, "%s:%d: crowd.groups[0].density_m2: value 9 outside [0, 8]", f->path,
+         line_of(f, "density_m2: 9"));
+    expect_scenario_error(f);
+
+    edit(f, CROWD_OK, "goal: hold", "goal: stage");
+    want(f,
+         "%s:%d: crowd.groups[0].goal: unknown value \"stage\" (allowed: hold, direction, point, "
+         "robot)",
+         f->path, line_of(f, "stage"));
+    expect_scenario_error(f);
+
+    edit(f, CROWD_OK, "density_m2: 3, ", "");
+    want(f, "%s:%d: crowd.groups[0]: needs a count or a density_m2", f->path,
+         line_of(f, "{name: fans"));
+    expect_scenario_error(f);
+
+    edit(f, CROWD_OK, "group: line,", "group: lane,");
+    want(f, "%s:%d: crowd.events[0].group: \"lane\" is not a group of the crowd", f->path,
+         line_of(f, "lane"));
+    expect_scenario_error(f);
+
+    edit(f, CROWD_OK, "agent: 3,", "agent: 4,");
+    want(f, "%s:%d: crowd.events[0].agent: value 4, group line has 4 agents", f->path,
+         line_of(f, "agent: 4"));
+    expect_scenario_error(f);
+
+    edit(f, CROWD_OK, "rows: 2, ", "");
+    want(f, "%s:%d: crowd.events[1]: a surge needs rows, speed_m_s and a direction", f->path,
+         line_of(f, "kind: surge") );
+    expect_scenario_error(f);
+
+    edit(f, CROWD_OK, "wall: [-3.9, -3, -3.9, 0], ", "");
+    want(f,
+         "%s:%d: crowd.events[2]: a wall needs a wall [x0, y0, x1, y1], speed_m_s and a "
+         "direction",
+         f->path, line_of(f, "kind: wall"));
+    expect_scenario_error(f);
+
+    edit(f, CROWD_OK, "x_max_m: 4, y_max_m: 3}\n  arena_walls", "x_max_m: -4, y_max_m: 3}\n  arena_walls");
+    want(f, "%s:%d: crowd.arena: empty rectangle: x -4..-4, y -3..3", f->path,
+         line_of(f, "arena: {"));
+    expect_scenario_error(f);
+
+    edit(f, CROWD_OK, "body: {body_k_n_m: 60000}", "body: {step_time_s: 0.3}");
+    want(f, "%s:%d: crowd.body.step_time_s: value 0.3 outside [0.5, 1]", f->path,
+         line_of(f, "step_time_s"));
+    expect_scenario_error(f);
+
+    edit(f, CROWD_OK, "name: line,", "name: fans,");
+    want(f, "%s:%d: crowd.groups[1].name: \"fans\" names an earlier group too", f->path,
+         line_of(f, "name: fans, count"));
+    expect_scenario_error(f);
+
+    edit(f, CROWD_OK, "arena_walls: true", "arena_walls: yes");
+    expect_scenario_error_any(f);
 }
 
 /* ---- robot fixture ---------------------------------------------------- */
@@ -1537,6 +1646,8 @@ int main(void)
         T(test_load_robot_rate_div_not_dividing_rejected),
         T(test_load_robot_unknown_protocol_rejected),
         T(test_load_robot_mass_zero_rejected),
+        T(test_load_scenario_crowd_fixture_values_and_defaults),
+        T(test_load_scenario_crowd_rejections),
         T(test_load_scenario_unknown_key_rejected),
         T(test_load_scenario_unknown_event_kind_rejected),
         T(test_load_scenario_force_not_three_rejected),

@@ -67,8 +67,12 @@ static ps_plant_t *make_plant(const ps_crowd_cfg_t *crowd, double rx, double ry,
 static void run_s(ps_plant_t *p, double t_s)
 {
     const int n = (int)lround(t_s / ps_plant_timestep_s(p));
-    for (int i = 0; i < n; i++)
-        assert_int_equal(ps_plant_step(p), 0);
+    for (int i = 0; i < n; i++) {
+        const int rc = ps_plant_step(p);
+        if (rc != 0) {
+            fail_msg("plant step: %s", ps_plant_error_reason(p));
+        }
+    }
 }
 
 static ps_crowd_agent_state_t agent(ps_plant_t *p, uint32_t i)
@@ -78,12 +82,15 @@ static ps_crowd_agent_state_t agent(ps_plant_t *p, uint32_t i)
     return a;
 }
 
-/* A crowd cfg with an open arena around the origin and one group. */
+/* A crowd cfg with an open arena around the origin and one group; crowd-only
+ * tests step at 1 ms (timestep_s) to stay short: the crowd model is what they
+ * check, the robot hangs in its harness far away or nearby. */
 static ps_crowd_cfg_t base_cfg(void)
 {
     ps_crowd_cfg_t c;
     ps_crowd_default_cfg(&c);
     c.is_enabled = true;
+    c.timestep_s = 0.001f;
     c.arena = (ps_crowd_rect_t){-20, -20, 20, 20};
     c.measure = c.arena;
     c.n_groups = 1;
@@ -92,92 +99,472 @@ static ps_crowd_cfg_t base_cfg(void)
     return c;
 }
 
-/* ---- exploratory: one free walker ----------------------------------------- */
+static void line_group(ps_crowd_cfg_t *c, uint32_t n, float spacing_m, float x0, float y0,
+                       float x1, float y1)
+{
+    ps_crowd_group_cfg_t *g = &c->groups[0];
+    g->count = n;
+    g->layout = PS_CROWD_LAYOUT_LINE;
+    g->spacing_m = spacing_m;
+    g->region = (ps_crowd_rect_t){x0, y0, x1, y1};
+}
 
-static void test_crowd_free_walker_reaches_free_speed(void **state)
+/* ---- social-force terms against hand-computed values --------------------- */
+
+static void test_social_drive_hand_computed(void **state)
+{
+    (void)state;
+    const double e[2] = {1.0, 0.0}, v[2] = {0.5, 0.2};
+    double f[2];
+    ps_social_drive(70.0, 1.29, 0.54, e, v, f);
+    /* 70 (1.29 - 0.5) / 0.54 = 102.4074, 70 (0 - 0.2) / 0.54 = -25.9259 */
+    assert_true(fabs(f[0] - 102.4074) < 1e-3);
+    assert_true(fabs(f[1] + 25.9259) < 1e-3);
+}
+
+static void test_social_agent_repulsion_hand_computed(void **state)
+{
+    (void)state;
+    ps_social_params_t p;
+    ps_social_default_params(&p); /* A 2000 N, B 0.08 m, lambda 0.5, range 1 m */
+    const double xi[2] = {0.0, 0.0}, xj[2] = {0.5, 0.0}, none[2] = {0.0, 0.0};
+    double f[2];
+    /* no heading: 2000 exp((0.34 - 0.5) / 0.08) = 2000 e^-2 = 270.6706 N along -x */
+    ps_social_agent_repulsion(&p, xi, 0.17, none, xj, 0.17, f);
+    assert_true(fabs(f[0] + 270.6706) < 1e-3 && fabs(f[1]) < 1e-12);
+    /* j straight ahead: w = 1; straight behind: w = lambda = 0.5 */
+    const double ahead[2] = {1.0, 0.0}, away[2] = {-1.0, 0.0};
+    ps_social_agent_repulsion(&p, xi, 0.17, ahead, xj, 0.17, f);
+    assert_true(fabs(f[0] + 270.6706) < 1e-3);
+    ps_social_agent_repulsion(&p, xi, 0.17, away, xj, 0.17, f);
+    assert_true(fabs(f[0] + 135.3353) < 1e-3);
+    /* j to the side: cos phi = 0, w = 0.5 + 0.5 * 0.5 = 0.75 */
+    const double side[2] = {0.0, 1.0};
+    ps_social_agent_repulsion(&p, xi, 0.17, side, xj, 0.17, f);
+    assert_true(fabs(f[0] + 203.0029) < 1e-3);
+    /* beyond range_m: nothing */
+    const double far[2] = {1.2, 0.0};
+    ps_social_agent_repulsion(&p, xi, 0.17, none, far, 0.17, f);
+    assert_true(f[0] == 0.0 && f[1] == 0.0);
+}
+
+static void test_social_wall_repulsion_hand_computed(void **state)
+{
+    (void)state;
+    ps_social_params_t p;
+    ps_social_default_params(&p);
+    const double a[2] = {-1.0, 0.0}, b[2] = {1.0, 0.0};
+    const double x[2] = {0.3, 0.5};
+    double f[2];
+    /* 2000 exp((0.17 - 0.5) / 0.08) = 2000 e^-4.125 = 32.3270 N along +y */
+    ps_social_wall_repulsion(&p, x, 0.17, a, b, f);
+    assert_true(fabs(f[0]) < 1e-12 && fabs(f[1] - 32.3270) < 1e-3);
+    /* past the segment's end: from the end point (1, 0), distance 0.5 at 45 deg */
+    const double y[2] = {1.0 + 0.5 / sqrt(2.0), 0.5 / sqrt(2.0)};
+    ps_social_wall_repulsion(&p, y, 0.17, a, b, f);
+    assert_true(fabs(f[0] - 32.3270 / sqrt(2.0)) < 1e-3 && fabs(f[1] - 32.3270 / sqrt(2.0)) < 1e-3);
+}
+
+static void test_social_evasive_steps_aside_away_from_neighbours(void **state)
+{
+    (void)state;
+    ps_social_params_t p;
+    ps_social_default_params(&p); /* evasive 80 N */
+    const double e[2] = {1.0, 0.0}, o_left[2] = {1.0, 0.3}, o_right[2] = {1.0, -0.3};
+    double f[2];
+    ps_social_evasive(&p, true, e, o_left, f); /* neighbours on the left: go right */
+    assert_true(fabs(f[0]) < 1e-12 && fabs(f[1] + 80.0) < 1e-9);
+    ps_social_evasive(&p, true, e, o_right, f);
+    assert_true(fabs(f[1] - 80.0) < 1e-9);
+    ps_social_evasive(&p, false, e, o_left, f); /* nothing in the way */
+    assert_true(f[0] == 0.0 && f[1] == 0.0);
+    const double xi[2] = {0, 0}, ahead[2] = {1.0, 0.3}, aside[2] = {1.0, 0.5};
+    assert_true(ps_social_is_ahead(xi, e, ahead, 1.5)); /* 16.7 deg */
+    assert_false(ps_social_is_ahead(xi, e, aside, 1.5)); /* 26.6 deg: outside the 45 deg sector */
+}
+
+static void test_social_grid_finds_every_neighbour_in_range(void **state)
+{
+    (void)state;
+    enum { N = 300 };
+    static double xy[2 * N];
+    uint32_t seed = 7;
+    for (int i = 0; i < 2 * N; i++) {
+        seed = seed * 1664525u + 1013904223u;
+        xy[i] = -5.0 + 10.0 * (double)(seed >> 8) / (double)(1u << 24);
+    }
+    xy[0] = 40.0; /* outside the grid: clamped into a border cell, still found */
+    const uint32_t n_cells = ps_social_grid_cells(12.0, 12.0, 1.0);
+    assert_int_equal(n_cells, 144);
+    static uint32_t start[145], items[N], cell_of[N];
+    ps_social_grid_t g;
+    ps_social_grid_init(&g, -6.0, -6.0, 12.0, 12.0, 1.0, start, items, cell_of, N);
+    ps_social_grid_build(&g, xy, N);
+    for (int i = 1; i < N; i++) {
+        int cx, cy, n_grid = 0, n_all = 0;
+        ps_social_grid_cell(&g, xy + 2 * i, &cx, &cy);
+        for (int gy = cy - 1; gy <= cy + 1; gy++)
+            for (int gx = cx - 1; gx <= cx + 1; gx++) {
+                if (gx < 0 || gy < 0 || gx >= g.nx || gy >= g.ny)
+                    continue;
+                const uint32_t c = (uint32_t)(gy * g.nx + gx);
+                for (uint32_t k = start[c]; k < start[c + 1]; k++) {
+                    const uint32_t j = items[k];
+                    const double d = hypot(xy[2 * i] - xy[2 * j], xy[2 * i + 1] - xy[2 * j + 1]);
+                    n_grid += (j != (uint32_t)i && d <= 1.0) ? 1 : 0;
+                }
+            }
+        for (int j = 0; j < N; j++)
+            n_all += (j != i && hypot(xy[2 * i] - xy[2 * j], xy[2 * i + 1] - xy[2 * j + 1]) <= 1.0);
+        assert_int_equal(n_grid, n_all);
+    }
+}
+
+/* ---- placement and scene --------------------------------------------------- */
+
+static void test_scene_place_seeded_lattice_density_and_clearance(void **state)
 {
     (void)state;
     ps_crowd_cfg_t c = base_cfg();
     ps_crowd_group_cfg_t *g = &c.groups[0];
-    g->count = 1;
-    g->layout = PS_CROWD_LAYOUT_LINE;
-    g->region = (ps_crowd_rect_t){-5, 5, -4, 5};
-    g->goal = PS_CROWD_GOAL_DIRECTION;
-    g->goal_xy[0] = 1.0f;
-    ps_plant_t *p = make_plant(&c, 0, 0, 1);
-    for (int k = 0; k < 10; k++) {
-        run_s(p, 0.5);
-        const ps_crowd_agent_state_t a = agent(p, 0);
-        printf("t=%.1f x=%.2f y=%.2f v=%.2f tilt=%.3f step=%d fall=%d\n", 0.5 * (k + 1), a.com_m[0],
-               a.com_m[1], a.vel_m_s[0], a.tilt_rad, a.is_stepping, a.is_fallen);
+    g->density_m2 = 4.0f;
+    g->region = (ps_crowd_rect_t){-3, -3, 3, 3};
+    g->clear_m = 0.5f;
+    g->height_sd_m = 0.07f;
+    static ps_crowd_agent_spec_t a[PS_CROWD_MAX_AGENTS], b[PS_CROWD_MAX_AGENTS];
+    uint32_t na = 0, nb = 0;
+    char err[PS_ERR_MSG_LEN];
+    const double robot_xy[2] = {0.0, 0.0};
+    assert_int_equal(ps_scene_place(&c, 9, robot_xy, a, PS_CROWD_MAX_AGENTS, &na, err, sizeof(err)), 0);
+    assert_int_equal(ps_scene_place(&c, 9, robot_xy, b, PS_CROWD_MAX_AGENTS, &nb, err, sizeof(err)), 0);
+    assert_int_equal(na, nb);
+    assert_memory_equal(a, b, na * sizeof(a[0])); /* same seed, same crowd */
+    /* 36 m^2 at 4 / m^2, less the clearance disc around the robot */
+    assert_true(na >= 130 && na <= 150);
+    for (uint32_t i = 0; i < na; i++) {
+        assert_true(hypot(a[i].x_m, a[i].y_m) >= 0.5);
+        assert_true(a[i].height_m >= 1.7f - 2.5 * 0.07f - 1e-6 &&
+                    a[i].height_m <= 1.7f + 2.5 * 0.07f + 1e-6);
     }
+    assert_int_equal(ps_scene_place(&c, 10, robot_xy, b, PS_CROWD_MAX_AGENTS, &nb, err, sizeof(err)), 0);
+    assert_true(memcmp(a, b, na * sizeof(a[0])) != 0); /* another seed, another crowd */
+    /* a region that cannot hold its count */
+    g->density_m2 = 0.0f;
+    g->count = 10;
+    g->layout = PS_CROWD_LAYOUT_RANDOM;
+    g->region = (ps_crowd_rect_t){-0.5f, -0.5f, 0.5f, 0.5f};
+    g->clear_m = 0.0f;
+    assert_int_equal(ps_scene_place(&c, 9, robot_xy, a, PS_CROWD_MAX_AGENTS, &na, err, sizeof(err)),
+                     -PS_ERR_CONFIG);
+    assert_non_null(strstr(err, "crowd.groups[0] (g): its region holds only"));
+}
+
+static void test_scene_loads_around_unchanged_robot_with_sizes(void **state)
+{
+    (void)state;
+    ps_crowd_cfg_t c = base_cfg();
+    c.timestep_s = 0.0f; /* the robot model's own */
+    line_group(&c, 7, 0.5f, 2, 2, 5, 2);
+    c.has_arena_walls = true;
+    c.arena = (ps_crowd_rect_t){-6, -6, 6, 6};
+    ps_plant_t *p = make_plant(&c, 0, 0, 1);
+    const mjModel *m = ps_plant_model(p);
+    assert_int_equal(mj_name2id(m, mjOBJ_BODY, "pelvis"), ps_plant_root_body(p));
+    assert_true(mj_name2id(m, mjOBJ_BODY, "agent6_torso") > 0);
+    assert_true(mj_name2id(m, mjOBJ_BODY, "agent7") < 0);
+    assert_true(mj_name2id(m, mjOBJ_GEOM, "arena_wall3") >= 0);
+    assert_true(m->opt.timestep == 0.0005); /* ps1.xml's */
+    int nconmax, njmax;
+    ps_scene_sizes(7, 150, 600, &nconmax, &njmax);
+    assert_int_equal(m->nconmax, nconmax);
+    assert_int_equal(m->njmax, njmax);
+    assert_int_equal(ps_crowd_agent_count(ps_plant_crowd(p)), 7);
     ps_plant_destroy(p);
 }
 
-static double pair_depth(ps_plant_t *p, int body_a, int body_b)
+/* ---- the crowd in the plant ---------------------------------------------- */
+
+/* An unobstructed agent reaches its configured free speed within 10 %. */
+static void test_crowd_free_speed_within_10_percent(void **state)
 {
-    const mjModel *m = ps_plant_model(p);
+    (void)state;
+    const float speeds[] = {1.29f, 0.8f};
+    for (int k = 0; k < 2; k++) {
+        ps_crowd_cfg_t c = base_cfg();
+        line_group(&c, 1, 1.0f, -8, 8, -7, 8);
+        c.groups[0].goal = PS_CROWD_GOAL_DIRECTION;
+        c.groups[0].goal_xy[0] = 1.0f;
+        c.groups[0].speed_m_s = speeds[k];
+        ps_plant_t *p = make_plant(&c, 0, 0, 1);
+        run_s(p, 3.0);
+        const ps_crowd_agent_state_t a = agent(p, 0);
+        printf("free speed: configured %.2f m/s, measured %.3f m/s\n", (double)speeds[k],
+               hypot(a.vel_m_s[0], a.vel_m_s[1]));
+        assert_true(fabs(hypot(a.vel_m_s[0], a.vel_m_s[1]) - speeds[k]) <= 0.1 * speeds[k]);
+        assert_false(a.is_fallen);
+        ps_plant_destroy(p);
+    }
+}
+
+static double pair_depth(ps_plant_t *p, int geom_a, int geom_b)
+{
     const mjData *d = ps_plant_data(p);
     double depth = 0.0;
     for (int k = 0; k < d->ncon; k++) {
-        const int b1 = m->geom_bodyid[d->contact[k].geom1], b2 = m->geom_bodyid[d->contact[k].geom2];
-        if ((b1 == body_a && b2 == body_b) || (b1 == body_b && b2 == body_a))
-            depth = -d->contact[k].dist > depth ? -d->contact[k].dist : depth;
+        const mjContact *con = &d->contact[k];
+        if ((con->geom1 == geom_a && con->geom2 == geom_b) ||
+            (con->geom1 == geom_b && con->geom2 == geom_a))
+            depth = -con->dist > depth ? -con->dist : depth;
     }
     return depth;
 }
 
-static void explore_compression(double k, double f)
+/* Two agents pressed together by a steady force F compress by F / K, K the
+ * configured body stiffness (Helbing 2000's k), at two stiffnesses. */
+static void test_crowd_two_body_compression_as_configured(void **state)
 {
+    (void)state;
+    const double ks[] = {1.2e5, 3e4};
+    const double f_n = 200.0;
+    for (int k = 0; k < 2; k++) {
+        ps_crowd_cfg_t c = base_cfg();
+        c.social.a_n = 0.0f; /* contact only */
+        c.social.wall_a_n = 0.0f;
+        c.social.v0_m_s = 0.0f;
+        c.robot_a_n = 0.0f;
+        c.body.body_k_n_m = (float)ks[k];
+        c.n_walls = 1;
+        c.walls[0] = (ps_crowd_wall_cfg_t){1.0f, -1.0f, 1.0f, 1.0f};
+        line_group(&c, 2, 0.36f, 0.35f, 0, 1, 0);
+        c.groups[0].goal = PS_CROWD_GOAL_DIRECTION;
+        c.groups[0].goal_xy[0] = 1.0f;
+        c.n_events = 1;
+        c.events[0] = (ps_crowd_event_cfg_t){.t_s = 0, .duration_s = 100,
+                                             .kind = PS_CROWD_EVENT_PUSH, .group = "g",
+                                             .agent = 0, .force_n = {(float)f_n, 0, 0}};
+        ps_plant_t *p = make_plant(&c, -5, -5, 1);
+        const mjModel *m = ps_plant_model(p);
+        run_s(p, 3.0);
+        const double depth = pair_depth(p, mj_name2id(m, mjOBJ_GEOM, "agent0_ring"),
+                                        mj_name2id(m, mjOBJ_GEOM, "agent1_ring"));
+        printf("compression: K %.0f N/m, F %.0f N: depth %.3f mm, F/K %.3f mm\n", ks[k], f_n,
+               depth * 1e3, f_n / ks[k] * 1e3);
+        assert_true(fabs(depth - f_n / ks[k]) <= 0.05 * f_n / ks[k]);
+        ps_plant_destroy(p);
+    }
+}
+
+/* Push-and-Step's 5-person queue: a shove on the rear person reaches the
+ * front person later and measurably; arrival grows along the queue. */
+static void test_crowd_queue_push_arrives_in_order(void **state)
+{
+    (void)state;
     ps_crowd_cfg_t c = base_cfg();
-    c.social.a_n = 0.0f;
-    c.social.wall_a_n = 0.0f;
-    c.robot_a_n = 0.0f;
-    c.body.body_k_n_m = (float)k;
-    c.social.v0_m_s = 0.0f;
-    c.n_walls = 1;
-    c.walls[0] = (ps_crowd_wall_cfg_t){1.0f, -1.0f, 1.0f, 1.0f};
-    ps_crowd_group_cfg_t *g = &c.groups[0];
-    g->count = 2;
-    g->layout = PS_CROWD_LAYOUT_LINE;
-    g->spacing_m = 0.36f;
-    g->region = (ps_crowd_rect_t){0.35f, 0, 1, 0};
-    g->goal = PS_CROWD_GOAL_DIRECTION;
-    g->speed_m_s = 0.0f;
-    g->goal_xy[0] = 1.0f;
+    c.social.a_n = 200.0f;
+    line_group(&c, 5, 0.38f, 2.0f, 3.0f, 0.0f, 3.0f); /* agent 0 at the front (x 2), 4 at the rear */
+    c.groups[0].goal = PS_CROWD_GOAL_HOLD;
     c.n_events = 1;
-    c.events[0] = (ps_crowd_event_cfg_t){.t_s = 0, .duration_s = 100, .kind = PS_CROWD_EVENT_PUSH, .group = "g", .agent = 0, .force_n = {(float)f, 0, 0}};
+    c.events[0] = (ps_crowd_event_cfg_t){.t_s = 3.0f, .duration_s = 0.3f,
+                                         .kind = PS_CROWD_EVENT_PUSH, .group = "g", .agent = 4,
+                                         .force_n = {400, 0, 0},
+                                         .profile = PS_CROWD_PROFILE_HALF_SINE};
     ps_plant_t *p = make_plant(&c, -5, -5, 1);
-    const mjModel *m = ps_plant_model(p);
-    const int ta = mj_name2id(m, mjOBJ_BODY, "agent0_torso"), tb = mj_name2id(m, mjOBJ_BODY, "agent1_torso");
-    for (int i = 0; i < 6; i++) {
-        run_s(p, 0.5);
-        {
-            const mjData *d = ps_plant_data(p);
-            for (int q = 0; q < d->ncon; q++) {
-                const mjContact *cc = &d->contact[q];
-                mjtNum f6[6];
-                mj_contactForce(m, d, q, f6);
-                printf("  con %s-%s dist %.5f fn %.1f pos %.3f %.3f %.3f n %.2f %.2f %.2f\n", mj_id2name(m, mjOBJ_GEOM, cc->geom1), mj_id2name(m, mjOBJ_GEOM, cc->geom2), cc->dist, f6[0], cc->pos[0], cc->pos[1], cc->pos[2], cc->frame[0], cc->frame[1], cc->frame[2]);
-            }
+    run_s(p, 2.999); /* settled: the queue stands still */
+    double x0[5], arrival[5], moved[5];
+    for (uint32_t i = 0; i < 5; i++) {
+        x0[i] = agent(p, i).com_m[0];
+        arrival[i] = -1.0;
+        moved[i] = 0.0;
+    }
+    for (int k = 0; k < 2500; k++) { /* 2.5 s in 1 ms steps */
+        assert_int_equal(ps_plant_step(p), 0);
+        for (uint32_t i = 0; i < 5; i++) {
+            const double dx = agent(p, i).com_m[0] - x0[i]; /* the push is along +x */
+            moved[i] = dx > moved[i] ? dx : moved[i];
+            if (arrival[i] < 0 && dx > 0.01)
+                arrival[i] = k * 1e-3;
         }
-        printf("K=%g F=%g t=%.1f depth=%.5f expect %.5f tilt %.3f %.3f\n", k, f, 0.5*(i+1), pair_depth(p, ta, tb), f / k, agent(p,0).tilt_rad, agent(p,1).tilt_rad);
+    }
+    for (uint32_t i = 0; i < 5; i++)
+        printf("queue: agent %u (%u from the rear) moved %.3f m, 1 cm reached %.3f s after the push\n",
+               i, 4 - i, moved[i], arrival[i]);
+    for (uint32_t i = 0; i < 5; i++)
+        assert_true(arrival[i] >= 0.0); /* all of them, the front one included, moved 1 cm */
+    for (uint32_t i = 0; i < 4; i++)
+        assert_true(arrival[i] > arrival[i + 1]); /* farther from the rear: later */
+    ps_plant_destroy(p);
+}
+
+/* A walled pen held at a preset density keeps it in the measuring area. */
+static void test_crowd_density_presets_within_10_percent(void **state)
+{
+    (void)state;
+    const float presets[] = {4.0f, 6.0f};
+    for (int k = 0; k < 2; k++) {
+        ps_crowd_cfg_t c = base_cfg();
+        c.arena = (ps_crowd_rect_t){-2, -2, 2, 2};
+        c.has_arena_walls = true;
+        c.measure = (ps_crowd_rect_t){-1.5f, -1.5f, 1.5f, 1.5f};
+        ps_crowd_group_cfg_t *g = &c.groups[0];
+        g->density_m2 = presets[k];
+        g->region = c.arena;
+        g->goal = PS_CROWD_GOAL_HOLD;
+        ps_plant_t *p = make_plant(&c, 30, 30, 2); /* robot out of the pen */
+        run_s(p, 1.5);
+        ps_crowd_stats_t st;
+        ps_crowd_get_stats(ps_plant_crowd(p), &st);
+        printf("density preset %.1f / m^2: %u agents, measured %.2f / m^2 in the central 9 m^2\n",
+               (double)presets[k], st.n_agents, st.measure_density_m2);
+        assert_true(fabs(st.measure_density_m2 - presets[k]) <= 0.1 * presets[k]);
+        ps_plant_destroy(p);
+    }
+}
+
+/* A light push makes an agent step and recover; a hard one fells it, and it
+ * then lies on the floor. */
+static void test_crowd_push_steps_or_fells(void **state)
+{
+    (void)state;
+    const float forces[] = {150.0f, 1200.0f};
+    for (int k = 0; k < 2; k++) {
+        ps_crowd_cfg_t c = base_cfg();
+        line_group(&c, 1, 1.0f, 0, 5, 1, 5);
+        c.groups[0].goal = PS_CROWD_GOAL_HOLD;
+        c.n_events = 1;
+        c.events[0] = (ps_crowd_event_cfg_t){.t_s = 0.5f, .duration_s = 0.2f,
+                                             .kind = PS_CROWD_EVENT_PUSH, .group = "g",
+                                             .agent = -1, .force_n = {forces[k], 0, 0}};
+        ps_plant_t *p = make_plant(&c, 30, 30, 4);
+        double max_tilt = 0.0;
+        for (int q = 0; q < 30; q++) {
+            run_s(p, 0.1);
+            const double tilt = agent(p, 0).tilt_rad;
+            max_tilt = tilt > max_tilt ? tilt : max_tilt;
+        }
+        ps_crowd_stats_t st;
+        ps_crowd_get_stats(ps_plant_crowd(p), &st);
+        const ps_crowd_agent_state_t a = agent(p, 0);
+        printf("push %.0f N for 0.2 s: %llu steps, max tilt %.3f rad, fallen %d, tilt now %.3f\n",
+               (double)forces[k], (unsigned long long)st.n_steps_taken, max_tilt, a.is_fallen,
+               a.tilt_rad);
+        assert_true(st.n_steps_taken >= 1);
+        if (k == 0) {
+            assert_false(a.is_fallen);
+            assert_true(a.tilt_rad < 0.05);
+        } else {
+            assert_true(a.is_fallen);
+            assert_int_equal(st.n_fallen, 1);
+            assert_true(a.tilt_rad > 1.4); /* lying on the floor */
+            assert_true(a.com_m[2] < 0.35);
+        }
+        ps_plant_destroy(p);
+    }
+}
+
+/* A moving wall pushes the people in front of it. */
+static void test_crowd_moving_wall_pushes_agents(void **state)
+{
+    (void)state;
+    ps_crowd_cfg_t c = base_cfg();
+    line_group(&c, 4, 0.6f, 0.5f, -0.9f, 0.5f, 1.0f);
+    c.groups[0].goal = PS_CROWD_GOAL_HOLD;
+    c.n_events = 1;
+    c.events[0] = (ps_crowd_event_cfg_t){.t_s = 0.2f, .duration_s = 2.0f,
+                                         .kind = PS_CROWD_EVENT_WALL, .speed_m_s = 0.5f,
+                                         .direction = {1, 0}, .wall = {0.0f, -1.5f, 0.0f, 1.5f}};
+    ps_plant_t *p = make_plant(&c, 30, 30, 5);
+    run_s(p, 2.5);
+    for (uint32_t i = 0; i < 4; i++) {
+        const ps_crowd_agent_state_t a = agent(p, i);
+        assert_true(a.base_m[0] > 0.5 + 0.5); /* the wall went 1 m; they were 0.5 m ahead */
     }
     ps_plant_destroy(p);
 }
 
-static void test_explore(void **state)
+/* Same scene, seed and events: the same trajectories, bit for bit. */
+static void test_crowd_same_seed_identical_trajectories(void **state)
 {
     (void)state;
-    explore_compression(1.2e5, 200);
-    explore_compression(3e4, 200);
+    ps_crowd_cfg_t c = base_cfg();
+    c.arena = (ps_crowd_rect_t){-2, -2, 2, 2};
+    c.has_arena_walls = true;
+    c.groups[0].density_m2 = 3.0f;
+    c.groups[0].region = c.arena;
+    c.groups[0].goal = PS_CROWD_GOAL_ROBOT;
+    c.groups[0].clear_m = 0.5f;
+    c.groups[0].speed_sd_m_s = 0.1f;
+    c.robot_a_n = 0.0f;
+    ps_plant_t *p[2];
+    for (int k = 0; k < 2; k++) {
+        p[k] = make_plant(&c, 0, 0, 6);
+        run_s(p[k], 1.0);
+    }
+    const mjModel *m = ps_plant_model(p[0]);
+    assert_memory_equal(ps_plant_data(p[0])->qpos, ps_plant_data(p[1])->qpos,
+                        (size_t)m->nq * sizeof(mjtNum));
+    assert_memory_equal(ps_plant_data(p[0])->qvel, ps_plant_data(p[1])->qvel,
+                        (size_t)m->nv * sizeof(mjtNum));
+    ps_plant_destroy(p[0]);
+    ps_plant_destroy(p[1]);
+}
+
+/* People pressing on the robot: force per robot part, transmitted impulse,
+ * local density, penetration. */
+static void test_crowd_measures_the_press_on_the_robot(void **state)
+{
+    (void)state;
+    ps_crowd_cfg_t c = base_cfg();
+    c.timestep_s = 0.0f; /* the robot's own step: it is measured here */
+    c.arena = (ps_crowd_rect_t){-1.5f, -1.5f, 1.5f, 1.5f};
+    c.has_arena_walls = true;
+    c.groups[0].density_m2 = 3.0f;
+    c.groups[0].region = c.arena;
+    c.groups[0].goal = PS_CROWD_GOAL_ROBOT;
+    c.groups[0].speed_m_s = 0.6f;
+    c.groups[0].clear_m = 0.45f;
+    c.robot_a_n = 0.0f;
+    ps_plant_t *p = make_plant(&c, 0, 0, 7);
+    run_s(p, 1.5);
+    ps_crowd_stats_t st;
+    ps_crowd_get_stats(ps_plant_crowd(p), &st);
+    double part_max = 0.0;
+    const char *part = "";
+    for (uint32_t i = 0; i < st.n_parts; i++)
+        if (st.part_force_max_n[i] > part_max) {
+            part_max = st.part_force_max_n[i];
+            part = st.part_name[i];
+        }
+    printf("press: %u agents, force on the robot %.1f N (max %.1f), most on %s (%.1f N), impulse "
+           "%.2f N s, local density %.2f / m^2, penetration max %.2f mm\n",
+           st.n_agents, st.robot_force_n, st.robot_force_max_n, part, part_max,
+           st.transmitted_impulse_ns, st.local_density_m2, st.penetration_max_m * 1e3);
+    assert_true(st.n_parts >= 10);
+    assert_true(st.robot_force_max_n > 50.0);
+    assert_true(part_max > 10.0);
+    assert_true(st.transmitted_impulse_ns > 1.0);
+    assert_true(st.local_density_m2 > 1.0);
+    assert_true(st.penetration_max_m > 0.0 && st.penetration_max_m < 0.05);
+    ps_plant_destroy(p);
 }
 
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_crowd_free_walker_reaches_free_speed),
-        cmocka_unit_test(test_explore),
+        cmocka_unit_test(test_social_drive_hand_computed),
+        cmocka_unit_test(test_social_agent_repulsion_hand_computed),
+        cmocka_unit_test(test_social_wall_repulsion_hand_computed),
+        cmocka_unit_test(test_social_evasive_steps_aside_away_from_neighbours),
+        cmocka_unit_test(test_social_grid_finds_every_neighbour_in_range),
+        cmocka_unit_test(test_scene_place_seeded_lattice_density_and_clearance),
+        cmocka_unit_test(test_scene_loads_around_unchanged_robot_with_sizes),
+        cmocka_unit_test(test_crowd_free_speed_within_10_percent),
+        cmocka_unit_test(test_crowd_two_body_compression_as_configured),
+        cmocka_unit_test(test_crowd_queue_push_arrives_in_order),
+        cmocka_unit_test(test_crowd_density_presets_within_10_percent),
+        cmocka_unit_test(test_crowd_push_steps_or_fells),
+        cmocka_unit_test(test_crowd_moving_wall_pushes_agents),
+        cmocka_unit_test(test_crowd_same_seed_identical_trajectories),
+        cmocka_unit_test(test_crowd_measures_the_press_on_the_robot),
     };
     return cmocka_run_group_tests(tests, setup_robot, NULL);
 }
