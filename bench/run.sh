@@ -104,7 +104,8 @@ command -v stress-ng >/dev/null && HAS_STRESS=yes
 
 log "RT privileges: $RT; board $BOARD_FILE priority $PRIO loop CPU $LOOP_CPU, period ${PERIOD_US} us;" \
     "$NCPU CPUs; cpu_dma_latency held: $DMA_HELD; stress-ng: $HAS_STRESS"
-PS_ARGS=(--board "$BOARD_FILE" --robot "$ROBOT" --hist-us "$HIST_US" --quiet)
+# The latency figures are of the standing robot (the default run is a crowd).
+PS_ARGS=(--board "$BOARD_FILE" --robot "$ROBOT" --scenario scenarios/stand.yaml --hist-us "$HIST_US" --quiet)
 [ "$RT" = yes ] && PS_ARGS+=(--require-rt)
 
 # ---- blocks -----------------------------------------------------------------
@@ -255,7 +256,7 @@ rt_detail=$RT
 # fast as it goes: simulated seconds per wall second, beside real time (1.0).
 SIM_S=${BENCH_SIM_S:-20}
 log "lockstep: $SIM_S simulated s"
-sim_cmd=("$BIN" --lockstep --board "$BOARD_FILE" --robot "$ROBOT" --duration "$SIM_S" --quiet
+sim_cmd=("$BIN" --lockstep --board "$BOARD_FILE" --robot "$ROBOT" --scenario scenarios/stand.yaml --duration "$SIM_S" --quiet
     --summary "$RUN/lockstep.json")
 "${sim_cmd[@]}" >"$RUN/lockstep.log" 2>&1 || {
     cat "$RUN/lockstep.log" >&2

@@ -55,6 +55,7 @@ typedef struct {
     bool is_trace;            /**< trace_marker points */
     const char *candump_path; /**< --candump: every frame as a candump -L line */
     const char *replay_path;  /**< --replay: buses fed from this candump -L log */
+    const char *crowd_log;    /**< --crowd-log: the crowd's measurements per tick, CSV */
     unsigned hist_us;         /**< wake-up histogram buckets (cyclictest -h N) */
 } options_t;
 
@@ -74,6 +75,8 @@ static struct {
     int64_t start_ns, end_ns;
     unsigned rt_missing;
     ps_guard_counts_t guard;
+    FILE *crowd_log;
+    uint64_t n_crowd_samples;
     int loop_rc;
     _Atomic bool is_loop_done;
 } g;
@@ -96,8 +99,8 @@ static const char USAGE[] =
     "  --board NAME|FILE     board file, or NAME for boards/NAME.yaml (default sim)\n"
     "  --robot FILE          robot file: joint map, ranges, gains, limits\n"
     "                        (default robots/ps1.yaml)\n"
-    "  --scenario FILE       simulation scenario: operator events, pushes, faults\n"
-    "                        (default scenarios/stand.yaml on board sim)\n"
+    "  --scenario FILE       simulation scenario: the crowd, operator events, pushes,\n"
+    "                        faults (default scenarios/crowd.yaml on board sim)\n"
     "  --duration S          run S seconds of loop time, then stop through damping\n"
     "                        (default: the scenario's duration_s; 0 = until Ctrl-C)\n"
     "  --lockstep            simulation only: no real-time pacing; loop and plant\n"
@@ -122,6 +125,10 @@ static const char USAGE[] =
     "                        to its last frame or --duration; the loop's commands are\n"
     "                        compared with the logged ones. Open loop: the replies do\n"
     "                        not answer the commands (docs/can-protocols.md, 5)\n"
+    "  --crowd-log FILE.csv  simulated crowd: its measurements every tick (time, agents\n"
+    "                        fallen and stepping, density around the robot, crowd force\n"
+    "                        on the robot and on each of its bodies, transmitted\n"
+    "                        impulse, deepest penetration) as CSV\n"
     "  --trace               write trace points to ftrace's trace_marker (tick start,\n"
     "                        end, overruns, state changes) for trace-cmd/KernelShark\n"
     "  -h, --help            this text\n"
@@ -174,7 +181,8 @@ static int parse_options(int argc, char **argv, options_t *o)
         O_TRACE,
         O_HIST_US,
         O_CANDUMP,
-        O_REPLAY
+        O_REPLAY,
+        O_CROWD_LOG
     };
     static const struct option LONG[] = {
         {"board", required_argument, NULL, 'b'},
@@ -192,6 +200,7 @@ static int parse_options(int argc, char **argv, options_t *o)
         {"hist-us", required_argument, NULL, O_HIST_US},
         {"candump", required_argument, NULL, O_CANDUMP},
         {"replay", required_argument, NULL, O_REPLAY},
+        {"crowd-log", required_argument, NULL, O_CROWD_LOG},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
@@ -241,6 +250,9 @@ static int parse_options(int argc, char **argv, options_t *o)
             break;
         case O_REPLAY:
             o->replay_path = optarg;
+            break;
+        case O_CROWD_LOG:
+            o->crowd_log = optarg;
             break;
         case O_OUT:
             o->out_dir = optarg;
@@ -490,12 +502,85 @@ static int close_candump(void)
 
 /* Wait for the loop thread to end. (The lowest CoM while the controller is in
  * charge is recorded by the plant on simulated time, ps_sim_truth_t.) */
+static void drain_crowd_log(void)
+{
+    ps_sim_crowd_sample_t cs;
+    while (g.app.sim != NULL && ps_sim_take_crowd_sample(g.app.sim, &cs) == 0) {
+        g.n_crowd_samples++;
+        if (g.crowd_log == NULL)
+            continue;
+        fprintf(g.crowd_log, "%.4f,%u,%u,%.3f,%.2f,%.4f,%.5f", cs.t_s, cs.n_fallen, cs.n_stepping,
+                (double)cs.local_density_m2, (double)cs.robot_force_n,
+                (double)cs.transmitted_impulse_ns, (double)cs.penetration_m);
+        for (uint32_t k = 0; k < cs.n_parts && k < PS_CROWD_MAX_PARTS; k++)
+            fprintf(g.crowd_log, ",%.2f", (double)cs.part_force_n[k]);
+        fputc('\n', g.crowd_log);
+    }
+}
+
 static void watch_truth(ps_summary_t *sum)
 {
     (void)sum;
     const struct timespec poll = {0, TRUTH_POLL_NS};
-    while (!atomic_load(&g.is_loop_done))
+    while (!atomic_load(&g.is_loop_done)) {
         nanosleep(&poll, NULL);
+        drain_crowd_log();
+    }
+    drain_crowd_log();
+}
+
+/* The crowd on the status line: agents, fallen, density around the robot,
+ * crowd force on the robot. */
+static void crowd_status(void *ctx, char *buf, size_t len)
+{
+    ps_sim_t *sim = ctx;
+    ps_sim_truth_t t;
+    ps_sim_get_truth(sim, &t);
+    if (t.has_crowd)
+        snprintf(buf, len, "crowd=%u(%u down) rho=%.1f/m2 F=%.0fN", t.crowd.n_agents,
+                 t.crowd.n_fallen, t.crowd.local_density_m2, t.crowd.robot_force_n);
+}
+
+static int open_crowd_log(char *err, size_t len)
+{
+    if (g.opt.crowd_log == NULL)
+        return 0;
+    if (g.app.sim == NULL || !g.app.scenario.crowd.is_enabled) {
+        snprintf(err, len, "the scenario has no crowd");
+        return -EINVAL;
+    }
+    g.crowd_log = fopen(g.opt.crowd_log, "w");
+    if (g.crowd_log == NULL) {
+        snprintf(err, len, "%s: %s", g.opt.crowd_log, strerror(errno));
+        return -errno;
+    }
+    ps_sim_truth_t t;
+    ps_sim_get_truth(g.app.sim, &t);
+    fprintf(g.crowd_log, "t_s,fallen,stepping,local_density_m2,robot_force_n,"
+                         "transmitted_impulse_ns,penetration_m");
+    for (uint32_t k = 0; k < t.crowd.n_parts; k++)
+        fprintf(g.crowd_log, ",force_n_%s", t.crowd.part_name[k]);
+    fputc('\n', g.crowd_log);
+    return 0;
+}
+
+static int close_crowd_log(void)
+{
+    if (g.crowd_log == NULL)
+        return 0;
+    const bool is_bad = ferror(g.crowd_log) != 0;
+    const bool is_closed = fclose(g.crowd_log) == 0;
+    g.crowd_log = NULL;
+    printf("crowd log: %llu ticks to %s", (unsigned long long)g.n_crowd_samples, g.opt.crowd_log);
+    if (ps_sim_crowd_samples_dropped(g.app.sim) > 0)
+        printf(" (WARNING: %llu ticks lost: the ring was full)",
+               (unsigned long long)ps_sim_crowd_samples_dropped(g.app.sim));
+    printf("\n");
+    if (is_bad || !is_closed) {
+        fprintf(stderr, "pushstep: --crowd-log: writing %s failed\n", g.opt.crowd_log);
+        return -EIO;
+    }
+    return 0;
 }
 
 static int run_loop(ps_summary_t *sum)
@@ -514,6 +599,10 @@ static int run_loop(ps_summary_t *sum)
     }
     if (g.opt.start_after_s >= 0)
         ps_app_request_start_at(&g.app, g.start_ns + ps_s_to_ns(g.opt.start_after_s));
+    if (g.app.sim != NULL && g.app.scenario.crowd.is_enabled) {
+        g.logger.status_extra = crowd_status;
+        g.logger.status_extra_ctx = g.app.sim;
+    }
     int rc =
         ps_logger_start(&g.logger, &g.app.loop, &g.app.ring, stdout, g.start_ns, g.opt.is_quiet,
                         g.app.board.rt.worker_cpu, g.frames.out != NULL ? &g.frames : NULL);
@@ -627,6 +716,28 @@ static void finish_summary(ps_summary_t *sum)
         sum->truth_plant_err = t.plant_err;
         sum->truth_plant_err_reason = t.plant_err_reason;
         sum->truth_plant_err_t_s = t.plant_err_t_s;
+        static ps_sim_truth_t crowd_truth; /* the summary points into it */
+        crowd_truth = t;
+        if (t.has_crowd) {
+            const ps_crowd_stats_t *c = &crowd_truth.crowd;
+            _Static_assert(PS_CROWD_MAX_PARTS <= PS_SUMMARY_MAX_PARTS, "parts fit the summary");
+            _Static_assert(PS_NAME_LEN == 32u, "part names as the summary takes them");
+            sum->has_crowd = true;
+            sum->crowd = (ps_summary_crowd_t){
+                .n_agents = c->n_agents,
+                .n_fallen = c->n_fallen,
+                .n_steps_taken = (unsigned long long)c->n_steps_taken,
+                .local_density_m2 = c->local_density_m2,
+                .local_density_max_m2 = crowd_truth.crowd_local_density_max_m2,
+                .robot_force_max_n = c->robot_force_max_n,
+                .transmitted_impulse_ns = c->transmitted_impulse_ns,
+                .penetration_max_m = c->penetration_max_m,
+                .n_parts = c->n_parts,
+                .part_name = c->part_name,
+                .part_force_max_n = c->part_force_max_n,
+                .part_impulse_ns = c->part_impulse_ns,
+            };
+        }
     }
 }
 
@@ -736,6 +847,12 @@ int main(int argc, char **argv)
     }
     if (g.app.notes[0] != '\0')
         printf("note: %s\n", g.app.notes);
+    if (open_crowd_log(err, sizeof(err)) < 0) {
+        fprintf(stderr, "pushstep: --crowd-log: %s\n", err);
+        ps_app_deinit(&g.app);
+        ps_trace_close(&g.trace);
+        return 2;
+    }
     if (g.opt.candump_path != NULL && open_candump_file(err, sizeof(err)) < 0) {
         fprintf(stderr, "pushstep: --candump: %s\n", err);
         ps_app_deinit(&g.app);
@@ -801,6 +918,8 @@ int main(int argc, char **argv)
         }
     }
     if (close_candump() < 0 && rc == 0)
+        rc = -EIO;
+    if (close_crowd_log() < 0 && rc == 0)
         rc = -EIO;
     ps_trace_close(&g.trace);
     ps_app_deinit(&g.app);

@@ -37,7 +37,7 @@ typedef struct {
     const char *data_dir; /**< where boards/, robots/, scenarios/ live */
     const char *board;    /**< NAME (boards/NAME.yaml) or a file path */
     const char *robot;    /**< file path or NAME; NULL: ps1 */
-    const char *scenario; /**< file path or NAME; NULL: stand on sim, none otherwise */
+    const char *scenario; /**< file path or NAME; NULL: crowd on sim, none otherwise */
     bool is_lockstep;
     uint32_t wake_hist_us; /**< 1-us wake-up histogram size; 0: 1000 */
     ps_trace_t *trace;     /**< trace_marker points for the loop; NULL: off */

@@ -63,15 +63,18 @@ static void print_status(ps_logger_t *lg, const ps_loop_rec_t *rec)
     double dt_s = ps_ns_to_s(rec->t_ns - lg->last_status_ns);
     double speed = (double)(rec->t_ns - lg->last_status_ns) / (double)(wall - lg->last_wall_ns);
     double policy_hz = dt_s > 0 ? (double)(rec->n_policy_runs - lg->last_policy_runs) / dt_s : 0;
+    char extra[160] = "";
+    if (lg->status_extra != NULL)
+        lg->status_extra(lg->status_extra_ctx, extra, sizeof(extra));
     fprintf(lg->out,
             "t=%6.1fs %-7s ticks=%-8llu overruns=%-4llu tick p50/p99/max=%5.1f/%5.1f/%5.1fus "
-            "com_z=%.3fm tilt=%4.1fdeg policy=%4.1fHz speed=%.1fx\n",
+            "com_z=%.3fm tilt=%4.1fdeg policy=%4.1fHz speed=%.1fx%s%s\n",
             ps_ns_to_s(rec->t_ns - lg->start_ns), ps_sm_state_name((ps_sm_state_t)rec->state),
             (unsigned long long)rec->tick, (unsigned long long)rec->n_overruns,
             (double)ps_perf_quantile_ns(&lg->delta, 0.5) * 1e-3,
             (double)ps_perf_quantile_ns(&lg->delta, 0.99) * 1e-3,
             (double)ps_perf_quantile_ns(&lg->delta, 1.0) * 1e-3, (double)rec->com_height_m,
-            (double)rec->tilt_rad * 57.29578, policy_hz, speed);
+            (double)rec->tilt_rad * 57.29578, policy_hz, speed, extra[0] ? " " : "", extra);
     fflush(lg->out);
     lg->last_status_ns = rec->t_ns;
     lg->last_wall_ns = wall;
@@ -160,7 +163,11 @@ static void *worker_main(void *arg)
 int ps_logger_start(ps_logger_t *lg, const ps_loop_t *loop, ps_ring_t *ring, FILE *out,
                     int64_t start_ns, bool is_quiet, int cpu, ps_logger_frames_t *frames)
 {
+    void (*extra)(void *, char *, size_t) = lg->status_extra;
+    void *extra_ctx = lg->status_extra_ctx;
     memset(lg, 0, sizeof(*lg));
+    lg->status_extra = extra;
+    lg->status_extra_ctx = extra_ctx;
     lg->loop = loop;
     lg->ring = ring;
     lg->out = out;

@@ -56,6 +56,11 @@ typedef struct {
     uint64_t last_policy_runs;
     ps_perf_hist_t prev_tick;
     ps_perf_hist_t delta;
+    /** Appended to each status line when set (user may set before
+     *  ps_logger_start, which keeps it): writes a few words into buf, e.g.
+     *  the simulated crowd's state. Called on the worker thread. */
+    void (*status_extra)(void *ctx, char *buf, size_t len);
+    void *status_extra_ctx;
     uint32_t n_transitions; /**< may exceed the array; extra ones are counted only */
     ps_logger_transition_t transitions[PS_LOGGER_MAX_TRANSITIONS];
 } ps_logger_t;

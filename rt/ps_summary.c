@@ -50,6 +50,28 @@ static const char *bus_mode_name(ps_can_bus_mode_t m)
     return (unsigned)m < sizeof(NAMES) / sizeof(NAMES[0]) ? NAMES[m] : "?";
 }
 
+static cJSON *crowd_json(const ps_summary_crowd_t *c)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddNumberToObject(o, "agents", c->n_agents);
+    cJSON_AddNumberToObject(o, "agents_fallen", c->n_fallen);
+    cJSON_AddNumberToObject(o, "reflex_steps", (double)c->n_steps_taken);
+    cJSON_AddNumberToObject(o, "local_density_m2", c->local_density_m2);
+    cJSON_AddNumberToObject(o, "local_density_max_m2", c->local_density_max_m2);
+    cJSON_AddNumberToObject(o, "robot_force_max_n", c->robot_force_max_n);
+    cJSON_AddNumberToObject(o, "transmitted_impulse_ns", c->transmitted_impulse_ns);
+    cJSON_AddNumberToObject(o, "penetration_max_m", c->penetration_max_m);
+    cJSON *parts = cJSON_AddArrayToObject(o, "robot_parts");
+    for (unsigned i = 0; i < c->n_parts && i < PS_SUMMARY_MAX_PARTS; i++) {
+        cJSON *p = cJSON_CreateObject();
+        cJSON_AddStringToObject(p, "body", c->part_name[i]);
+        cJSON_AddNumberToObject(p, "force_max_n", c->part_force_max_n[i]);
+        cJSON_AddNumberToObject(p, "impulse_ns", c->part_impulse_ns[i]);
+        cJSON_AddItemToArray(parts, p);
+    }
+    return o;
+}
+
 static cJSON *buses_json(const ps_summary_t *s)
 {
     cJSON *a = cJSON_CreateArray();
@@ -183,6 +205,8 @@ static cJSON *summary_json(const ps_summary_t *s)
             cJSON_AddNullToObject(sim, "plant_error");
         }
     }
+    if (s->has_crowd)
+        cJSON_AddItemToObject(root, "crowd", crowd_json(&s->crowd));
     return root;
 }
 
@@ -280,6 +304,21 @@ void ps_summary_print(const ps_summary_t *s, FILE *out)
                 "simulated time up to %.1f ms behind the wall clock (device timestamps follow "
                 "the wall clock; the run is not faithful)\n",
                 (unsigned long long)s->truth_plant_overruns, s->truth_plant_max_lag_ms);
+    if (s->has_crowd) {
+        const ps_summary_crowd_t *cr = &s->crowd;
+        unsigned top = 0;
+        for (unsigned i = 1; i < cr->n_parts; i++)
+            top = cr->part_force_max_n[i] > cr->part_force_max_n[top] ? i : top;
+        fprintf(out,
+                " crowd: %u agents, %u fell, %llu reflex steps; around the robot %.2f / m^2 "
+                "(max %.2f); crowd force on the robot up to %.0f N (most on %s: %.0f N), "
+                "transmitted impulse %.1f N s, deepest penetration %.1f mm\n",
+                cr->n_agents, cr->n_fallen, cr->n_steps_taken, cr->local_density_m2,
+                cr->local_density_max_m2, cr->robot_force_max_n,
+                cr->n_parts > 0 ? cr->part_name[top] : "-",
+                cr->n_parts > 0 ? cr->part_force_max_n[top] : 0.0, cr->transmitted_impulse_ns,
+                cr->penetration_max_m * 1e3);
+    }
     if (s->has_truth && s->truth_plant_err != 0)
         fprintf(out, " sim truth: PLANT ERROR at t=%.4f s, physics stopped: %s\n",
                 s->truth_plant_err_t_s,

@@ -16,6 +16,23 @@
 #include "ps_logger.h"
 #include "ps_loop.h"
 
+#define PS_SUMMARY_MAX_PARTS 32u
+
+/** What the simulated crowd did (board sim with a crowd scenario). */
+typedef struct {
+    unsigned n_agents, n_fallen;
+    unsigned long long n_steps_taken; /**< agents' reflex steps */
+    double local_density_m2;          /**< around the robot at the end */
+    double local_density_max_m2;
+    double robot_force_max_n;         /**< largest total crowd force on the robot */
+    double transmitted_impulse_ns;
+    double penetration_max_m;
+    unsigned n_parts;
+    const char (*part_name)[32];
+    const double *part_force_max_n;
+    const double *part_impulse_ns;
+} ps_summary_crowd_t;
+
 typedef struct {
     const char *board_path, *robot_path, *scenario_path;
     bool is_lockstep;
@@ -45,6 +62,8 @@ typedef struct {
     int truth_plant_err;                /**< 0, or the plant's first step error */
     const char *truth_plant_err_reason; /**< why, NULL: none */
     double truth_plant_err_t_s;         /**< simulated time of it since start */
+    bool has_crowd;                     /**< crowd below is valid */
+    ps_summary_crowd_t crowd;
 } ps_summary_t;
 
 /** @return 0 | -EIO (err says why)  @rt NON-RT */

@@ -75,6 +75,10 @@ struct ps_sim {
     bool has_thread;
     atomic_bool is_running;
 
+    ps_ring_t crowd_ring;
+    ps_sim_crowd_sample_t crowd_storage[PS_SIM_CROWD_RING_SLOTS];
+    double crowd_density_max;
+
     pthread_mutex_t truth_mu;
     double first_fall_t_s; /**< plant time of the first fall, -1: none yet */
     bool has_mutex;
@@ -267,6 +271,29 @@ static void update_truth(ps_sim_t *s)
     t.tau_abs_sum_nm = s->tau_abs_sum_nm;
     t.plant_err_reason = s->plant_err_reason;
     t.plant_err_t_s = s->plant_err_t_s;
+    const ps_crowd_t *crowd = ps_plant_crowd(s->plant);
+    if (crowd != NULL) {
+        t.has_crowd = true;
+        ps_crowd_get_stats(crowd, &t.crowd);
+        if (t.crowd.local_density_m2 > s->crowd_density_max)
+            s->crowd_density_max = t.crowd.local_density_m2;
+        t.crowd_local_density_max_m2 = s->crowd_density_max;
+        if (s->is_started) {
+            ps_sim_crowd_sample_t cs = {
+                .t_s = pt.t_s,
+                .n_fallen = t.crowd.n_fallen,
+                .n_stepping = t.crowd.n_stepping,
+                .local_density_m2 = (float)t.crowd.local_density_m2,
+                .robot_force_n = (float)t.crowd.robot_force_n,
+                .transmitted_impulse_ns = (float)t.crowd.transmitted_impulse_ns,
+                .penetration_m = (float)t.crowd.penetration_m,
+                .n_parts = t.crowd.n_parts,
+            };
+            for (uint32_t k = 0; k < t.crowd.n_parts && k < PS_CROWD_MAX_PARTS; k++)
+                cs.part_force_n[k] = (float)t.crowd.part_force_n[k];
+            (void)ps_ring_push(&s->crowd_ring, &cs); /* full: dropped and counted */
+        }
+    }
     /* Held only for the copy, so the plant thread is never delayed for long. */
     pthread_mutex_lock(&s->truth_mu);
     s->truth = t;
@@ -454,6 +481,8 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
     atomic_init(&s->requests, 0u);
     atomic_init(&s->is_running, false);
     s->clock = (ps_clock_t){.now_ns = sim_now_ns, .sleep_until_ns = sim_sleep_until_ns, .ctx = s};
+    (void)ps_ring_init(&s->crowd_ring, s->crowd_storage, PS_SIM_CROWD_RING_SLOTS,
+                       sizeof(s->crowd_storage[0])); /* constant, valid sizes */
 
     /* Priority inheritance: the SCHED_FIFO plant thread and the SCHED_OTHER
      * main thread share this mutex. */
@@ -618,6 +647,23 @@ int ps_sim_get_actuator(ps_sim_t *s, unsigned joint_idx, ps_devices_actuator_t *
         return -EINVAL;
     *out = s->act[joint_idx];
     return 0;
+}
+
+int ps_sim_take_crowd_sample(ps_sim_t *s, ps_sim_crowd_sample_t *out)
+{
+    if (ps_plant_crowd(s->plant) == NULL)
+        return -ENOENT;
+    return ps_ring_pop(&s->crowd_ring, out);
+}
+
+uint64_t ps_sim_crowd_samples_dropped(ps_sim_t *s)
+{
+    return ps_ring_dropped(&s->crowd_ring);
+}
+
+const struct ps_plant *ps_sim_plant(const ps_sim_t *s)
+{
+    return s->plant;
 }
 
 void ps_sim_destroy(ps_sim_t *s)

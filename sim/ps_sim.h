@@ -75,6 +75,8 @@
 #include "../drivers/ps_imu_msg.h"
 #include "../rt/ps_clock.h"
 #include "../rt/ps_limits.h"
+#include "../rt/ps_ring.h"
+#include "ps_crowd.h"
 #include "ps_devices.h"
 #include "ps_scenario.h"
 
@@ -178,7 +180,26 @@ typedef struct {
                                          while hooks.is_controller_active said so,
                                          on simulated time (deterministic in
                                          lockstep); -1: never active */
+    bool has_crowd;                 /**< the scenario has a crowd: crowd is valid */
+    ps_crowd_stats_t crowd;         /**< its measurements at the end of the last period */
+    double crowd_local_density_max_m2; /**< largest local density around the robot */
 } ps_sim_truth_t;
+
+/** One servo period of the crowd's measurements, for the non-real-time side
+ *  (ps_sim_take_crowd_sample). */
+typedef struct {
+    double t_s;                /**< simulated time since start */
+    uint32_t n_fallen;
+    uint32_t n_stepping;
+    float local_density_m2;
+    float robot_force_n;
+    float transmitted_impulse_ns; /**< cumulative */
+    float penetration_m;
+    uint32_t n_parts;
+    float part_force_n[PS_CROWD_MAX_PARTS];
+} ps_sim_crowd_sample_t;
+
+#define PS_SIM_CROWD_RING_SLOTS 1024u
 
 /** Load the model, build devices and buses, apply the scenario's initial
  *  state (robot in stance, harness engaged unless the scenario says otherwise:
@@ -227,6 +248,22 @@ uint32_t ps_sim_take_requests(ps_sim_t *s);
  *  @pre lockstep, or the plant thread stopped (no lock guards the devices)
  *  @return 0 | -EINVAL joint_idx out of range  @rt NON-RT */
 int ps_sim_get_actuator(ps_sim_t *s, unsigned joint_idx, ps_devices_actuator_t *out);
+
+/** The oldest crowd sample not taken yet (one per servo period, pushed by
+ *  the thread that steps the plant into a preallocated SPSC ring; when the
+ *  taker falls behind, new samples are dropped and counted).
+ *  @return 0 | -EAGAIN none waiting | -ENOENT no crowd
+ *  @rt RT-SAFE, one consumer thread (NON-RT side) */
+int ps_sim_take_crowd_sample(ps_sim_t *s, ps_sim_crowd_sample_t *out);
+
+/** @return crowd samples dropped because the taker fell behind  @rt any */
+uint64_t ps_sim_crowd_samples_dropped(ps_sim_t *s);
+
+/** The plant, for rendering and tests: read its model and data only while
+ *  it does not step (lockstep between sleeps, or the thread stopped).
+ *  @rt INIT/NON-RT */
+struct ps_plant;
+const struct ps_plant *ps_sim_plant(const ps_sim_t *s);
 
 /** @post all resources freed; s invalid. Safe on NULL.  @rt INIT */
 void ps_sim_destroy(ps_sim_t *s);

@@ -101,7 +101,8 @@ static void test_cli_help_documents_every_option(void **state)
         "--board NAME|FILE", "--robot FILE",        "--scenario FILE", "--duration S",
         "--lockstep",        "--summary FILE.json", "--require-rt",    "--trace",
         "pushstep profile",  "--stress cpu|mem|io", "--out DIR",       "--hist-us N",
-        "pushstep monitor",  "pushstep emulate",    "--start-after S", "--candump FILE"};
+        "pushstep monitor",  "pushstep emulate",    "--start-after S", "--candump FILE",
+        "--crowd-log FILE.csv"};
     for (size_t i = 0; i < sizeof(OPTIONS) / sizeof(OPTIONS[0]); i++)
         if (strstr(out, OPTIONS[i]) == NULL)
             fail_msg("--help does not mention %s", OPTIONS[i]);
@@ -113,7 +114,7 @@ static void test_cli_lockstep_summary_json_has_the_figures(void **state)
     char path[32];
     make_temp_file(path, sizeof(path));
     char args[256];
-    snprintf(args, sizeof(args), "--lockstep --duration 6 --quiet --summary %s", path);
+    snprintf(args, sizeof(args), "--scenario scenarios/stand.yaml --lockstep --duration 6 --quiet --summary %s", path);
     int rc = run(args);
     if (rc != 0)
         fail_msg("exit %d:\n%s", rc, out);
@@ -169,7 +170,7 @@ static void test_cli_lockstep_candump_log_has_every_frame(void **state)
     char args[256];
     /* 10 s: about 190,000 frames, three times the 65,536-frame ring, so that
      * nothing lost means the logger drained while the loop ran */
-    snprintf(args, sizeof(args), "--lockstep --duration 10 --quiet --summary %s --candump %s",
+    snprintf(args, sizeof(args), "--scenario scenarios/stand.yaml --lockstep --duration 10 --quiet --summary %s --candump %s",
              sum_path, log_path);
     int rc = run(args);
     if (rc != 0)
@@ -242,7 +243,7 @@ static void test_cli_lockstep_candump_log_has_every_frame(void **state)
              "echo keep > %s",
              board, log_path);
     assert_int_equal(system(sed_cmd), 0);
-    snprintf(args, sizeof(args), "--board %s --lockstep --duration 1 --candump %s", board,
+    snprintf(args, sizeof(args), "--scenario scenarios/stand.yaml --board %s --lockstep --duration 1 --candump %s", board,
              log_path);
     assert_int_equal(run(args), 2);
     if (strstr(out, "buses[0].ifname \"sixteen_chars_ab\" does not fit") == NULL)
@@ -315,13 +316,76 @@ static void test_cli_lockstep_same_scenario_twice_identical_summaries(void **sta
     cJSON_Delete(j[1]);
 }
 
+/* The default run on board sim is the crowd: the status line shows it and the
+ * summary reports what it did to the robot. */
+static void test_cli_default_run_is_the_crowd(void **state)
+{
+    (void)state;
+    char path[32];
+    make_temp_file(path, sizeof(path));
+    char args[256];
+    snprintf(args, sizeof(args), "--lockstep --duration 2 --summary %s", path);
+    const int rc = run(args);
+    if (rc != 0)
+        fail_msg("exit %d:\n%s", rc, out);
+    if (strstr(out, " crowd=24(") == NULL || strstr(out, "rho=") == NULL)
+        fail_msg("no crowd on the status line:\n%s", out);
+    cJSON *j = read_json(path);
+    const cJSON *crowd = obj(j, "crowd");
+    assert_int_equal((int)num(crowd, "agents"), 24);
+    assert_true(num(crowd, "local_density_m2") > 0.5);
+    const cJSON *parts = cJSON_GetObjectItemCaseSensitive(crowd, "robot_parts");
+    assert_true(cJSON_GetArraySize(parts) >= 10);
+    const char *scenario = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(j, "scenario"));
+    assert_non_null(scenario);
+    assert_non_null(strstr(scenario, "scenarios/crowd.yaml"));
+    cJSON_Delete(j);
+    unlink(path);
+}
+
+/* Lockstep with a crowd is deterministic: the same scenario twice gives the
+ * same per-tick crowd log (forces on every robot body, densities, falls). */
+static void test_cli_lockstep_crowd_twice_identical_logs(void **state)
+{
+    (void)state;
+    char path[2][32];
+    for (int i = 0; i < 2; i++) {
+        make_temp_file(path[i], sizeof(path[i]));
+        char args[256];
+        snprintf(args, sizeof(args),
+                 "--lockstep --quiet --scenario scenarios/queue.yaml --duration 6 --crowd-log %s",
+                 path[i]);
+        const int rc = run(args);
+        if (rc != 0)
+            fail_msg("run %d: exit %d:\n%s", i, rc, out);
+        assert_non_null(strstr(out, "crowd log: 8000 ticks"));
+    }
+    char cmd[128];
+    snprintf(cmd, sizeof(cmd), "cmp -s %s %s", path[0], path[1]);
+    assert_int_equal(system(cmd), 0);
+    FILE *f = fopen(path[0], "r");
+    assert_non_null(f);
+    char line[1024];
+    double max_force = 0.0;
+    while (fgets(line, sizeof(line), f) != NULL) {
+        double t, rho, force;
+        unsigned fallen, stepping;
+        if (sscanf(line, "%lf,%u,%u,%lf,%lf", &t, &fallen, &stepping, &rho, &force) == 5)
+            max_force = force > max_force ? force : max_force;
+    }
+    fclose(f);
+    assert_true(max_force > 50.0); /* the shove reached the robot */
+    unlink(path[0]);
+    unlink(path[1]);
+}
+
 /* Names are looked up in $PUSHSTEP_DATA_DIR when set, and an error names
  * the path it tried. */
 static void test_cli_data_dir_from_environment(void **state)
 {
     (void)state;
     char args[512];
-    snprintf(args, sizeof(args), "--lockstep --duration 1 --quiet");
+    snprintf(args, sizeof(args), "--scenario scenarios/stand.yaml --lockstep --duration 1 --quiet");
     assert_int_equal(setenv("PUSHSTEP_DATA_DIR", "/nonexistent-ps", 1), 0);
     int rc = run(args);
     assert_int_equal(unsetenv("PUSHSTEP_DATA_DIR"), 0);
@@ -335,7 +399,7 @@ static void test_cli_realtime_run_paced_in_real_time(void **state)
     char path[32];
     make_temp_file(path, sizeof(path));
     char args[256];
-    snprintf(args, sizeof(args), "--duration 2 --quiet --summary %s", path);
+    snprintf(args, sizeof(args), "--scenario scenarios/stand.yaml --duration 2 --quiet --summary %s", path);
     int rc = run(args);
     if (rc != 0)
         fail_msg("exit %d:\n%s", rc, out);
@@ -367,7 +431,7 @@ static void test_cli_realtime_slow_plant_require_rt_fatal(void **state)
     make_temp_file(path, sizeof(path));
     char args[256];
     assert_int_equal(setenv("PUSHSTEP_SIM_SLOW_NS", "1500000", 1), 0);
-    snprintf(args, sizeof(args), "--duration 1 --quiet --summary %s", path);
+    snprintf(args, sizeof(args), "--scenario scenarios/stand.yaml --duration 1 --quiet --summary %s", path);
     int rc = run(args);
     if (rc != 0) {
         assert_int_equal(unsetenv("PUSHSTEP_SIM_SLOW_NS"), 0);
@@ -397,7 +461,7 @@ static void test_cli_profile_writes_json_and_cyclictest_histogram(void **state)
     char dir[] = "/tmp/ps_prof_XXXXXX";
     assert_non_null(mkdtemp(dir));
     char args[256];
-    snprintf(args, sizeof(args), "profile --duration 1 --quiet --hist-us 200 --out %s", dir);
+    snprintf(args, sizeof(args), "profile --scenario scenarios/stand.yaml --duration 1 --quiet --hist-us 200 --out %s", dir);
     int rc = run(args);
     if (rc != 0)
         fail_msg("exit %d:\n%s", rc, out);
@@ -472,7 +536,7 @@ static void test_cli_profile_without_rt_privileges_says_so(void **state)
     assert_non_null(mkdtemp(dir));
     assert_int_equal(chmod(dir, 0777), 0);
     char args[512];
-    snprintf(args, sizeof(args), "profile --duration 1 --quiet --out %s", dir);
+    snprintf(args, sizeof(args), "profile --scenario scenarios/stand.yaml --duration 1 --quiet --out %s", dir);
     char cmd[1024];
     snprintf(cmd, sizeof(cmd), "setpriv --reuid=65534 --regid=65534 --clear-groups %s %s 2>&1",
              bin(), args);
@@ -520,7 +584,7 @@ static void test_cli_bad_config_names_file_and_field(void **state)
     assert_int_equal(write(fd, bad, strlen(bad)), (ssize_t)strlen(bad));
     close(fd);
     char args[256];
-    snprintf(args, sizeof(args), "--board %s --lockstep --duration 1", path);
+    snprintf(args, sizeof(args), "--scenario scenarios/stand.yaml --board %s --lockstep --duration 1", path);
     assert_int_equal(run(args), 2);
     assert_non_null(strstr(out, path));
     assert_non_null(strstr(out, ":4:"));
@@ -563,7 +627,7 @@ static void robot_variant_refused(const char *sed_expr, unsigned line, const cha
              path);
     assert_int_equal(system(cmd), 0);
     char args[256];
-    snprintf(args, sizeof(args), "--robot %s --lockstep --duration 1", path);
+    snprintf(args, sizeof(args), "--scenario scenarios/stand.yaml --robot %s --lockstep --duration 1", path);
     assert_int_equal(run(args), 2);
     char where[128];
     snprintf(where, sizeof(where), "%s:%u: %s:", path, line, field);
@@ -599,7 +663,7 @@ static void test_cli_monitor_decodes_a_candump_log_per_joint(void **state)
     (void)state;
     char log_path[32], args[160];
     make_temp_file(log_path, sizeof(log_path));
-    snprintf(args, sizeof(args), "--lockstep --duration 2 --quiet --candump %s", log_path);
+    snprintf(args, sizeof(args), "--scenario scenarios/stand.yaml --lockstep --duration 2 --quiet --candump %s", log_path);
     assert_int_equal(run(args), 0);
     snprintf(args, sizeof(args), "monitor --board sim --log %s --rates", log_path);
     if (run(args) != 0)
@@ -840,7 +904,7 @@ static void test_cli_replay_of_a_lockstep_log_same_transitions_and_commands(void
     char log_path[32], again_path[32], args[256];
     make_temp_file(log_path, sizeof(log_path));
     make_temp_file(again_path, sizeof(again_path));
-    snprintf(args, sizeof(args), "--lockstep --duration 3 --quiet --candump %s", log_path);
+    snprintf(args, sizeof(args), "--scenario scenarios/stand.yaml --lockstep --duration 3 --quiet --candump %s", log_path);
     int rc = run(args);
     if (rc != 0)
         fail_msg("record: exit %d:\n%s", rc, out);
@@ -940,6 +1004,8 @@ int main(void)
         cmocka_unit_test(test_cli_lockstep_candump_log_has_every_frame),
         cmocka_unit_test(test_cli_lockstep_shove_fall_detected_and_in_truth),
         cmocka_unit_test(test_cli_lockstep_same_scenario_twice_identical_summaries),
+        cmocka_unit_test(test_cli_default_run_is_the_crowd),
+        cmocka_unit_test(test_cli_lockstep_crowd_twice_identical_logs),
         cmocka_unit_test(test_cli_data_dir_from_environment),
         cmocka_unit_test(test_cli_realtime_run_paced_in_real_time),
         cmocka_unit_test(test_cli_realtime_slow_plant_require_rt_fatal),
