@@ -61,8 +61,8 @@ help:
 	@echo "             (skipped with a message where qemu cannot be installed)"
 	@echo "make test-hw the real drivers (SocketCAN, libgpiod) in a Debian kernel"
 	@echo "             booted under qemu with vcan, vxcan and gpio-mockup"
-	@echo "make bench   latency beside cyclictest, tick share, bus load, allocations:"
-	@echo "             bench/results/*.json and summary.md (see docs/latency.md)"
+	@echo "make bench   latency beside cyclictest, tick share, bus load, allocations,"
+	@echo "             the crowd's cost: bench/results/*.json, summary.md, crowd.md"
 	@echo "make bench-hw the real drivers' figures in the test VM (e-stop reaction,"
 	@echo "             loop reaction, frames per bus): bench/results/hw.json"
 	@echo "make format  clang-format every C source in place"
@@ -113,9 +113,14 @@ test: deps-test $(BUILD)/pushstep $(TEST_BINS) $(HW_BINS)
 test-hw: deps-test $(BUILD)/pushstep $(HW_BINS)
 	@PUSHSTEP_BIN=$(BUILD)/pushstep QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh tools/qemu/test-hw.sh
 
-bench: deps-bench $(BUILD)/pushstep
+bench: deps-bench $(BUILD)/pushstep $(BUILD)/crowd_bench
 	@bash bench/run.sh
+	@BUILD=$(BUILD) bash bench/crowd.sh
 	@QEMU_WORK=$(QEMU_WORK) bash bench/hw.sh
+
+# The simulated crowd's cost (bench/crowd.sh): plant with N agents beside mj_step.
+$(BUILD)/crowd_bench: $(call OBJ,bench/crowd_bench.c) $(LIB_OBJS)
+	$(CC) $(CFLAGS) -o $@ $^ $(LDLIBS)
 
 bench-hw: deps-test $(BUILD)/pushstep
 	@QEMU_WORK=$(QEMU_WORK) bash bench/hw.sh

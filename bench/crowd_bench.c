@@ -64,7 +64,7 @@ int main(int argc, char **argv)
     c.has_arena_walls = true;
     c.measure = c.arena;
     c.robot_a_n = 0.0f;
-    c.n_groups = 1;
+    c.n_groups = n > 0 ? 1u : 0u;
     c.groups[0] = (ps_crowd_group_cfg_t){.name = "press",
                                          .count = n,
                                          .density_m2 = 4.0f,
