@@ -37,7 +37,8 @@ json.dump({"meta": meta, "runs": rows}, open(os.path.join(out, "crowd.json"), "w
 with open(os.path.join(out, "crowd.md"), "w") as f:
     f.write("# The simulated crowd's cost\n\n")
     f.write("`make bench` (bench/crowd.sh), %s, %d CPUs, 1-min load average %.2f when it ended.\n" % (meta["date"], meta["cpus"], meta["load_avg_1m"]))
-    f.write("Agents walk toward the robot (limp in its harness) in a walled pen at 4 persons/m^2; after 1 s of\n")
+    f.write("Agents walk toward the robot (limp in its harness) at 1 m/s in a walled pen at 4 persons/m^2, social\n")
+    f.write("repulsion 100 N (a crush: they press into each other and the robot); after 1 s of\n")
     f.write("settling, S simulated seconds of the plant (MuJoCo step + the crowd's forces, decisions and\n")
     f.write("measurements), then the bare `mj_step` of the same generated model from the same state.\n")
     f.write("Speed = simulated s per wall s (RTF); crowd share = the crowd's own time / mj_step time, same run.\n\n")

@@ -64,13 +64,14 @@ int main(int argc, char **argv)
     c.has_arena_walls = true;
     c.measure = c.arena;
     c.robot_a_n = 0.0f;
+    c.social.a_n = 100.0f; /* a crush: people press into each other and the robot */
     c.n_groups = n > 0 ? 1u : 0u;
     c.groups[0] = (ps_crowd_group_cfg_t){.name = "press",
                                          .count = n,
                                          .density_m2 = 4.0f,
                                          .region = c.arena,
                                          .goal = PS_CROWD_GOAL_ROBOT,
-                                         .speed_m_s = 0.5f,
+                                         .speed_m_s = 1.0f,
                                          .height_m = 1.7f,
                                          .height_sd_m = 0.07f,
                                          .mass_kg = 70.0f,
