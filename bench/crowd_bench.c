@@ -3,9 +3,12 @@
  * For N agents pressed around the robot (they walk toward it in a walled
  * pen, 4 persons/m^2), after 1 s of settling it runs S simulated seconds of
  * the plant (robot limp on its harness, crowd forces, decisions and
- * measurements) and then, from the same pressed state, the bare mj_step of
- * the same generated model for the same steps (no crowd work: the agents
- * coast). Prints one JSON object per N. Run from the repository root.
+ * measurements), and before each plant step the bare mj_step of the same
+ * generated model from a copy of the same state (the crowd's last forces
+ * held): the two interleaved, so both see the same load. Times in wall and
+ * in thread CPU time (what one core spends); MuJoCo's stage timers of the
+ * bare steps. Prints one JSON object per N. Run from the repository root.
+ * Env: CROWD_BENCH_DT (physics step; 0: the robot model's own).
  *
  * usage: crowd_bench N [S]
  */
@@ -28,15 +31,22 @@ static double now_s(void)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
+/* thread CPU time: what one core spends, whatever else the machine runs */
+static double cpu_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
 static mjtNum timer_us(void)
 {
-    return 1e6 * now_s();
+    return 1e6 * cpu_s();
 }
 
 int main(int argc, char **argv)
 {
-    if (getenv("CROWD_BENCH_TIMERS") != NULL)
-        mjcb_time = timer_us;
+    mjcb_time = timer_us;
     if (argc < 2) {
         fprintf(stderr, "usage: crowd_bench N [S]\n");
         return 2;
@@ -103,49 +113,77 @@ int main(int argc, char **argv)
     long ncon = 0, nefc = 0;
     const mjModel *m = ps_plant_model(p);
     const mjData *d = ps_plant_data(p);
-    double t0 = now_s();
+    /* Interleaved, step by step: the bare mj_step from a copy of the
+     * plant's state (the forces it applied last step held), then the
+     * plant's own step from that same state; both under the same load. */
+    mjData *bare = mj_makeData(m);
+    if (bare == NULL) {
+        fprintf(stderr, "crowd_bench: out of memory\n");
+        return 1;
+    }
+    double wall_plant = 0.0, wall_bare = 0.0, cpu_plant = 0.0, cpu_bare = 0.0;
     for (long i = 0; i < steps; i++) {
+        bare->time = d->time;
+        mju_copy(bare->qpos, d->qpos, m->nq);
+        mju_copy(bare->qvel, d->qvel, m->nv);
+        mju_copy(bare->act, d->act, m->na);
+        mju_copy(bare->ctrl, d->ctrl, m->nu);
+        mju_copy(bare->qacc_warmstart, d->qacc_warmstart, m->nv);
+        mju_copy(bare->qfrc_applied, d->qfrc_applied, m->nv);
+        mju_copy(bare->xfrc_applied, d->xfrc_applied, 6 * m->nbody);
+        mju_copy(bare->mocap_pos, d->mocap_pos, 3 * m->nmocap);
+        mju_copy(bare->mocap_quat, d->mocap_quat, 4 * m->nmocap);
+        double w0 = now_s(), k0 = cpu_s();
+        mj_step(m, bare);
+        double w1 = now_s(), k1 = cpu_s();
+        wall_bare += w1 - w0;
+        cpu_bare += k1 - k0;
         if (ps_plant_step(p) != 0) {
             fprintf(stderr, "crowd_bench: %s\n", ps_plant_error_reason(p));
             return 1;
         }
+        wall_plant += now_s() - w1;
+        cpu_plant += cpu_s() - k1;
         ncon += d->ncon;
         nefc += d->nefc;
     }
-    const double wall_plant = now_s() - t0;
     ps_plant_get_timing(p, &c1, &m1);
-    /* the bare step on the same model from a copy of the pressed state */
-    mjData *bare = mj_copyData(NULL, m, d);
-    mju_zero(bare->xfrc_applied, 6 * m->nbody);
-    mju_zero(bare->qfrc_applied, m->nv);
-    t0 = now_s();
-    for (long i = 0; i < steps; i++)
-        mj_step(m, bare);
-    const double wall_bare = now_s() - t0;
-    mj_deleteData(bare);
     ps_crowd_stats_t st;
     memset(&st, 0, sizeof(st));
     if (ps_plant_crowd(p) != NULL)
         ps_crowd_get_stats(ps_plant_crowd(p), &st);
-    printf("{\"agents\": %u, \"timestep_s\": %g, \"sim_s\": %g, \"nv\": %d, \"ncon_mean\": %.1f, "
-           "\"nefc_mean\": %.1f, \"plant_rtf\": %.3f, \"bare_mujoco_rtf\": %.3f, "
-           "\"plant_us_per_step\": %.1f, \"bare_us_per_step\": %.1f, \"crowd_us_per_step\": %.2f, "
-           "\"mj_step_us_per_step\": %.1f, \"crowd_share_of_mj_step\": %.4f, "
-           "\"robot_force_n\": %.1f, \"local_density_m2\": %.2f}\n",
-           n, dt, sim_s, m->nv, (double)ncon / steps, (double)nefc / steps, sim_s / wall_plant,
-           sim_s / wall_bare, 1e6 * wall_plant / steps, 1e6 * wall_bare / steps,
-           1e-3 * (double)(c1 - c0) / steps, 1e-3 * (double)(m1 - m0) / steps,
-           (double)(c1 - c0) / (double)(m1 - m0), st.robot_force_n, st.local_density_m2);
-    if (mjcb_time != NULL) {
-        static const char *const NAMES[] = {"step",     "forward", "inverse",   "position",
-                                            "velocity", "actuation", "acceleration", "constraint",
-                                            "kinematics", "inertia", "collision", "make",
-                                            "project"};
-        for (int i = 0; i < 13; i++)
-            fprintf(stderr, "%s %.1f us  ", NAMES[i],
-                    d->timer[i].number > 0 ? d->timer[i].duration / d->timer[i].number : 0.0);
-        fprintf(stderr, "\n");
+    /* MuJoCo's own stage timers (thread CPU time) of the bare steps */
+    static const int STAGES[] = {mjTIMER_POS_KINEMATICS, mjTIMER_POS_INERTIA,
+                                 mjTIMER_POS_COLLISION,  mjTIMER_POS_MAKE,
+                                 mjTIMER_POS_PROJECT,    mjTIMER_VELOCITY,
+                                 mjTIMER_ACTUATION,      mjTIMER_ACCELERATION,
+                                 mjTIMER_CONSTRAINT};
+    static const char *const STAGE_NAMES[] = {"kinematics", "inertia",  "collision",
+                                              "make_constraint", "project", "velocity",
+                                              "actuation",  "acceleration", "solver"};
+    char stages[512] = "";
+    size_t used = 0;
+    for (size_t k = 0; k < sizeof(STAGES) / sizeof(STAGES[0]); k++) {
+        const mjTimerStat *ts = &bare->timer[STAGES[k]];
+        const int w = snprintf(stages + used, sizeof(stages) - used, "%s\"%s\": %.1f",
+                               k > 0 ? ", " : "", STAGE_NAMES[k],
+                               ts->number > 0 ? ts->duration / ts->number : 0.0);
+        used += w > 0 ? (size_t)w : 0u;
     }
+    printf("{\"agents\": %u, \"timestep_s\": %g, \"sim_s\": %g, \"nv\": %d, \"nbody\": %d, "
+           "\"ncon_mean\": %.1f, \"nefc_mean\": %.1f, "
+           "\"plant_rtf_wall\": %.3f, \"bare_rtf_wall\": %.3f, "
+           "\"plant_rtf_cpu\": %.3f, \"bare_rtf_cpu\": %.3f, "
+           "\"plant_us_per_step_cpu\": %.1f, \"bare_us_per_step_cpu\": %.1f, "
+           "\"crowd_us_per_step\": %.2f, \"mj_step_us_per_step\": %.1f, "
+           "\"crowd_share_of_mj_step\": %.4f, \"robot_force_n\": %.1f, "
+           "\"local_density_m2\": %.2f, \"mujoco_stage_us_cpu\": {%s}}\n",
+           n, dt, sim_s, m->nv, m->nbody, (double)ncon / steps, (double)nefc / steps,
+           sim_s / wall_plant, sim_s / wall_bare, sim_s / cpu_plant, sim_s / cpu_bare,
+           1e6 * cpu_plant / steps, 1e6 * cpu_bare / steps, 1e-3 * (double)(c1 - c0) / steps,
+           1e-3 * (double)(m1 - m0) / steps, (double)(c1 - c0) / (double)(m1 - m0),
+           st.robot_force_n, st.local_density_m2, stages);
+    mj_deleteData(bare);
     ps_plant_destroy(p);
     return 0;
 }

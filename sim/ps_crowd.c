@@ -20,9 +20,11 @@
 typedef struct {
     int qx, qy, qtx, qty; /* qpos addresses */
     int vx, vy, vtx, vty; /* dof addresses */
-    int base_body, torso_body, geom, ring;
+    int jtx, jty;         /* tilt hinges */
+    int body, ring_body, geom, ring; /* the agent's body; the ring's at its torso's CoM */
     double x0, y0; /* body position in the model (slides count from it) */
     double mass, m_torso, radius, pivot_h, com_h, v0;
+    double len; /* capsule segment, pivot to head sphere's centre */
     double ankle_k, ankle_max;
     uint32_t group;
     /* state */
@@ -53,6 +55,7 @@ struct ps_crowd {
     int update_every; /* physics steps per crowd update */
     int step_count;
     double robot_xy[2];
+    double wall_pen_m; /* deepest overlap with the arena's sides, this step */
     ps_crowd_stats_t st;
 };
 
@@ -76,6 +79,7 @@ void ps_crowd_default_cfg(ps_crowd_cfg_t *out)
     out->robot_radius_m = 0.2f;
     out->robot_a_n = out->social.a_n;
     out->crowd_dt_s = 0.002f;
+    out->timestep_s = 0.001f; /* docs/crowd.md, "Performance": the robot stands at it */
 }
 
 /* ---- create ---------------------------------------------------------------- */
@@ -99,13 +103,14 @@ static int bind_agent(ps_crowd_t *c, mjModel *m, const ps_crowd_agent_spec_t *s,
     const int jy = find(m, mjOBJ_JOINT, "agent%u_y", i, err, err_len);
     const int jtx = find(m, mjOBJ_JOINT, "agent%u_tx", i, err, err_len);
     const int jty = find(m, mjOBJ_JOINT, "agent%u_ty", i, err, err_len);
-    a->base_body = find(m, mjOBJ_BODY, "agent%u", i, err, err_len);
-    a->torso_body = find(m, mjOBJ_BODY, "agent%u_torso", i, err, err_len);
+    a->body = find(m, mjOBJ_BODY, "agent%u", i, err, err_len);
     a->geom = find(m, mjOBJ_GEOM, "agent%u_body", i, err, err_len);
     a->ring = find(m, mjOBJ_GEOM, "agent%u_ring", i, err, err_len);
-    if (jx < 0 || jy < 0 || jtx < 0 || jty < 0 || a->base_body < 0 || a->torso_body < 0 ||
-        a->geom < 0 || a->ring < 0)
+    if (jx < 0 || jy < 0 || jtx < 0 || jty < 0 || a->body < 0 || a->geom < 0 || a->ring < 0)
         return -PS_ERR_CONFIG;
+    a->jtx = jtx;
+    a->jty = jty;
+    a->ring_body = m->geom_bodyid[a->ring];
     a->qx = m->jnt_qposadr[jx];
     a->qy = m->jnt_qposadr[jy];
     a->qtx = m->jnt_qposadr[jtx];
@@ -114,13 +119,17 @@ static int bind_agent(ps_crowd_t *c, mjModel *m, const ps_crowd_agent_spec_t *s,
     a->vy = m->jnt_dofadr[jy];
     a->vtx = m->jnt_dofadr[jtx];
     a->vty = m->jnt_dofadr[jty];
-    a->x0 = m->body_pos[3 * a->base_body];
-    a->y0 = m->body_pos[3 * a->base_body + 1];
-    a->mass = s->mass_kg;
-    a->m_torso = m->body_mass[a->torso_body];
+    a->x0 = m->body_pos[3 * a->body];
+    a->y0 = m->body_pos[3 * a->body + 1];
+    a->mass = m->body_mass[a->body];
     a->radius = s->radius_m;
-    a->pivot_h = m->body_pos[3 * a->torso_body + 2];
-    a->com_h = a->pivot_h + m->body_ipos[3 * a->torso_body + 2];
+    a->len = 2.0 * m->geom_size[3 * a->geom + 1];
+    a->pivot_h = m->body_pos[3 * a->body + 2];
+    /* the torso's centre of mass is the ring's place; the body's own lies
+     * lower, the feet's mass being at the pivot: m zc = m_torso l */
+    const double l_torso = m->body_pos[3 * a->ring_body + 2];
+    a->com_h = a->pivot_h + l_torso;
+    a->m_torso = a->mass * m->body_ipos[3 * a->body + 2] / l_torso;
     a->v0 = s->v0_m_s;
     a->group = s->group_idx;
     const double l = a->com_h - a->pivot_h;
@@ -134,7 +143,7 @@ static int bind_agent(ps_crowd_t *c, mjModel *m, const ps_crowd_agent_spec_t *s,
      * weights at qpos0), so it settles at depth (1 - d) D f / k. Each agent
      * geom carries k = K (1 - d) 2 w_i, so that the pair's mean is K (1 - d) D:
      * depth f / K; b = 2 zeta sqrt(k) damps it as body_damping says. */
-    const double w = m->body_invweight0[2 * a->torso_body];
+    const double w = m->body_invweight0[2 * a->ring_body];
     const double k = (double)c->cfg.body.body_k_n_m * (1.0 - SOLIMP_D) * 2.0 * w;
     const double b = 2.0 * (double)c->cfg.body.body_damping * sqrt(k);
     const int geoms[2] = {a->geom, a->ring};
@@ -142,7 +151,8 @@ static int bind_agent(ps_crowd_t *c, mjModel *m, const ps_crowd_agent_spec_t *s,
         m->geom_solref[mjNREF * geoms[q]] = -k;
         m->geom_solref[mjNREF * geoms[q] + 1] = -b;
     }
-    c->agent_of_body[a->torso_body] = (int)i;
+    c->agent_of_body[a->body] = (int)i;
+    c->agent_of_body[a->ring_body] = (int)i;
     c->ring_of_geom[a->ring] = (int)i;
     return 0;
 }
@@ -267,8 +277,8 @@ static void read_agent(agent_t *a, const mjData *d)
     a->base[1] = a->y0 + d->qpos[a->qy];
     a->vbase[0] = d->qvel[a->vx];
     a->vbase[1] = d->qvel[a->vy];
-    const mjtNum *R = d->xmat + 9 * a->torso_body;
-    const mjtNum *com = d->xipos + 3 * a->torso_body;
+    const mjtNum *R = d->xmat + 9 * a->body;
+    const mjtNum *com = d->xpos + 3 * a->ring_body;
     a->tilt = acos(R[8] > 1.0 ? 1.0 : (R[8] < -1.0 ? -1.0 : R[8]));
     /* omega = qd_tx x + qd_ty (Rx(tx) y); v_com = v_base + omega x (com - pivot) */
     const double tx = d->qpos[a->qtx];
@@ -654,21 +664,100 @@ static double profile(const ps_crowd_event_cfg_t *ev, double t_s)
     return 1.0;
 }
 
+/* A force f (world) at point p of the agent's body as generalised forces on
+ * its four joints, J^T f: the slides take f, each hinge the moment of f
+ * about its axis through its anchor. mj_applyFT (what xfrc_applied goes
+ * through) forms a 3 x nv Jacobian per body, O(agents^2) per step in all;
+ * this is O(1) per agent. Axes and anchors are the last mj_step's. */
+static void point_force_qfrc(const agent_t *a, const mjData *d, const double p[3],
+                             const double f[3])
+{
+    d->qfrc_applied[a->vx] += f[0];
+    d->qfrc_applied[a->vy] += f[1];
+    const int joints[2] = {a->jtx, a->jty}, dofs[2] = {a->vtx, a->vty};
+    for (int q = 0; q < 2; q++) {
+        const mjtNum *ax = d->xaxis + 3 * joints[q], *an = d->xanchor + 3 * joints[q];
+        const double r[3] = {p[0] - an[0], p[1] - an[1], p[2] - an[2]};
+        const double rxf[3] = {r[1] * f[2] - r[2] * f[1], r[2] * f[0] - r[0] * f[2],
+                               r[0] * f[1] - r[1] * f[0]};
+        d->qfrc_applied[dofs[q]] += ax[0] * rxf[0] + ax[1] * rxf[1] + ax[2] * rxf[2];
+    }
+}
+
+static void torso_force_qfrc(const agent_t *a, const mjData *d, const double f[3])
+{
+    point_force_qfrc(a, d, d->xpos + 3 * a->ring_body, f);
+}
+
+/* Helbing 2000's contact with a wall, k g n - kappa g (v . t) t, plus a
+ * damper c g' along n (c = 2 zeta sqrt(k m), zeta = body_damping), on the
+ * capsule's two sphere centres: against a vertical plane the capsule's
+ * deepest point lies below one of them. The arena's sides push this way
+ * instead of through MuJoCo contacts (sim/ps_scene.c says why). Runs every
+ * physics step; returns the deepest overlap. */
+static double arena_contact(ps_crowd_t *c, const agent_t *a, mjData *d)
+{
+    const ps_crowd_rect_t *ar = &c->cfg.arena;
+    const ps_crowd_body_cfg_t *bc = &c->cfg.body;
+    const mjtNum *p0 = d->xpos + 3 * a->body, *R = d->xmat + 9 * a->body;
+    const double p1[3] = {p0[0] + a->len * R[2], p0[1] + a->len * R[5], p0[2] + a->len * R[8]};
+    /* angular velocity from the hinges' world axes; endpoint velocities */
+    const mjtNum *ax = d->xaxis + 3 * a->jtx, *ay = d->xaxis + 3 * a->jty;
+    const double wx = d->qvel[a->vtx], wy = d->qvel[a->vty];
+    const double om[3] = {wx * ax[0] + wy * ay[0], wx * ax[1] + wy * ay[1],
+                          wx * ax[2] + wy * ay[2]};
+    const double r1[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
+    const double vb[2] = {d->qvel[a->vx], d->qvel[a->vy]};
+    const double v1[2] = {vb[0] + om[1] * r1[2] - om[2] * r1[1],
+                          vb[1] + om[2] * r1[0] - om[0] * r1[2]};
+    const double *pts[2] = {p0, p1}, *vel[2] = {vb, v1};
+    const double k = (double)bc->body_k_n_m, kappa = (double)bc->sliding_kappa;
+    const double damp = 2.0 * (double)bc->body_damping * sqrt(k * a->mass);
+    /* inward normal and the wall's coordinate along it, per side */
+    const double sides[4][3] = {{1.0, 0.0, ar->x_min_m}, {-1.0, 0.0, -(double)ar->x_max_m},
+                                {0.0, 1.0, ar->y_min_m}, {0.0, -1.0, -(double)ar->y_max_m}};
+    double deepest = 0.0;
+    for (int s = c->cfg.is_periodic_x ? 2 : 0; s < 4; s++) {
+        const double n[2] = {sides[s][0], sides[s][1]}, t[2] = {-sides[s][1], sides[s][0]};
+        for (int q = 0; q < 2; q++) {
+            const double *p = pts[q], *v = vel[q];
+            const double g = a->radius - (n[0] * p[0] + n[1] * p[1] - sides[s][2]);
+            if (g <= 0.0)
+                continue;
+            const double vn = v[0] * n[0] + v[1] * n[1], vt = v[0] * t[0] + v[1] * t[1];
+            double fn = k * g - damp * vn;
+            fn = fn > 0.0 ? fn : 0.0;
+            const double ft = -kappa * g * vt;
+            const double f[3] = {fn * n[0] + ft * t[0], fn * n[1] + ft * t[1], 0.0};
+            point_force_qfrc(a, d, p, f);
+            deepest = g > deepest ? g : deepest;
+        }
+    }
+    return deepest;
+}
+
 void ps_crowd_before_step(ps_crowd_t *c, const mjModel *m, mjData *d, double t_s)
 {
     if (c->step_count++ % c->update_every == 0)
         update(c, m, d, t_s);
     for (uint32_t i = 0; i < c->n; i++) {
         const agent_t *a = &c->a[i];
-        mjtNum *xt = d->xfrc_applied + 6 * a->torso_body;
-        mjtNum *xb = d->xfrc_applied + 6 * a->base_body;
-        xt[0] += a->f_social[0];
-        xt[1] += a->f_social[1];
-        xb[0] += a->f_base[0];
-        xb[1] += a->f_base[1];
+        /* the base force acts on the slides alone, the ankle on the hinges */
+        d->qfrc_applied[a->vx] = a->f_base[0];
+        d->qfrc_applied[a->vy] = a->f_base[1];
         d->qfrc_applied[a->vtx] = a->tau_ankle[0];
         d->qfrc_applied[a->vty] = a->tau_ankle[1];
+        const double f[3] = {a->f_social[0], a->f_social[1], 0.0};
+        torso_force_qfrc(a, d, f);
     }
+    double wall_pen = 0.0;
+    if (c->cfg.has_arena_walls) {
+        for (uint32_t i = 0; i < c->n; i++) {
+            const double g = arena_contact(c, &c->a[i], d);
+            wall_pen = g > wall_pen ? g : wall_pen;
+        }
+    }
+    c->wall_pen_m = wall_pen;
     for (uint32_t e = 0; e < c->cfg.n_events; e++) {
         const ps_crowd_event_cfg_t *ev = &c->cfg.events[e];
         if (ev->kind == PS_CROWD_EVENT_PUSH) {
@@ -681,9 +770,9 @@ void ps_crowd_before_step(ps_crowd_t *c, const mjModel *m, mjData *d, double t_s
                 if (strcmp(c->cfg.groups[a->group].name, ev->group) != 0)
                     continue;
                 if (ev->agent < 0 || (uint32_t)ev->agent == k) {
-                    mjtNum *xt = d->xfrc_applied + 6 * a->torso_body;
-                    for (int q = 0; q < 3; q++)
-                        xt[q] += s * (double)ev->force_n[q];
+                    const double f[3] = {s * (double)ev->force_n[0], s * (double)ev->force_n[1],
+                                         s * (double)ev->force_n[2]};
+                    torso_force_qfrc(a, d, f);
                 }
                 k++;
             }
@@ -701,7 +790,7 @@ void ps_crowd_after_step(ps_crowd_t *c, const mjModel *m, const mjData *d, doubl
 {
     double part_f[PS_CROWD_MAX_PARTS][3];
     memset(part_f, 0, sizeof(part_f));
-    double pen = 0.0;
+    double pen = c->wall_pen_m;
     for (int k = 0; k < d->ncon; k++) {
         const mjContact *con = &d->contact[k];
         const int b1 = m->geom_bodyid[con->geom1], b2 = m->geom_bodyid[con->geom2];

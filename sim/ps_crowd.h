@@ -147,7 +147,7 @@ typedef struct {
     float robot_radius_m; /**< the robot as a neighbour in the social force (0.2 m) */
     float robot_a_n;      /**< its repulsion strength; 0: agents do not shy from it */
     float crowd_dt_s;     /**< crowd update period (0.002 s) */
-    float timestep_s;     /**< physics step of the scene; 0: the robot model's own */
+    float timestep_s;     /**< physics step of the scene (0.001 s); 0: the robot model's own */
     uint32_t n_groups;
     ps_crowd_group_cfg_t groups[PS_CROWD_MAX_GROUPS];
     uint32_t n_walls;
@@ -218,9 +218,9 @@ int ps_crowd_create(const ps_crowd_cfg_t *cfg, const ps_crowd_agent_spec_t *agen
 
 /** Before a physics step at simulated time t_s since start: every
  *  crowd_dt_s the decisions (social force, ankle, steps, falls, events),
- *  then their forces added into d->xfrc_applied and d->qfrc_applied (the
- *  caller has set xfrc_applied for this step already, qfrc_applied is the
- *  crowd's) and the moving walls' mocap positions.
+ *  then their forces written into d->qfrc_applied as generalised forces on
+ *  the agents' joints (qfrc_applied is the crowd's; the robot's forces go
+ *  through xfrc_applied) and the moving walls' mocap positions.
  *  @rt RT-SAFE O(agents * neighbours), no allocation, plant thread */
 void ps_crowd_before_step(ps_crowd_t *c, const struct mjModel_ *m, struct mjData_ *d,
                           double t_s);

@@ -15,6 +15,8 @@
 #define WALL_HALF_T_M  0.05
 #define WALL_HEIGHT_M  2.0
 #define OBST_HEIGHT_M  1.5
+#define ARENA_WALL_HEIGHT_M 1.2
+#define WALL_SEG_M     2.0 /* longest box of a wall */
 #define PIVOT_MASS_FRAC 0.15 /* feet and shanks: the base */
 
 /* ---- seeded generator (splitmix64) --------------------------------------- */
@@ -274,6 +276,30 @@ static void write_box(FILE *f, const char *name, double x0, double y0, double x1
             WALL_HALF_T_M, h / 2.0, rgba);
 }
 
+/* Inertia of a solid capsule of mass m, radius r and segment length len
+ * about its centre: out[0] across the axis, out[1] along it (a cylinder
+ * plus two hemispheres, each hemisphere's own 83/320 m r^2 moved by the
+ * parallel-axis theorem to its centroid 3r/8 beyond the segment's end). */
+static void capsule_inertia(double m, double r, double len, double out[2])
+{
+    const double v_cyl = M_PI * r * r * len, v_sph = 4.0 / 3.0 * M_PI * r * r * r;
+    const double m_cyl = m * v_cyl / (v_cyl + v_sph), m_hemi = (m - m_cyl) / 2.0;
+    const double off = len / 2.0 + 3.0 * r / 8.0;
+    out[0] = m_cyl * (3.0 * r * r + len * len) / 12.0 +
+             2.0 * (83.0 / 320.0 * m_hemi * r * r + m_hemi * off * off);
+    out[1] = m_cyl * r * r / 2.0 + 2.0 * (2.0 / 5.0 * m_hemi * r * r);
+}
+
+/* One agent: one body on four joints (slide x, slide y, then the tilt
+ * hinges x and y, all through the pivot at height r), the feet's mass at the
+ * pivot and the torso capsule's above it, so the slides carry the whole
+ * person and the hinges tilt the torso about the feet. The ring (agent-agent
+ * contact) sits on a jointless child body at the torso's centre of mass:
+ * MuJoCo's broadphase drops a body pair by contype/conaffinity only when each
+ * body has a single geom, and sizes a body's box by its largest geom. With
+ * the ring beside the capsule every two agents within a capsule's length
+ * (1.7 m) made a pair to sort and test; on its own body a ring pairs only
+ * with rings within a diameter. */
 static void write_agent(FILE *f, const ps_crowd_cfg_t *cfg, const ps_crowd_agent_spec_t *a,
                         uint32_t i)
 {
@@ -281,88 +307,115 @@ static void write_agent(FILE *f, const ps_crowd_cfg_t *cfg, const ps_crowd_agent
     const double len = a->height_m - 2.0 * r; /* capsule segment; pivot at height r */
     const double m_base = PIVOT_MASS_FRAC * a->mass_kg;
     const double m_torso = a->mass_kg - m_base;
+    const double l = len / 2.0; /* the torso's centre of mass above the pivot */
+    double it[2];
+    capsule_inertia(m_torso, r, len, it);
+    /* the body's centre of mass and inertia about it, feet at the pivot */
+    const double zc = m_torso * l / a->mass_kg;
+    const double i_across = it[0] + m_torso * (l - zc) * (l - zc) + m_base * zc * zc;
     /* Tilt damping: about 0.7 of critical for the torso on the ankle spring
-     * net of gravity, inertia about the pivot m (l^2 + len^2/12). */
-    const double l = len / 2.0;
-    const double inertia = m_torso * (l * l + len * len / 12.0);
+     * net of gravity, inertia about the pivot. */
+    const double inertia = it[0] + m_torso * l * l;
     const double k_net = ((double)cfg->body.ankle_k_ratio - 1.0) * m_torso * 9.81 * l;
     const double c = 1.4 * sqrt((k_net > 1.0 ? k_net : 1.0) * inertia);
     const float *rgb = GROUP_RGBA[a->group_idx % (sizeof(GROUP_RGBA) / sizeof(GROUP_RGBA[0]))];
     fprintf(f,
-            "    <body name=\"agent%u\" pos=\"%.4f %.4f 0\">\n"
+            "    <body name=\"agent%u\" pos=\"%.4f %.4f %.4f\">\n"
             "      <joint name=\"agent%u_x\" type=\"slide\" axis=\"1 0 0\" limited=\"false\" "
             "armature=\"0\" damping=\"0\" stiffness=\"0\" frictionloss=\"0\"/>\n"
             "      <joint name=\"agent%u_y\" type=\"slide\" axis=\"0 1 0\" limited=\"false\" "
             "armature=\"0\" damping=\"0\" stiffness=\"0\" frictionloss=\"0\"/>\n"
-            "      <inertial pos=\"0 0 %.4f\" mass=\"%.3f\" diaginertia=\"0.05 0.05 0.05\"/>\n"
-            "      <geom name=\"agent%u_feet\" type=\"cylinder\" pos=\"0 0 0.01\" size=\"%.3f 0.01\" "
-            "contype=\"0\" conaffinity=\"0\" mass=\"0\" rgba=\"0.15 0.15 0.15 1\"/>\n"
-            "      <body name=\"agent%u_torso\" pos=\"0 0 %.4f\">\n"
-            "        <joint name=\"agent%u_tx\" type=\"hinge\" axis=\"1 0 0\" limited=\"true\" "
+            "      <joint name=\"agent%u_tx\" type=\"hinge\" axis=\"1 0 0\" limited=\"true\" "
             "range=\"-1.5708 1.5708\" armature=\"0\" damping=\"%.2f\" stiffness=\"0\" "
             "frictionloss=\"0\"/>\n"
-            "        <joint name=\"agent%u_ty\" type=\"hinge\" axis=\"0 1 0\" limited=\"true\" "
+            "      <joint name=\"agent%u_ty\" type=\"hinge\" axis=\"0 1 0\" limited=\"true\" "
             "range=\"-1.5708 1.5708\" armature=\"0\" damping=\"%.2f\" stiffness=\"0\" "
             "frictionloss=\"0\"/>\n"
-            "        <geom name=\"agent%u_body\" type=\"capsule\" fromto=\"0 0 0 0 0 %.4f\" "
-            "size=\"%.4f\" mass=\"%.3f\" contype=\"8\" conaffinity=\"18\" condim=\"3\" "
+            "      <inertial pos=\"0 0 %.5f\" mass=\"%.4f\" diaginertia=\"%.5f %.5f %.5f\"/>\n"
+            "      <geom name=\"agent%u_body\" type=\"capsule\" fromto=\"0 0 0 0 0 %.4f\" "
+            "size=\"%.4f\" contype=\"8\" conaffinity=\"18\" condim=\"3\" "
             "priority=\"1\" friction=\"%.3f 0.005 0.0001\" solref=\"0.02 1\" "
             "solimp=\"0.9 0.9 0.001 0.5 2\" margin=\"0\" gap=\"0\" rgba=\"%.2f %.2f %.2f 1\"/>\n"
-            "        <geom name=\"agent%u_ring\" type=\"sphere\" pos=\"0 0 %.4f\" size=\"%.4f\" "
-            "mass=\"0\" contype=\"4\" conaffinity=\"4\" condim=\"1\" priority=\"1\" "
+            "      <body name=\"agent%u_ring\" pos=\"0 0 %.4f\">\n"
+            "        <inertial pos=\"0 0 0\" mass=\"1e-6\" diaginertia=\"1e-9 1e-9 1e-9\"/>\n"
+            "        <geom name=\"agent%u_ring\" type=\"sphere\" size=\"%.4f\" "
+            "contype=\"4\" conaffinity=\"4\" condim=\"1\" priority=\"1\" "
             "friction=\"%.3f 0.005 0.0001\" solref=\"0.02 1\" solimp=\"0.9 0.9 0.001 0.5 2\" "
             "margin=\"0\" gap=\"0\" group=\"3\" rgba=\"%.2f %.2f %.2f 1\"/>\n"
             "      </body>\n"
             "    </body>\n",
-            i, a->x_m, a->y_m, i, i, r / 2.0, m_base, i, r * 0.8, i, r, i, c, i, c, i, len, r,
-            m_torso, (double)cfg->body.friction, (double)rgb[0], (double)rgb[1], (double)rgb[2],
-            i, l, r, (double)cfg->body.friction, (double)rgb[0], (double)rgb[1], (double)rgb[2]);
+            i, a->x_m, a->y_m, r, i, i, i, c, i, c, zc, a->mass_kg, i_across, i_across, it[1], i,
+            len, r, (double)cfg->body.friction, (double)rgb[0], (double)rgb[1], (double)rgb[2], i,
+            l, i, r, (double)cfg->body.friction, (double)rgb[0], (double)rgb[1], (double)rgb[2]);
+}
+
+/* A vertical wall from (x0, y0) to (x1, y1), h high, as boxes of at most
+ * WALL_SEG_M on static bodies of their own. A long box (or a plane) in the
+ * world body is tested against every body of the scene each step; a short
+ * one on its own body reaches the narrow phase only for what stands near
+ * it (the broadphase sorts bodies by their boxes). */
+static void write_wall(FILE *f, const char *name, double x0, double y0, double x1, double y1,
+                       double h, const char *rgba)
+{
+    const double len = sqrt((x1 - x0) * (x1 - x0) + (y1 - y0) * (y1 - y0));
+    const int n = len > WALL_SEG_M ? (int)ceil(len / WALL_SEG_M) : 1;
+    const double ang = atan2(y1 - y0, x1 - x0);
+    for (int k = 0; k < n; k++) {
+        const double s0 = (double)k / n, s1 = (double)(k + 1) / n;
+        const double cx = x0 + (s0 + s1) / 2.0 * (x1 - x0), cy = y0 + (s0 + s1) / 2.0 * (y1 - y0);
+        /* segments overlap by the wall's thickness so no gap opens at a joint */
+        fprintf(f,
+                "    <body name=\"%s_%d\" pos=\"%.4f %.4f %.4f\" quat=\"%.6f 0 0 %.6f\">\n"
+                "      <geom name=\"%s_%d\" type=\"box\" size=\"%.4f %.4f %.4f\" contype=\"16\" "
+                "conaffinity=\"3\" condim=\"3\" priority=\"2\" friction=\"0.5 0.005 0.0001\" "
+                "solref=\"0.004 1\" solimp=\"0.9 0.95 0.001 0.5 2\" margin=\"0\" gap=\"0\" "
+                "rgba=\"%s\"/>\n"
+                "    </body>\n",
+                name, k, cx, cy, h / 2.0, cos(ang / 2.0), sin(ang / 2.0), name, k,
+                len / (2.0 * n) + WALL_HALF_T_M, WALL_HALF_T_M, h / 2.0, rgba);
+    }
 }
 
 static void write_walls(FILE *f, const ps_crowd_cfg_t *cfg)
 {
     char name[32];
     if (cfg->has_arena_walls) {
-        /* Planes facing into the arena: a plane-capsule test is analytic and
-         * cheap, where a long box would be tested against every agent (the
-         * world body's geoms all pass the broadphase). A plane is a half
-         * space, so these bound the crowd only (conaffinity 0): the robot
-         * may stand anywhere, inside the arena or not. */
+        /* Drawn only: the crowd pushes agents out of them itself (Helbing's
+         * wall contact, sim/ps_crowd.c), which costs O(agents) where even a
+         * plane in the world body is tested against every body each step.
+         * They bound the crowd only: the robot may stand anywhere. */
         const ps_crowd_rect_t *a = &cfg->arena;
+        const double t = WALL_HALF_T_M, h = ARENA_WALL_HEIGHT_M / 2.0;
         const double cx = (a->x_min_m + a->x_max_m) / 2.0, cy = (a->y_min_m + a->y_max_m) / 2.0;
-        const double hw = (a->x_max_m - a->x_min_m) / 2.0, hh = (a->y_max_m - a->y_min_m) / 2.0;
-        /* pos, half extent along the wall, and the quaternion turning the
-         * plane's +z normal to point inward */
-        const double walls[4][7] = {
-            {a->x_min_m, cy, hh, 0.7071068, 0.0, 0.7071068, 0.0},   /* normal +x */
-            {a->x_max_m, cy, hh, 0.7071068, 0.0, -0.7071068, 0.0},  /* normal -x */
-            {cx, a->y_min_m, hw, 0.7071068, -0.7071068, 0.0, 0.0},  /* normal +y */
-            {cx, a->y_max_m, hw, 0.7071068, 0.7071068, 0.0, 0.0},   /* normal -y */
-        };
-        for (int k = cfg->is_periodic_x ? 2 : 0; k < 4; k++) { /* periodic: no end walls */
-            const double *w = walls[k];
-            const bool is_x = k < 2;
+        const double hx = (a->x_max_m - a->x_min_m) / 2.0 + 2.0 * t;
+        const double hy = (a->y_max_m - a->y_min_m) / 2.0 + 2.0 * t;
+        /* centre x, y and half sizes x, y of each side's box */
+        const double sides[4][4] = {{a->x_min_m - t, cy, t, hy}, {a->x_max_m + t, cy, t, hy},
+                                    {cx, a->y_min_m - t, hx, t}, {cx, a->y_max_m + t, hx, t}};
+        fprintf(f, "    <body name=\"arena\">\n");
+        for (int k = cfg->is_periodic_x ? 2 : 0; k < 4; k++) /* periodic: no end walls */
             fprintf(f,
-                    "    <geom name=\"arena_wall%d\" type=\"plane\" pos=\"%.4f %.4f 0.6\" "
-                    "quat=\"%.7f %.7f %.7f %.7f\" size=\"%.4f %.4f 0.5\" contype=\"16\" "
-                    "conaffinity=\"0\" condim=\"3\" priority=\"2\" friction=\"0.5 0.005 0.0001\" "
-                    "solref=\"0.004 1\" margin=\"0\" gap=\"0\" rgba=\"0.55 0.55 0.6 0.35\"/>\n",
-                    k, w[0], w[1], w[3], w[4], w[5], w[6], is_x ? 0.6 : w[2], is_x ? w[2] : 0.6);
-        }
+                    "      <geom name=\"arena_wall%d\" type=\"box\" pos=\"%.4f %.4f %.4f\" "
+                    "size=\"%.4f %.4f %.4f\" contype=\"0\" conaffinity=\"0\" "
+                    "rgba=\"0.55 0.55 0.6 0.35\"/>\n",
+                    k, sides[k][0], sides[k][1], h, sides[k][2], sides[k][3], h);
+        fprintf(f, "    </body>\n");
     }
     for (uint32_t k = 0; k < cfg->n_walls; k++) {
         const ps_crowd_wall_cfg_t *w = &cfg->walls[k];
         (void)snprintf(name, sizeof(name), "wall%u", k);
-        write_box(f, name, w->x0_m, w->y0_m, w->x1_m, w->y1_m, WALL_HEIGHT_M, "0.5 0.5 0.55 1");
+        write_wall(f, name, w->x0_m, w->y0_m, w->x1_m, w->y1_m, WALL_HEIGHT_M, "0.5 0.5 0.55 1");
     }
     for (uint32_t k = 0; k < cfg->n_obstacles; k++) {
         const ps_crowd_obstacle_cfg_t *o = &cfg->obstacles[k];
         fprintf(f,
-                "    <geom name=\"obstacle%u\" type=\"cylinder\" pos=\"%.4f %.4f %.4f\" "
-                "size=\"%.4f %.4f\" contype=\"16\" conaffinity=\"3\" condim=\"3\" priority=\"2\" "
+                "    <body name=\"obstacle%u\" pos=\"%.4f %.4f %.4f\">\n"
+                "      <geom name=\"obstacle%u\" type=\"cylinder\" size=\"%.4f %.4f\" "
+                "contype=\"16\" conaffinity=\"3\" condim=\"3\" priority=\"2\" "
                 "friction=\"0.5 0.005 0.0001\" solref=\"0.004 1\" margin=\"0\" gap=\"0\" "
-                "rgba=\"0.45 0.4 0.35 1\"/>\n",
-                k, o->x_m, o->y_m, OBST_HEIGHT_M / 2.0, o->radius_m, OBST_HEIGHT_M / 2.0);
+                "rgba=\"0.45 0.4 0.35 1\"/>\n"
+                "    </body>\n",
+                k, o->x_m, o->y_m, OBST_HEIGHT_M / 2.0, k, o->radius_m, OBST_HEIGHT_M / 2.0);
     }
     for (uint32_t e = 0; e < cfg->n_events; e++) {
         const ps_crowd_event_cfg_t *ev = &cfg->events[e];

@@ -8,12 +8,17 @@
  * agent count. The plant loads it through MuJoCo's virtual file system.
  *
  * Names in the scene (sim/ps_crowd.c binds them): bodies "agentI" (base, slide
- * joints "agentI_x", "agentI_y") and "agentI_torso" (hinges "agentI_tx",
- * "agentI_ty", capsule geom "agentI_body"); world geoms "arena_wallK",
- * "wallK", "obstacleK"; mocap bodies "crowd_wallE" for moving-wall event E.
- * Collision bits: agents contype 4, conaffinity 2|4 (each other and the
- * robot, not the floor); walls contype 4, conaffinity 1|2|4. The robot model
- * keeps its own (ps1: robot 2/1, floor 1/1).
+ * joints "agentI_x", "agentI_y"), "agentI_torso" (hinges "agentI_tx",
+ * "agentI_ty", capsule geom "agentI_body") and its jointless child
+ * "agentI_ring" (sphere geom "agentI_ring" at the torso's centre of mass);
+ * static bodies "wallK_S" (segment S of wall K, box geom of the same name)
+ * and "obstacleK"; body "arena" with the arena's drawn sides "arena_wallK"
+ * (no contact: sim/ps_crowd.c pushes agents out of them); mocap bodies
+ * "crowd_wallE" for moving-wall event E.
+ * Collision bits (contype/conaffinity): capsule 8/2|16 (the robot and the
+ * walls), ring 4/4 (other rings), walls and obstacles 16/1|2. The robot
+ * model keeps its own (ps1: robot 2/1, floor 1/1), so agents never touch
+ * the floor.
  *
  * Threads: any (INIT). Allocation: ps_scene_write_mjcf returns a malloc'd
  * string.

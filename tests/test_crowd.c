@@ -270,7 +270,7 @@ static void test_scene_loads_around_unchanged_robot_with_sizes(void **state)
     ps_plant_t *p = make_plant(&c, 0, 0, 1);
     const mjModel *m = ps_plant_model(p);
     assert_int_equal(mj_name2id(m, mjOBJ_BODY, "pelvis"), ps_plant_root_body(p));
-    assert_true(mj_name2id(m, mjOBJ_BODY, "agent6_torso") > 0);
+    assert_true(mj_name2id(m, mjOBJ_BODY, "agent6_ring") > 0);
     assert_true(mj_name2id(m, mjOBJ_BODY, "agent7") < 0);
     assert_true(mj_name2id(m, mjOBJ_GEOM, "arena_wall3") >= 0);
     assert_true(m->opt.timestep == 0.0005); /* ps1.xml's */
@@ -481,6 +481,87 @@ static void test_crowd_moving_wall_pushes_agents(void **state)
     ps_plant_destroy(p);
 }
 
+/* The crowd turns a force on a torso into generalised forces on the agent's
+ * joints itself (J^T f, O(1) per agent): for a tilted agent they equal what
+ * MuJoCo's mj_applyFT makes of the same force at the same point. The push
+ * is isolated as the difference of two calls between crowd updates, one
+ * inside the push and one after it. */
+static void test_crowd_torso_force_equals_mj_applyft(void **state)
+{
+    (void)state;
+    ps_crowd_cfg_t c = base_cfg();
+    line_group(&c, 1, 1.0f, 0, 5, 1, 5);
+    c.groups[0].goal = PS_CROWD_GOAL_HOLD;
+    c.n_events = 1;
+    c.events[0] = (ps_crowd_event_cfg_t){.t_s = 0.0f, .duration_s = 0.01f,
+                                         .kind = PS_CROWD_EVENT_PUSH, .group = "g",
+                                         .agent = -1, .force_n = {300, -200, 50}};
+    ps_plant_t *p = make_plant(&c, 30, 30, 4);
+    const mjModel *m = ps_plant_model(p);
+    mjData *d = (mjData *)ps_plant_data(p);
+    d->qpos[m->jnt_qposadr[mj_name2id(m, mjOBJ_JOINT, "agent0_tx")]] = 0.3;
+    d->qpos[m->jnt_qposadr[mj_name2id(m, mjOBJ_JOINT, "agent0_ty")]] = -0.2;
+    d->qpos[m->jnt_qposadr[mj_name2id(m, mjOBJ_JOINT, "agent0_x")]] = 0.4;
+    mj_forward(m, d);
+    ps_crowd_t *cr = ps_plant_crowd(p);
+    ps_crowd_before_step(cr, m, d, 0.005); /* updates, then pushes */
+    double *with = calloc((size_t)m->nv, sizeof(double));
+    double *want = calloc((size_t)m->nv, sizeof(double));
+    assert_non_null(with);
+    assert_non_null(want);
+    memcpy(with, d->qfrc_applied, (size_t)m->nv * sizeof(double));
+    ps_crowd_before_step(cr, m, d, 0.02); /* no update (every 2 steps), no push */
+    const int ring = mj_name2id(m, mjOBJ_BODY, "agent0_ring");
+    mjtNum f[3] = {300, -200, 50}, zero[3] = {0, 0, 0};
+    mj_applyFT(m, d, f, zero, d->xpos + 3 * ring, ring, want);
+    double worst = 0.0, largest = 0.0;
+    for (int i = 0; i < m->nv; i++) {
+        const double e = fabs((with[i] - d->qfrc_applied[i]) - want[i]);
+        worst = e > worst ? e : worst;
+        largest = fabs(want[i]) > largest ? fabs(want[i]) : largest;
+    }
+    printf("torso force: largest generalised force %.3f, worst difference to mj_applyFT %.3g\n",
+           largest, worst);
+    assert_true(largest > 100.0);
+    assert_true(worst < 1e-9 * largest);
+    free(with);
+    free(want);
+    ps_plant_destroy(p);
+}
+
+/* The arena's sides hold people in through Helbing's wall contact (no MuJoCo
+ * geoms): an agent driven into a side without the social wall term stops
+ * at it, compressed by about its drive over the body stiffness. */
+static void test_crowd_arena_side_stops_agent(void **state)
+{
+    (void)state;
+    ps_crowd_cfg_t c = base_cfg();
+    c.arena = (ps_crowd_rect_t){-2, -2, 2, 2};
+    c.has_arena_walls = true;
+    c.social.wall_a_n = 0.0f; /* contact alone */
+    line_group(&c, 1, 1.0f, 1.0f, 0, 1.5f, 0);
+    c.groups[0].goal = PS_CROWD_GOAL_DIRECTION;
+    c.groups[0].goal_xy[0] = 1.0f;
+    c.groups[0].speed_m_s = 1.0f;
+    ps_plant_t *p = make_plant(&c, 30, 30, 4);
+    run_s(p, 3.0);
+    const ps_crowd_agent_state_t a = agent(p, 0);
+    ps_crowd_stats_t st;
+    ps_crowd_get_stats(ps_plant_crowd(p), &st);
+    /* at rest the drive m v0 / tau presses it on; depth F / K */
+    const double drive_n = 70.0 * 1.0 / (double)c.social.tau_s;
+    printf("arena side: base x %.4f m, CoM x %.4f m, overlap %.2f mm (drive / K %.2f mm), "
+           "max %.2f mm, speed %.3f m/s\n",
+           a.base_m[0], a.com_m[0], st.penetration_m * 1e3, drive_n / 1.2e5 * 1e3,
+           st.penetration_max_m * 1e3, hypot(a.vel_m_s[0], a.vel_m_s[1]));
+    assert_false(a.is_fallen);
+    assert_true(a.com_m[0] < 2.0 - 0.17 + 0.01);
+    assert_true(hypot(a.vel_m_s[0], a.vel_m_s[1]) < 0.02);
+    assert_true(st.penetration_m > 0.2 * drive_n / 1.2e5);
+    assert_true(st.penetration_max_m < 0.02);
+    ps_plant_destroy(p);
+}
+
 /* Same scene, seed and events: the same trajectories, bit for bit. */
 static void test_crowd_same_seed_identical_trajectories(void **state)
 {
@@ -563,6 +644,8 @@ int main(void)
         cmocka_unit_test(test_crowd_density_presets_within_10_percent),
         cmocka_unit_test(test_crowd_push_steps_or_fells),
         cmocka_unit_test(test_crowd_moving_wall_pushes_agents),
+        cmocka_unit_test(test_crowd_torso_force_equals_mj_applyft),
+        cmocka_unit_test(test_crowd_arena_side_stops_agent),
         cmocka_unit_test(test_crowd_same_seed_identical_trajectories),
         cmocka_unit_test(test_crowd_measures_the_press_on_the_robot),
     };
