@@ -14,6 +14,7 @@
 #define SOLIMP_D        0.9  /* constant impedance the scene sets on agent geoms */
 #define STAND_OMEGA     10.0 /* base follows the centre of mass: ~0.1 s */
 #define STEP_OMEGA      20.0 /* base tracks a reflex step's path */
+#define STANCE_SHIFT_S  0.3  /* feet drift under the CoM between steps */
 #define FALLEN_DRAG_N_S 400.0
 #define SLOW_FRAC       0.25 /* ahead and slower than this share of v0: in the way */
 
@@ -29,10 +30,15 @@ typedef struct {
     uint32_t group;
     /* state */
     bool is_stepping, is_fallen, is_surging;
-    double step_t0, step_from[2], step_to[2];
+    double step_t0, step_offset[2];
+    /* where the feet mean to be: the social-force particle, moved by the
+     * self-propulsion and shifted by each reflex step */
+    double feet[2], vfeet[2];
     double goal_xy[2]; /* hold: the start place */
     double surge_until, surge_v[2];
-    double f_social[2], f_base[2], tau_ankle[2];
+    double f_social[2];  /* self-propulsion (drive, repulsion, evasion): through the feet */
+    double f_contact[2]; /* sliding friction between bodies: at the torso's CoM */
+    double f_base[2], tau_ankle[2];
     /* kinematics at the last update */
     double base[2], vbase[2], com[3], vcom[2], tilt;
 } agent_t;
@@ -135,6 +141,8 @@ static int bind_agent(ps_crowd_t *c, mjModel *m, const ps_crowd_agent_spec_t *s,
     const double l = a->com_h - a->pivot_h;
     a->ankle_k = (double)c->cfg.body.ankle_k_ratio * a->m_torso * G_M_S2 * l;
     a->ankle_max = a->mass * G_M_S2 * (double)c->cfg.body.bos_m;
+    a->feet[0] = s->x_m;
+    a->feet[1] = s->y_m;
     a->goal_xy[0] = s->x_m;
     a->goal_xy[1] = s->y_m;
     /* Contact stiffness: with constant impedance d and solref (-k, -b) MuJoCo
@@ -336,7 +344,7 @@ static void social_force(ps_crowd_t *c, uint32_t i, const mjModel *m, double out
     agent_t *a = &c->a[i];
     double e[2], v0;
     heading(c, a, e, &v0);
-    ps_social_drive(a->mass, v0, sp->tau_s, e, a->vcom, out);
+    ps_social_drive(a->mass, v0, sp->tau_s, e, a->vfeet, out);
     const double xi[2] = {a->com[0], a->com[1]};
     int cx, cy;
     ps_social_grid_cell(&c->grid, xi, &cx, &cy);
@@ -458,47 +466,78 @@ static void balance(ps_crowd_t *c, agent_t *a, const mjData *d, double t_s)
     a->tau_ankle[1] = -a->ankle_k * d->qpos[a->qty];
     clamp_norm(a->tau_ankle, a->ankle_max);
 
-    /* Capture point against where the base should be for the wanted walk. */
+    /* The feet walk as the social-force particle: its acceleration is the
+     * self-propulsion over the mass (which also acts on the body, spread in
+     * proportion to mass, ps_crowd_before_step), so in a free walk body and
+     * feet move together and the feet's controller does nothing. */
+    const double dt = (double)c->cfg.crowd_dt_s;
+    for (int k = 0; k < 2; k++) {
+        a->vfeet[k] += a->f_social[k] / a->mass * dt;
+        a->feet[k] += a->vfeet[k] * dt;
+    }
+    /* Stepping reflex on the capture point relative to the feet, which
+     * stand where they mean to be (ground friction): what has to be caught
+     * is the torso falling relative to them, pushed or pressed,
+     * xi = (com - base) + (v_com - v_base) / omega0. */
     const double omega0 = sqrt(G_M_S2 / a->com_h);
-    double e[2], v0;
-    heading(c, a, e, &v0);
-    const double xi[2] = {a->com[0] + a->vcom[0] / omega0, a->com[1] + a->vcom[1] / omega0};
-    const double err[2] = {xi[0] - a->base[0] - v0 * e[0] / omega0,
-                           xi[1] - a->base[1] - v0 * e[1] / omega0};
-    if (!a->is_stepping && sqrt(err[0] * err[0] + err[1] * err[1]) > (double)bc->bos_m) {
+    double xi[2] = {a->com[0] - a->base[0] + (a->vcom[0] - a->vbase[0]) / omega0,
+                    a->com[1] - a->base[1] + (a->vcom[1] - a->vbase[1]) / omega0};
+    if (!a->is_stepping && sqrt(xi[0] * xi[0] + xi[1] * xi[1]) > (double)bc->bos_m) {
+        clamp_norm(xi, (double)bc->step_max_m);
         a->is_stepping = true;
         a->step_t0 = t_s;
-        double dx[2] = {xi[0] - a->base[0], xi[1] - a->base[1]};
-        clamp_norm(dx, (double)bc->step_max_m);
-        for (int k = 0; k < 2; k++) {
-            a->step_from[k] = a->base[k];
-            a->step_to[k] = a->base[k] + dx[k];
-        }
+        a->step_offset[0] = xi[0];
+        a->step_offset[1] = xi[1];
         c->st.n_steps_taken++;
     }
-    double target[2], vtarget[2], omega;
+    double target[2], vtarget[2];
     if (a->is_stepping) {
+        /* the swing foot heads for where the capture point is now (it lands
+         * where the body would come to rest over it) along a minimum-jerk
+         * path from where the feet stood */
+        for (int k = 0; k < 2; k++)
+            a->step_offset[k] =
+                a->com[k] - a->feet[k] + (a->vcom[k] - a->vfeet[k]) / omega0;
+        clamp_norm(a->step_offset, (double)bc->step_max_m);
         const double T = (double)bc->step_time_s;
         double p, dp;
         min_jerk((t_s - a->step_t0) / T, &p, &dp);
         for (int k = 0; k < 2; k++) {
-            target[k] = a->step_from[k] + p * (a->step_to[k] - a->step_from[k]);
-            vtarget[k] = dp / T * (a->step_to[k] - a->step_from[k]);
+            target[k] = a->feet[k] + p * a->step_offset[k];
+            vtarget[k] = a->vfeet[k] + dp / T * a->step_offset[k];
         }
-        omega = STEP_OMEGA;
-        if (t_s - a->step_t0 >= T)
+        if (t_s - a->step_t0 >= T) {
             a->is_stepping = false;
+            a->feet[0] += a->step_offset[0];
+            a->feet[1] += a->step_offset[1];
+        }
     } else {
-        target[0] = a->com[0];
-        target[1] = a->com[1];
-        vtarget[0] = a->vcom[0];
-        vtarget[1] = a->vcom[1];
-        omega = STAND_OMEGA;
+        /* standing or walking: small shuffles bring the feet under the CoM
+         * and to its speed over STANCE_SHIFT_S (weight shifts; a lean the
+         * ankle alone would take seconds to undo; and where bodies press on
+         * each other the feet do not walk on through them) */
+        const double w = dt / STANCE_SHIFT_S < 1.0 ? dt / STANCE_SHIFT_S : 1.0;
+        for (int k = 0; k < 2; k++) {
+            a->feet[k] += w * (a->com[k] - a->feet[k]);
+            a->vfeet[k] += w * (a->vcom[k] - a->vfeet[k]);
+            target[k] = a->feet[k];
+            vtarget[k] = a->vfeet[k];
+        }
     }
+    const double omega = a->is_stepping ? STEP_OMEGA : STAND_OMEGA;
     for (int k = 0; k < 2; k++)
         a->f_base[k] = a->mass * (omega * omega * (target[k] - a->base[k]) +
                                   2.0 * omega * (vtarget[k] - a->vbase[k]));
-    clamp_norm(a->f_base, (double)bc->ground_mu * a->mass * G_M_S2);
+    const double cap = (double)bc->ground_mu * a->mass * G_M_S2;
+    if (hypot(a->f_base[0], a->f_base[1]) > cap && !a->is_stepping) {
+        /* more than friction holds: the feet slide, and mean to be where
+         * they are now */
+        for (int k = 0; k < 2; k++) {
+            a->feet[k] = a->base[k];
+            a->vfeet[k] = a->vbase[k];
+        }
+    }
+    clamp_norm(a->f_base, cap);
 }
 
 static void run_events(ps_crowd_t *c, double t_s)
@@ -562,12 +601,12 @@ static void sliding_friction(ps_crowd_t *c, const mjModel *m, const mjData *d)
         const double dvt = (b->vcom[0] - a->vcom[0]) * t[0] + (b->vcom[1] - a->vcom[1]) * t[1];
         const double f = kappa * -con->dist * dvt; /* on a, along t */
         if (!a->is_fallen) {
-            a->f_social[0] += f * t[0];
-            a->f_social[1] += f * t[1];
+            a->f_contact[0] += f * t[0];
+            a->f_contact[1] += f * t[1];
         }
         if (!b->is_fallen) {
-            b->f_social[0] -= f * t[0];
-            b->f_social[1] -= f * t[1];
+            b->f_contact[0] -= f * t[0];
+            b->f_contact[1] -= f * t[1];
         }
     }
     (void)m;
@@ -593,8 +632,10 @@ static void wrap_x(ps_crowd_t *c, mjData *d)
             const double dy = b->y0 + d->qpos[b->qy] - (a->y0 + d->qpos[a->qy]);
             is_free = j == i || dx * dx + dy * dy > 4.0 * 0.25 * 0.25;
         }
-        if (is_free)
+        if (is_free) {
             d->qpos[a->qx] += shift;
+            a->feet[0] += shift;
+        }
     }
 }
 
@@ -626,6 +667,7 @@ static void update(ps_crowd_t *c, const mjModel *m, mjData *d, double t_s)
             social_force(c, i, m, a->f_social);
         else
             a->f_social[0] = a->f_social[1] = 0.0;
+        a->f_contact[0] = a->f_contact[1] = 0.0;
     }
     sliding_friction(c, m, d);
     for (uint32_t i = 0; i < c->n; i++) {
@@ -747,7 +789,15 @@ void ps_crowd_before_step(ps_crowd_t *c, const mjModel *m, mjData *d, double t_s
         d->qfrc_applied[a->vy] = a->f_base[1];
         d->qfrc_applied[a->vtx] = a->tau_ankle[0];
         d->qfrc_applied[a->vty] = a->tau_ankle[1];
-        const double f[3] = {a->f_social[0], a->f_social[1], 0.0};
+        /* Self-propulsion is a ground reaction: spread in proportion to
+         * mass (the torso's share at its CoM, the rest at the feet) it
+         * translates the person without tipping them. Body contact acts on
+         * the torso. */
+        const double share = a->m_torso / a->mass;
+        const double f[3] = {share * a->f_social[0] + a->f_contact[0],
+                             share * a->f_social[1] + a->f_contact[1], 0.0};
+        d->qfrc_applied[a->vx] += (1.0 - share) * a->f_social[0];
+        d->qfrc_applied[a->vy] += (1.0 - share) * a->f_social[1];
         torso_force_qfrc(a, d, f);
     }
     double wall_pen = 0.0;

@@ -306,21 +306,29 @@ static void test_crowd_free_speed_within_10_percent(void **state)
     }
 }
 
-static double pair_depth(ps_plant_t *p, int geom_a, int geom_b)
+/* Depth and normal force of the contact between two geoms (0 if none). */
+static double pair_depth(ps_plant_t *p, int geom_a, int geom_b, double *out_force_n)
 {
+    const mjModel *m = ps_plant_model(p);
     const mjData *d = ps_plant_data(p);
     double depth = 0.0;
+    *out_force_n = 0.0;
     for (int k = 0; k < d->ncon; k++) {
         const mjContact *con = &d->contact[k];
         if ((con->geom1 == geom_a && con->geom2 == geom_b) ||
-            (con->geom1 == geom_b && con->geom2 == geom_a))
-            depth = -con->dist > depth ? -con->dist : depth;
+            (con->geom1 == geom_b && con->geom2 == geom_a)) {
+            mjtNum f[6];
+            mj_contactForce(m, d, k, f);
+            depth = -con->dist;
+            *out_force_n = f[0];
+        }
     }
     return depth;
 }
 
-/* Two agents pressed together by a steady force F compress by F / K, K the
- * configured body stiffness (Helbing 2000's k), at two stiffnesses. */
+/* Two agents pressed together by a steady push (the pushed one's feet take
+ * part of it) compress by the force between them over K, the configured
+ * body stiffness (Helbing 2000's k), at two stiffnesses. */
 static void test_crowd_two_body_compression_as_configured(void **state)
 {
     (void)state;
@@ -345,11 +353,14 @@ static void test_crowd_two_body_compression_as_configured(void **state)
         ps_plant_t *p = make_plant(&c, -5, -5, 1);
         const mjModel *m = ps_plant_model(p);
         run_s(p, 3.0);
+        double f_contact = 0.0;
         const double depth = pair_depth(p, mj_name2id(m, mjOBJ_GEOM, "agent0_ring"),
-                                        mj_name2id(m, mjOBJ_GEOM, "agent1_ring"));
-        printf("compression: K %.0f N/m, F %.0f N: depth %.3f mm, F/K %.3f mm\n", ks[k], f_n,
-               depth * 1e3, f_n / ks[k] * 1e3);
-        assert_true(fabs(depth - f_n / ks[k]) <= 0.05 * f_n / ks[k]);
+                                        mj_name2id(m, mjOBJ_GEOM, "agent1_ring"), &f_contact);
+        printf("compression: K %.0f N/m, push %.0f N, contact force %.1f N: depth %.3f mm, "
+               "F/K %.3f mm\n",
+               ks[k], f_n, f_contact, depth * 1e3, f_contact / ks[k] * 1e3);
+        assert_true(f_contact > 0.5 * f_n);
+        assert_true(fabs(depth - f_contact / ks[k]) <= 0.05 * f_contact / ks[k]);
         ps_plant_destroy(p);
     }
 }
@@ -420,12 +431,57 @@ static void test_crowd_density_presets_within_10_percent(void **state)
     }
 }
 
+/* Walking down a wide wrapping corridor (10 m x 3 m, periodic in x) at
+ * several densities, everyone wanting the same 1.29 m/s (so density is all
+ * that changes): the mean speed in the corridor falls as density grows (the
+ * fundamental diagram), and the walkers stay on their feet. */
+static void test_crowd_speed_falls_with_density(void **state)
+{
+    (void)state;
+    const float densities[] = {0.5f, 1.5f, 2.5f, 3.5f};
+    double speed[4];
+    for (int k = 0; k < 4; k++) {
+        ps_crowd_cfg_t c = base_cfg();
+        c.arena = (ps_crowd_rect_t){-5, -1.5f, 5, 1.5f};
+        c.has_arena_walls = true;
+        c.is_periodic_x = true;
+        c.measure = c.arena;
+        ps_crowd_group_cfg_t *g = &c.groups[0];
+        g->density_m2 = densities[k];
+        g->region = c.arena;
+        g->goal = PS_CROWD_GOAL_DIRECTION;
+        g->goal_xy[0] = 1.0f;
+        ps_plant_t *p = make_plant(&c, 30, 30, 11);
+        run_s(p, 2.5); /* from rest into the flow */
+        double sum = 0.0;
+        const int n_samples = 15;
+        for (int q = 0; q < n_samples; q++) {
+            run_s(p, 0.1);
+            ps_crowd_stats_t st;
+            ps_crowd_get_stats(ps_plant_crowd(p), &st);
+            sum += st.measure_speed_m_s;
+        }
+        ps_crowd_stats_t st;
+        ps_crowd_get_stats(ps_plant_crowd(p), &st);
+        speed[k] = sum / n_samples;
+        printf("corridor at %.1f / m^2 (%u agents): mean speed %.3f m/s over 1.5 s, %u fallen, "
+               "%llu reflex steps\n",
+               (double)densities[k], st.n_agents, speed[k], st.n_fallen,
+               (unsigned long long)st.n_steps_taken);
+        assert_int_equal(st.n_fallen, 0);
+        ps_plant_destroy(p);
+    }
+    assert_true(fabs(speed[0] - 1.29) < 0.1 * 1.29); /* nearly free at 0.5 / m^2 */
+    for (int k = 0; k < 3; k++)
+        assert_true(speed[k + 1] < speed[k] - 0.02);
+}
+
 /* A light push makes an agent step and recover; a hard one fells it, and it
  * then lies on the floor. */
 static void test_crowd_push_steps_or_fells(void **state)
 {
     (void)state;
-    const float forces[] = {150.0f, 1200.0f};
+    const float forces[] = {250.0f, 1200.0f};
     for (int k = 0; k < 2; k++) {
         ps_crowd_cfg_t c = base_cfg();
         line_group(&c, 1, 1.0f, 0, 5, 1, 5);
@@ -642,6 +698,7 @@ int main(void)
         cmocka_unit_test(test_crowd_two_body_compression_as_configured),
         cmocka_unit_test(test_crowd_queue_push_arrives_in_order),
         cmocka_unit_test(test_crowd_density_presets_within_10_percent),
+        cmocka_unit_test(test_crowd_speed_falls_with_density),
         cmocka_unit_test(test_crowd_push_steps_or_fells),
         cmocka_unit_test(test_crowd_moving_wall_pushes_agents),
         cmocka_unit_test(test_crowd_torso_force_equals_mj_applyft),
