@@ -12,6 +12,9 @@ CXX     ?= c++
 # can-utils, libgpiod, C++ for the camera side). `make deps` installs both.
 BUILD_PKGS := gcc libc6-dev make pkg-config libmujoco-dev libcyaml-dev libyaml-dev \
               libcmocka-dev libcjson-dev libmnl-dev libgpiod-dev
+# The crowd's pictures (--record, --view, sim/ps_render.h): PNG, offscreen
+# OpenGL through EGL on Mesa's software rasteriser, a GLFW window, ffmpeg.
+BUILD_PKGS += libpng-dev libegl-dev libegl-mesa0 libgl1-mesa-dri libglfw3-dev ffmpeg
 TOOL_PKGS  := g++ rt-tests can-utils
 # What `make test` needs beyond building: can-utils' log2long reads the
 # candump-format lines the runtime writes (tests/test_candump.c).
@@ -23,6 +26,7 @@ WARN    := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototyp
 CFLAGS  ?= -O2 -g
 CFLAGS  += -std=c11 -D_GNU_SOURCE -pthread $(WARN) -MMD -MP
 LDLIBS  := -lmujoco -lcyaml -lyaml -lcjson -lmnl -lgpiod -lm -pthread
+LDLIBS  += -lpng -lEGL -lglfw
 SANFLAGS := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
 
 LIB_SRCS  := $(filter-out rt/main.c,$(wildcard rt/*.c drivers/*.c policy/*.c sim/*.c))
@@ -31,7 +35,7 @@ FAKE_SRCS := $(wildcard tests/fakes/*.c tests/contract/*.c)
 TEST_SRCS := $(wildcard tests/test_*.c)
 # Tests that count allocations or page faults, or need full speed, run without
 # sanitizers (ASan replaces malloc, which the allocation guard interposes).
-NOSAN_TESTS := $(basename $(notdir $(wildcard tests/test_e2e*.c tests/test_guard*.c tests/test_noalloc*.c)))
+NOSAN_TESTS := $(basename $(notdir $(wildcard tests/test_e2e*.c tests/test_guard*.c tests/test_noalloc*.c tests/test_render*.c)))
 SAN_TESTS   := $(filter-out $(NOSAN_TESTS),$(basename $(notdir $(TEST_SRCS))))
 
 OBJ      = $(patsubst %.c,$(BUILD)/obj/%.o,$(1))

@@ -10,6 +10,7 @@
 #include <getopt.h>
 #include <libgen.h>
 #include <limits.h>
+#include <math.h>
 #include <pthread.h>
 #include <signal.h>
 #include <stdio.h>
@@ -20,6 +21,8 @@
 #include <unistd.h>
 
 #include "../drivers/ps_candump.h"
+#include "../sim/ps_plant.h"
+#include "../sim/ps_render.h"
 #include "ps_app.h"
 #include "ps_emulate.h"
 #include "ps_monitor.h"
@@ -56,6 +59,9 @@ typedef struct {
     const char *candump_path; /**< --candump: every frame as a candump -L line */
     const char *replay_path;  /**< --replay: buses fed from this candump -L log */
     const char *crowd_log;    /**< --crowd-log: the crowd's measurements per tick, CSV */
+    const char *record_dir;   /**< --record: frames, density map, MP4 */
+    double record_fps;        /**< --record-fps */
+    bool is_view;             /**< --view: live window */
     unsigned hist_us;         /**< wake-up histogram buckets (cyclictest -h N) */
 } options_t;
 
@@ -77,6 +83,7 @@ static struct {
     ps_guard_counts_t guard;
     FILE *crowd_log;
     uint64_t n_crowd_samples;
+    ps_render_t *render;
     int loop_rc;
     _Atomic bool is_loop_done;
 } g;
@@ -129,6 +136,14 @@ static const char USAGE[] =
     "                        fallen and stepping, density around the robot, crowd force\n"
     "                        on the robot and on each of its bodies, transmitted\n"
     "                        impulse, deepest penetration) as CSV\n"
+    "  --record DIR          simulation: pictures of the scene into DIR (made if\n"
+    "                        missing): frame_NNNNN.png at --record-fps of simulated\n"
+    "                        time with the crowd's contact forces on the robot's\n"
+    "                        parts, density.png (the crowd from above), crowd.mp4\n"
+    "                        (ffmpeg); offscreen (EGL), no display needed\n"
+    "  --record-fps N        frames per simulated second (default 25)\n"
+    "  --view                simulation: show the scene live in a window (needs a\n"
+    "                        display)\n"
     "  --trace               write trace points to ftrace's trace_marker (tick start,\n"
     "                        end, overruns, state changes) for trace-cmd/KernelShark\n"
     "  -h, --help            this text\n"
@@ -182,7 +197,10 @@ static int parse_options(int argc, char **argv, options_t *o)
         O_HIST_US,
         O_CANDUMP,
         O_REPLAY,
-        O_CROWD_LOG
+        O_CROWD_LOG,
+        O_RECORD,
+        O_RECORD_FPS,
+        O_VIEW
     };
     static const struct option LONG[] = {
         {"board", required_argument, NULL, 'b'},
@@ -201,10 +219,17 @@ static int parse_options(int argc, char **argv, options_t *o)
         {"candump", required_argument, NULL, O_CANDUMP},
         {"replay", required_argument, NULL, O_REPLAY},
         {"crowd-log", required_argument, NULL, O_CROWD_LOG},
+        {"record", required_argument, NULL, O_RECORD},
+        {"record-fps", required_argument, NULL, O_RECORD_FPS},
+        {"view", no_argument, NULL, O_VIEW},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
-    *o = (options_t){.board = "sim", .start_after_s = -1.0, .out_dir = "profile", .hist_us = 1000};
+    *o = (options_t){.board = "sim",
+                     .start_after_s = -1.0,
+                     .out_dir = "profile",
+                     .hist_us = 1000,
+                     .record_fps = 25.0};
     if (argc > 1 && strcmp(argv[1], "profile") == 0) {
         o->is_profile = true;
         argv[1] = argv[0]; /* getopt starts after the subcommand */
@@ -253,6 +278,22 @@ static int parse_options(int argc, char **argv, options_t *o)
             break;
         case O_CROWD_LOG:
             o->crowd_log = optarg;
+            break;
+        case O_RECORD:
+            o->record_dir = optarg;
+            break;
+        case O_RECORD_FPS: {
+            char *end = NULL;
+            o->record_fps = strtod(optarg, &end);
+            if (end == optarg || *end != '\0' || !(o->record_fps > 0.0) || o->record_fps > 200.0) {
+                fprintf(stderr, "pushstep: --record-fps: \"%s\" is not a rate in (0, 200]\n",
+                        optarg);
+                return -EINVAL;
+            }
+            break;
+        }
+        case O_VIEW:
+            o->is_view = true;
             break;
         case O_OUT:
             o->out_dir = optarg;
@@ -539,6 +580,72 @@ static void crowd_status(void *ctx, char *buf, size_t len)
     if (t.has_crowd)
         snprintf(buf, len, "crowd=%u(%u down) rho=%.1f/m2 F=%.0fN", t.crowd.n_agents,
                  t.crowd.n_fallen, t.crowd.local_density_m2, t.crowd.robot_force_n);
+}
+
+/* ---- pictures (--record, --view) ---------------------------------------- */
+
+static void on_frame(void *ctx, const struct ps_plant *p)
+{
+    ps_render_offer(ctx, ps_plant_data(p));
+}
+
+static int open_render(char *err, size_t len)
+{
+    if (g.opt.record_dir == NULL && !g.opt.is_view)
+        return 0;
+    if (g.app.sim == NULL) {
+        snprintf(err, len, "only the simulation (board sim) has a scene to show");
+        return -EINVAL;
+    }
+    const ps_crowd_cfg_t *cc = &g.app.scenario.crowd;
+    const double rx = g.app.scenario.robot_xy_m[0], ry = g.app.scenario.robot_xy_m[1];
+    const ps_render_cfg_t rc = {
+        .dir = g.opt.record_dir,
+        .fps = g.opt.record_fps,
+        .width = 960,
+        .height = 540,
+        .is_view = g.opt.is_view,
+        .is_lockstep = g.opt.is_lockstep,
+        .robot_root = "pelvis",
+        .area_m = {cc->is_enabled ? cc->arena.x_min_m : rx - 3.0,
+                   cc->is_enabled ? cc->arena.y_min_m : ry - 3.0,
+                   cc->is_enabled ? cc->arena.x_max_m : rx + 3.0,
+                   cc->is_enabled ? cc->arena.y_max_m : ry + 3.0},
+    };
+    const struct ps_plant *plant = ps_sim_plant(g.app.sim);
+    int rc_ = ps_render_create(&rc, ps_plant_model(plant), &g.render, err, len);
+    if (rc_ == 0)
+        rc_ = ps_render_start(g.render, err, len);
+    const int64_t frame_ns = (int64_t)llround(1e9 / g.opt.record_fps);
+    if (rc_ == 0 && ps_sim_set_frame_hook(g.app.sim, frame_ns, on_frame, g.render) < 0) {
+        snprintf(err, len, "--record-fps %g: a frame every %lld ns is not a whole number of "
+                 "physics steps", g.opt.record_fps, (long long)frame_ns);
+        rc_ = -EINVAL;
+    }
+    if (rc_ < 0) {
+        ps_render_destroy(g.render);
+        g.render = NULL;
+    }
+    return rc_;
+}
+
+static int close_render(void)
+{
+    if (g.render == NULL)
+        return 0;
+    ps_render_result_t res;
+    char err[PS_ERR_MSG_LEN] = "";
+    const int rc = ps_render_finish(g.render, &res, err, sizeof(err));
+    if (g.opt.record_dir != NULL)
+        printf("record: %llu frames (%llu dropped) to %s: frame_*.png%s%s\n",
+               (unsigned long long)res.n_frames, (unsigned long long)res.n_dropped,
+               g.opt.record_dir, res.is_density ? ", density.png" : "",
+               res.is_mp4 ? ", crowd.mp4" : "");
+    if (rc < 0)
+        fprintf(stderr, "pushstep: --record: %s\n", err);
+    ps_render_destroy(g.render);
+    g.render = NULL;
+    return rc;
 }
 
 static int open_crowd_log(char *err, size_t len)
@@ -853,6 +960,13 @@ int main(int argc, char **argv)
         ps_trace_close(&g.trace);
         return 2;
     }
+    if (open_render(err, sizeof(err)) < 0) {
+        fprintf(stderr, "pushstep: %s: %s\n", g.opt.is_view ? "--view" : "--record", err);
+        (void)close_crowd_log();
+        ps_app_deinit(&g.app);
+        ps_trace_close(&g.trace);
+        return 2;
+    }
     if (g.opt.candump_path != NULL && open_candump_file(err, sizeof(err)) < 0) {
         fprintf(stderr, "pushstep: --candump: %s\n", err);
         ps_app_deinit(&g.app);
@@ -920,6 +1034,8 @@ int main(int argc, char **argv)
     if (close_candump() < 0 && rc == 0)
         rc = -EIO;
     if (close_crowd_log() < 0 && rc == 0)
+        rc = -EIO;
+    if (close_render() < 0 && rc == 0)
         rc = -EIO;
     ps_trace_close(&g.trace);
     ps_app_deinit(&g.app);

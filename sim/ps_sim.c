@@ -24,6 +24,9 @@ struct ps_sim {
     ps_sim_robot_t robot;
     ps_scenario_cfg_t scenario;
     ps_sim_hooks_t hooks;
+    int64_t frame_ns; /* pictures: ps_sim_set_frame_hook */
+    void (*frame_fn)(void *ctx, const struct ps_plant *p);
+    void *frame_ctx;
     bool is_lockstep;
     int64_t period_ns;
     int64_t dt_ns; /**< physics timestep */
@@ -227,6 +230,19 @@ static void substep(ps_sim_t *s, int64_t t_dev_ns, int64_t rel_ns)
             s->n_steps++;
     }
     s->plant_rel_ns += s->dt_ns;
+    if (s->frame_fn != NULL && s->plant_rel_ns % s->frame_ns == 0)
+        s->frame_fn(s->frame_ctx, s->plant);
+}
+
+int ps_sim_set_frame_hook(ps_sim_t *s, int64_t frame_ns,
+                          void (*fn)(void *ctx, const struct ps_plant *p), void *ctx)
+{
+    if (fn != NULL && (frame_ns <= 0 || frame_ns % s->dt_ns != 0))
+        return -EINVAL;
+    s->frame_ns = frame_ns;
+    s->frame_fn = fn;
+    s->frame_ctx = ctx;
+    return 0;
 }
 
 static void update_truth(ps_sim_t *s)

@@ -266,6 +266,14 @@ struct ps_plant;
 const struct ps_plant *ps_sim_plant(const ps_sim_t *s);
 
 /** @post all resources freed; s invalid. Safe on NULL.  @rt INIT */
+/** Pictures: fn(ctx, plant) after each physics step that ends on the
+ *  frame_ns grid of simulated time (sim/ps_render.h offers the state), on
+ *  the thread that steps the plant; it must not block in real time. Set
+ *  before ps_sim_start; fn NULL: none.
+ *  @return 0 | -EINVAL (frame_ns not a positive multiple of the step)  @rt INIT */
+int ps_sim_set_frame_hook(ps_sim_t *s, int64_t frame_ns,
+                          void (*fn)(void *ctx, const struct ps_plant *p), void *ctx);
+
 void ps_sim_destroy(ps_sim_t *s);
 
 #endif /* PS_SIM_H */

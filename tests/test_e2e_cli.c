@@ -102,7 +102,7 @@ static void test_cli_help_documents_every_option(void **state)
         "--lockstep",        "--summary FILE.json", "--require-rt",    "--trace",
         "pushstep profile",  "--stress cpu|mem|io", "--out DIR",       "--hist-us N",
         "pushstep monitor",  "pushstep emulate",    "--start-after S", "--candump FILE",
-        "--crowd-log FILE.csv"};
+        "--crowd-log FILE.csv", "--record DIR",     "--record-fps N",  "--view"};
     for (size_t i = 0; i < sizeof(OPTIONS) / sizeof(OPTIONS[0]); i++)
         if (strstr(out, OPTIONS[i]) == NULL)
             fail_msg("--help does not mention %s", OPTIONS[i]);
@@ -341,6 +341,53 @@ static void test_cli_default_run_is_the_crowd(void **state)
     assert_non_null(strstr(scenario, "scenarios/crowd.yaml"));
     cJSON_Delete(j);
     unlink(path);
+}
+
+/* --record DIR: a frame per 1/fps of simulated time, the density map and an
+ * MP4 with one frame per PNG; --view refuses cleanly without a display. */
+static void test_cli_record_writes_frames_density_and_mp4(void **state)
+{
+    (void)state;
+    char dir[] = "/tmp/ps_record_XXXXXX";
+    assert_non_null(mkdtemp(dir));
+    char args[256];
+    snprintf(args, sizeof(args), "--lockstep --quiet --duration 1 --record %s --record-fps 10",
+             dir);
+    const int rc = run(args);
+    if (rc != 0)
+        fail_msg("exit %d:\n%s", rc, out);
+    unsigned long long n_frames = 0, n_dropped = 1;
+    const char *line = strstr(out, "record: ");
+    assert_non_null(line);
+    assert_int_equal(sscanf(line, "record: %llu frames (%llu dropped)", &n_frames, &n_dropped), 2);
+    assert_true(n_frames >= 10); /* 1 s and the braking after it, at 10 per s */
+    assert_int_equal(n_dropped, 0);
+    char path[128], cmd[320];
+    snprintf(path, sizeof(path), "%s/frame_%05llu.png", dir, n_frames - 1);
+    assert_int_equal(access(path, R_OK), 0);
+    snprintf(path, sizeof(path), "%s/density.png", dir);
+    assert_int_equal(access(path, R_OK), 0);
+    snprintf(cmd, sizeof(cmd),
+             "ffprobe -v error -count_frames -select_streams v:0 -show_entries "
+             "stream=nb_read_frames -of csv=p=0 %s/crowd.mp4",
+             dir);
+    FILE *p = popen(cmd, "r");
+    assert_non_null(p);
+    unsigned long long n_mp4 = 0;
+    assert_int_equal(fscanf(p, "%llu", &n_mp4), 1);
+    (void)pclose(p);
+    assert_int_equal(n_mp4, n_frames);
+    snprintf(cmd, sizeof(cmd), "rm -rf %s", dir);
+    assert_int_equal(system(cmd), 0);
+
+    char *display = getenv("DISPLAY") ? strdup(getenv("DISPLAY")) : NULL;
+    assert_int_equal(unsetenv("DISPLAY"), 0);
+    assert_int_equal(unsetenv("WAYLAND_DISPLAY"), 0);
+    assert_int_equal(run("--lockstep --quiet --duration 1 --view"), 2);
+    if (display != NULL)
+        assert_int_equal(setenv("DISPLAY", display, 1), 0);
+    free(display);
+    assert_non_null(strstr(out, "--view: the live viewer needs a display"));
 }
 
 /* Lockstep with a crowd is deterministic: the same scenario twice gives the
@@ -1050,6 +1097,7 @@ int main(void)
         cmocka_unit_test(test_cli_lockstep_same_scenario_twice_identical_summaries),
         cmocka_unit_test(test_cli_default_run_is_the_crowd),
         cmocka_unit_test(test_cli_lockstep_crowd_twice_identical_logs),
+        cmocka_unit_test(test_cli_record_writes_frames_density_and_mp4),
         cmocka_unit_test(test_cli_data_dir_from_environment),
         cmocka_unit_test(test_cli_realtime_run_paced_in_real_time),
         cmocka_unit_test(test_cli_realtime_slow_plant_require_rt_fatal),
