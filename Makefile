@@ -11,7 +11,8 @@ CXX     ?= c++
 # and run the system; TOOL_PKGS are for working with targets (cyclictest,
 # can-utils, libgpiod, C++ for the camera side). `make deps` installs both.
 BUILD_PKGS := gcc libc6-dev make pkg-config libmujoco-dev libcyaml-dev libyaml-dev \
-              libcmocka-dev libcjson-dev libmnl-dev libgpiod-dev
+              libcmocka-dev libcjson-dev libmnl-dev libgpiod-dev \
+              libzstd-dev liblz4-dev zlib1g-dev
 TOOL_PKGS  := g++ rt-tests can-utils
 # What `make test` needs beyond building: can-utils' log2long reads the
 # candump-format lines the runtime writes (tests/test_candump.c).
@@ -22,7 +23,7 @@ BENCH_PKGS := stress-ng gnuplot-nox python3
 WARN    := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototypes
 CFLAGS  ?= -O2 -g
 CFLAGS  += -std=c11 -D_GNU_SOURCE -pthread $(WARN) -MMD -MP
-LDLIBS  := -lmujoco -lcyaml -lyaml -lcjson -lmnl -lgpiod -lm -pthread
+LDLIBS  := -lmujoco -lcyaml -lyaml -lcjson -lmnl -lgpiod -lzstd -llz4 -lz -lm -pthread
 SANFLAGS := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
 
 LIB_SRCS  := $(filter-out rt/main.c,$(wildcard rt/*.c drivers/*.c policy/*.c sim/*.c))

@@ -27,6 +27,7 @@
 #include "ps_guard.h"
 #include "ps_logger.h"
 #include "ps_profile.h"
+#include "ps_recorder.h"
 #include "ps_rtsetup.h"
 #include "ps_summary.h"
 
@@ -56,6 +57,10 @@ typedef struct {
     const char *candump_path; /**< --candump: every frame as a candump -L line */
     const char *replay_path;  /**< --replay: buses fed from this candump -L log */
     unsigned hist_us;         /**< wake-up histogram buckets (cyclictest -h N) */
+    const char *record_path;  /**< --record: every tick to this MCAP file */
+    const char *flight_dir;   /**< --flight: triggered dumps into this folder */
+    double flight_pre_s, flight_post_s;
+    ps_mcap_compression_t compression;
 } options_t;
 
 /* Everything the run owns; static because ps_app_t is large and must not
@@ -69,6 +74,8 @@ static struct {
     ps_ring_t frame_ring;
     ps_loop_frame_rec_t *frame_storage; /**< PS_CANDUMP_RING_SLOTS, --candump only */
     ps_logger_frames_t frames;
+    ps_recorder_t rec;
+    _Atomic bool is_recording; /**< the signal handler may trigger rec */
     pid_t stress_pid;
     int cpu_latency_fd;
     int64_t start_ns, end_ns;
@@ -124,6 +131,15 @@ static const char USAGE[] =
     "                        not answer the commands (docs/can-protocols.md, 5)\n"
     "  --trace               write trace points to ftrace's trace_marker (tick start,\n"
     "                        end, overruns, state changes) for trace-cmd/KernelShark\n"
+    "  --record FILE.mcap    flight recorder, continuous: every tick (joints, IMU,\n"
+    "                        estimate, state, timing, buses, policy, sim truth,\n"
+    "                        events) to an MCAP file (Foxglove, PlotJuggler read it)\n"
+    "  --flight DIR          flight recorder, triggered: on e-stop, fall, watchdog,\n"
+    "                        overrun burst, the GPIO record button or SIGUSR1, the\n"
+    "                        seconds around it to DIR/flight-NNNN.mcap\n"
+    "  --flight-pre S        seconds kept before a trigger (default 5, 0..600)\n"
+    "  --flight-post S       seconds written after it (default 2, 0..600)\n"
+    "  --record-compression zstd|lz4|none  chunk compression (default zstd)\n"
     "  -h, --help            this text\n"
     "\n"
     "pushstep profile runs the real loop (any board, sim included; default 30 s) and\n"
@@ -174,7 +190,12 @@ static int parse_options(int argc, char **argv, options_t *o)
         O_TRACE,
         O_HIST_US,
         O_CANDUMP,
-        O_REPLAY
+        O_REPLAY,
+        O_RECORD,
+        O_FLIGHT,
+        O_FLIGHT_PRE,
+        O_FLIGHT_POST,
+        O_RECORD_COMPRESSION
     };
     static const struct option LONG[] = {
         {"board", required_argument, NULL, 'b'},
@@ -192,10 +213,21 @@ static int parse_options(int argc, char **argv, options_t *o)
         {"hist-us", required_argument, NULL, O_HIST_US},
         {"candump", required_argument, NULL, O_CANDUMP},
         {"replay", required_argument, NULL, O_REPLAY},
+        {"record", required_argument, NULL, O_RECORD},
+        {"flight", required_argument, NULL, O_FLIGHT},
+        {"flight-pre", required_argument, NULL, O_FLIGHT_PRE},
+        {"flight-post", required_argument, NULL, O_FLIGHT_POST},
+        {"record-compression", required_argument, NULL, O_RECORD_COMPRESSION},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
-    *o = (options_t){.board = "sim", .start_after_s = -1.0, .out_dir = "profile", .hist_us = 1000};
+    *o = (options_t){.board = "sim",
+                     .start_after_s = -1.0,
+                     .out_dir = "profile",
+                     .hist_us = 1000,
+                     .flight_pre_s = 5.0,
+                     .flight_post_s = 2.0,
+                     .compression = PS_MCAP_COMPRESS_ZSTD};
     if (argc > 1 && strcmp(argv[1], "profile") == 0) {
         o->is_profile = true;
         argv[1] = argv[0]; /* getopt starts after the subcommand */
@@ -241,6 +273,32 @@ static int parse_options(int argc, char **argv, options_t *o)
             break;
         case O_REPLAY:
             o->replay_path = optarg;
+            break;
+        case O_RECORD:
+            o->record_path = optarg;
+            break;
+        case O_FLIGHT:
+            o->flight_dir = optarg;
+            break;
+        case O_FLIGHT_PRE:
+        case O_FLIGHT_POST: {
+            double *v = c == O_FLIGHT_PRE ? &o->flight_pre_s : &o->flight_post_s;
+            if (parse_seconds(optarg, c == O_FLIGHT_PRE ? "--flight-pre" : "--flight-post", v) <
+                    0 ||
+                *v > 600.0) {
+                fprintf(stderr, "pushstep: %s: at most 600 s\n",
+                        c == O_FLIGHT_PRE ? "--flight-pre" : "--flight-post");
+                return -EINVAL;
+            }
+            break;
+        }
+        case O_RECORD_COMPRESSION:
+            if (ps_mcap_parse_compression(optarg, &o->compression) < 0) {
+                fprintf(stderr,
+                        "pushstep: --record-compression: \"%s\" is not one of zstd, lz4, none\n",
+                        optarg);
+                return -EINVAL;
+            }
             break;
         case O_OUT:
             o->out_dir = optarg;
@@ -389,6 +447,48 @@ static void on_signal(int sig)
     ps_loop_request_stop(&g.app.loop);
 }
 
+/* SIGUSR1: a flight-recorder trigger (installed only when recording). */
+static void on_trigger_signal(int sig)
+{
+    (void)sig;
+    if (atomic_load(&g.is_recording))
+        ps_recorder_trigger(&g.rec, PS_REC_TRIG_SIGNAL);
+}
+
+/* --record / --flight, once the configuration is good: the ring (touched
+ * now), the files checked, the loop tapped; SIGUSR1 triggers a dump and a
+ * full disk (or a file size limit, SIGXFSZ) fails writes instead of the
+ * process. */
+static int setup_recorder(char *err, size_t len)
+{
+    ps_recorder_cfg_t rc_cfg = {
+        .path = g.opt.record_path,
+        .dir = g.opt.flight_dir,
+        .pre_s = g.opt.flight_pre_s,
+        .post_s = g.opt.flight_post_s,
+        .compression = g.opt.compression,
+        .is_sync_chunks = true,
+        .cpu = g.app.board.rt.worker_cpu,
+    };
+    ps_app_recorder_cfg(&g.app, &rc_cfg);
+    int rc = ps_recorder_init(&g.rec, &rc_cfg, err, len);
+    if (rc < 0)
+        return rc;
+    ps_app_attach_recorder(&g.app, &g.rec);
+    struct sigaction sa;
+    memset(&sa, 0, sizeof(sa));
+    sa.sa_handler = on_trigger_signal;
+    sigemptyset(&sa.sa_mask);
+    struct sigaction ign;
+    memset(&ign, 0, sizeof(ign));
+    ign.sa_handler = SIG_IGN;
+    sigemptyset(&ign.sa_mask);
+    if (sigaction(SIGUSR1, &sa, NULL) < 0 || sigaction(SIGXFSZ, &ign, NULL) < 0)
+        return -errno;
+    atomic_store(&g.is_recording, true);
+    return 0;
+}
+
 /* SIGINT and SIGTERM are blocked from the start of main until the loop is
  * initialised, with the handler already installed: a signal during start-up
  * (loading the model takes a while) stays pending instead of killing the
@@ -488,6 +588,21 @@ static int close_candump(void)
     return 0;
 }
 
+/* A recording asked for that could not be written (a file that failed):
+ * the run's outputs are incomplete. Records lost to a slow disk are only
+ * reported (the summary says how many). */
+static bool recorder_failed(void)
+{
+    const ps_recorder_stats_t *s = &g.rec.stats;
+    if (s->cont.err != 0)
+        fprintf(stderr, "pushstep: --record %s: %s; %llu records not written\n", s->cont.path,
+                strerror(-s->cont.err), (unsigned long long)s->cont.n_lost_io);
+    if (s->n_dumps_failed > 0)
+        fprintf(stderr, "pushstep: --flight %s: %u of %u dumps failed\n", g.opt.flight_dir,
+                s->n_dumps_failed, s->n_dumps);
+    return s->cont.err != 0 || s->n_dumps_failed > 0;
+}
+
 /* Wait for the loop thread to end. (The lowest CoM while the controller is in
  * charge is recorded by the plant on simulated time, ps_sim_truth_t.) */
 static void watch_truth(ps_summary_t *sum)
@@ -519,8 +634,13 @@ static int run_loop(ps_summary_t *sum)
                         g.app.board.rt.worker_cpu, g.frames.out != NULL ? &g.frames : NULL);
     if (rc < 0)
         return rc;
+    if (atomic_load(&g.is_recording) && (rc = ps_recorder_start(&g.rec)) < 0) {
+        ps_logger_stop(&g.logger);
+        return rc;
+    }
     rc = g.app.sim != NULL ? ps_sim_start(g.app.sim, g.start_ns) : 0; /* real boards: none */
     if (rc < 0) {
+        ps_recorder_stop(&g.rec);
         ps_logger_stop(&g.logger);
         return rc;
     }
@@ -553,6 +673,7 @@ static int run_loop(ps_summary_t *sum)
     }
     sum->wall_s = ps_ns_to_s(wall_ns() - wall0);
     ps_sim_stop(g.app.sim);
+    ps_recorder_stop(&g.rec); /* writes what the ring still holds, closes the files */
     ps_logger_stop(&g.logger);
     return rc;
 }
@@ -610,6 +731,7 @@ static void finish_summary(ps_summary_t *sum)
     sum->hist_us = g.opt.hist_us;
     sum->plan = &g.app.plan;
     sum->board = &g.app.board;
+    sum->recorder = atomic_load(&g.is_recording) ? &g.rec.stats : NULL;
     for (uint32_t b = 0; b < g.app.board.n_buses; b++)
         if (ps_can_get_state(&g.app.loop.cfg.buses[b], &sum->bus_states[b]) < 0)
             memset(&sum->bus_states[b], 0, sizeof(sum->bus_states[b]));
@@ -742,6 +864,14 @@ int main(int argc, char **argv)
         ps_trace_close(&g.trace);
         return 2;
     }
+    if ((g.opt.record_path != NULL || g.opt.flight_dir != NULL) &&
+        setup_recorder(err, sizeof(err)) < 0) {
+        fprintf(stderr, "pushstep: %s\n", err);
+        ps_recorder_deinit(&g.rec);
+        ps_app_deinit(&g.app);
+        ps_trace_close(&g.trace);
+        return 2;
+    }
     rc = setup_process_rt();
     if (rc == 0)
         rc = block_stop_signals(SIG_UNBLOCK); /* the loop exists: pending stops land */
@@ -802,6 +932,9 @@ int main(int argc, char **argv)
     }
     if (close_candump() < 0 && rc == 0)
         rc = -EIO;
+    if (atomic_load(&g.is_recording) && recorder_failed() && rc == 0)
+        rc = -EIO;
+    ps_recorder_deinit(&g.rec);
     ps_trace_close(&g.trace);
     ps_app_deinit(&g.app);
     return rc < 0 ? 1 : 0;
