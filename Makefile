@@ -48,7 +48,7 @@ HW_SRCS := $(wildcard tests/hw/test_hw_*.c)
 HW_BINS := $(patsubst tests/hw/%.c,$(BUILD)/tests/hw/%,$(HW_SRCS))
 QEMU_WORK ?= $(BUILD)/qemu
 
-.PHONY: all deps deps-build deps-test deps-bench run test test-hw clean format help bench bench-hw
+.PHONY: all deps deps-build deps-test deps-npm deps-bench run test test-hw clean format help bench bench-hw
 all: $(BUILD)/pushstep
 
 help:
@@ -77,6 +77,12 @@ deps-build:
 
 deps-test: deps-build
 	@bash tools/deps.sh $(TEST_PKGS)
+
+# The recorder tests read the MCAP files with Foxglove's own readers (npm
+# packages pinned in tests/mcap/package.json, installed into $(BUILD)/npm;
+# Debian's nodejs and npm when there is no node).
+deps-npm:
+	@bash tools/npm-deps.sh $(BUILD)/npm
 
 deps-bench: deps
 	@bash tools/deps.sh $(BENCH_PKGS)
@@ -107,8 +113,8 @@ $(HW_BINS): $(BUILD)/tests/hw/%: $(BUILD)/obj/tests/hw/%.o $(LIB_OBJS) $(FAKE_OB
 run: deps-build $(BUILD)/pushstep
 	$(BUILD)/pushstep --board sim $(ARGS)
 
-test: deps-test $(BUILD)/pushstep $(TEST_BINS) $(HW_BINS)
-	@PUSHSTEP_BIN=$(BUILD)/pushstep QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh \
+test: deps-test deps-npm $(BUILD)/pushstep $(TEST_BINS) $(HW_BINS)
+	@PUSHSTEP_BIN=$(BUILD)/pushstep PUSHSTEP_NPM=$(BUILD)/npm QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh \
 	    tools/check-layers.sh $(TEST_BINS) tools/qemu/test-hw.sh
 
 test-hw: deps-test $(BUILD)/pushstep $(HW_BINS)

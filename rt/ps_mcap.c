@@ -418,21 +418,22 @@ int ps_mcap_flush(ps_mcap_writer_t *w)
     int rc = build_chunk(w, &b, &e);
     w->zbuf = b.p; /* it may have grown */
     w->zbuf_cap = b.cap;
+    /* The chunk first: once it is in the file its messages count, whatever
+     * happens to the index records behind it (a reader needs only the chunk). */
     if (rc == 0)
-        rc = write_out(w, b.p, b.len, true);
+        rc = write_out(w, b.p, (size_t)e.length, true);
+    if (rc < 0 || !chunk_entry_append(w, &e)) {
+        if (w->err == 0)
+            w->err = rc < 0 ? rc : -ENOMEM;
+        w->n_lost += w->chunk_n_messages;
+        reset_chunk(w);
+        return w->err;
+    }
+    rc = write_out(w, b.p + e.length, b.len - (size_t)e.length, true);
     if (rc == 0 && w->cfg.is_sync_chunks && w->cfg.io.sync != NULL) {
         rc = w->cfg.io.sync(w->cfg.io_ctx);
         if (rc < 0)
             w->err = rc;
-    }
-    if (rc == 0 && !chunk_entry_append(w, &e))
-        rc = -ENOMEM;
-    if (rc < 0) {
-        if (w->err == 0)
-            w->err = rc;
-        w->n_lost += w->chunk_n_messages;
-        reset_chunk(w);
-        return rc;
     }
     /* the chunk is in the file: its messages count */
     if (w->n_messages == 0 || e.start_time < w->start_time)
@@ -443,7 +444,7 @@ int ps_mcap_flush(ps_mcap_writer_t *w)
     for (uint16_t c = 0; c < w->n_channels; c++)
         w->channel_n_messages[c] += w->mi_len[c];
     reset_chunk(w);
-    return 0;
+    return rc;
 }
 
 int ps_mcap_write_message(ps_mcap_writer_t *w, uint16_t channel_id, uint32_t sequence,

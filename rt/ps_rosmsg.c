@@ -225,8 +225,9 @@ int ps_rosmsg_parse(const char *text, size_t len, ps_rosmsg_parsed_t *out, char 
         bool is_blank = true;
         for (size_t k = 0; k < body; k++)
             is_blank &= isspace((unsigned char)line[k]) != 0;
-        if (is_blank || memchr(line, '=', body) != NULL)
-            continue; /* comment, blank or constant */
+        const char *eq = memchr(line, '=', body);
+        if (is_blank || (eq != NULL && !(eq > line && eq[-1] == '<')))
+            continue; /* comment, blank or constant (NAME=VALUE; not a bound [<=N]) */
         if (out->n_fields >= PS_ROSMSG_MAX_FIELDS) {
             ps_err_format(err, err_len, "line %u: more than %u fields", line_no,
                           PS_ROSMSG_MAX_FIELDS);
