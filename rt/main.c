@@ -60,6 +60,7 @@ typedef struct {
     const char *record_path;  /**< --record: every tick to this MCAP file */
     const char *flight_dir;   /**< --flight: triggered dumps into this folder */
     double flight_pre_s, flight_post_s;
+    double record_ring_s; /**< --record-ring; 0: the recorder's default */
     ps_mcap_compression_t compression;
 } options_t;
 
@@ -140,6 +141,9 @@ static const char USAGE[] =
     "  --flight-pre S        seconds kept before a trigger (default 5, 0..600)\n"
     "  --flight-post S       seconds written after it (default 2, 0..600)\n"
     "  --record-compression zstd|lz4|none  chunk compression (default zstd)\n"
+    "  --record-ring S       recorder ring in seconds of ticks, the most a slow disk\n"
+    "                        may lag before records are lost (default pre + post + 1,\n"
+    "                        at least 2; about 2.5 kB a tick)\n"
     "  -h, --help            this text\n"
     "\n"
     "pushstep profile runs the real loop (any board, sim included; default 30 s) and\n"
@@ -195,7 +199,8 @@ static int parse_options(int argc, char **argv, options_t *o)
         O_FLIGHT,
         O_FLIGHT_PRE,
         O_FLIGHT_POST,
-        O_RECORD_COMPRESSION
+        O_RECORD_COMPRESSION,
+        O_RECORD_RING
     };
     static const struct option LONG[] = {
         {"board", required_argument, NULL, 'b'},
@@ -218,6 +223,7 @@ static int parse_options(int argc, char **argv, options_t *o)
         {"flight-pre", required_argument, NULL, O_FLIGHT_PRE},
         {"flight-post", required_argument, NULL, O_FLIGHT_POST},
         {"record-compression", required_argument, NULL, O_RECORD_COMPRESSION},
+        {"record-ring", required_argument, NULL, O_RECORD_RING},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
@@ -292,6 +298,13 @@ static int parse_options(int argc, char **argv, options_t *o)
             }
             break;
         }
+        case O_RECORD_RING:
+            if (parse_seconds(optarg, "--record-ring", &o->record_ring_s) < 0 ||
+                o->record_ring_s < 0.1 || o->record_ring_s > 600.0) {
+                fprintf(stderr, "pushstep: --record-ring: 0.1 to 600 s\n");
+                return -EINVAL;
+            }
+            break;
         case O_RECORD_COMPRESSION:
             if (ps_mcap_parse_compression(optarg, &o->compression) < 0) {
                 fprintf(stderr,
@@ -466,6 +479,7 @@ static int setup_recorder(char *err, size_t len)
         .dir = g.opt.flight_dir,
         .pre_s = g.opt.flight_pre_s,
         .post_s = g.opt.flight_post_s,
+        .ring_s = g.opt.record_ring_s,
         .compression = g.opt.compression,
         .is_sync_chunks = true,
         .cpu = g.app.board.rt.worker_cpu,

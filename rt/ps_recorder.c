@@ -379,8 +379,8 @@ void ps_recorder_on_tick(void *ctx, const ps_loop_t *loop)
     r->last_state = t->state;
     ps_recorder_commit(r);
     if (t->triggers != 0) {
-        atomic_store_explicit(&r->trig_bits, t->triggers, memory_order_relaxed);
-        atomic_store_explicit(&r->trig_tick, idx + 1u, memory_order_release);
+        const ps_rec_trig_t tr = {.idx = idx, .bits = t->triggers};
+        (void)ps_ring_push(&r->trig_ring, &tr); /* full: noted in the record only */
         atomic_fetch_add_explicit(&r->n_trig, 1u, memory_order_relaxed);
         for (unsigned i = 0; i < PS_REC_TRIG_COUNT; i++)
             if (t->triggers & (1u << i))
@@ -445,9 +445,11 @@ int ps_recorder_init(ps_recorder_t *r, const ps_recorder_cfg_t *cfg, char *err, 
         if (rc < 0)
             return rc;
     }
-    double ring_s = cfg->ring_s > 0 ? cfg->ring_s : cfg->pre_s + cfg->post_s + 1.0;
+    double ring_s = cfg->pre_s + cfg->post_s + 1.0;
     if (ring_s < 2.0)
         ring_s = 2.0;
+    if (cfg->ring_s > 0)
+        ring_s = cfg->ring_s < 0.1 ? 0.1 : cfg->ring_s;
     r->n_slots = pow2_at_least((uint64_t)ceil(ring_s * cfg->servo_hz));
     const size_t bytes = (size_t)r->n_slots * sizeof(ps_rec_slot_t);
     r->slots = malloc(bytes);
@@ -461,8 +463,9 @@ int ps_recorder_init(ps_recorder_t *r, const ps_recorder_cfg_t *cfg, char *err, 
         atomic_init(&r->slots[i].seq, 0u);
     atomic_init(&r->head, 0u);
     atomic_init(&r->ext_trigger, 0u);
-    atomic_init(&r->trig_tick, 0u);
-    atomic_init(&r->trig_bits, 0u);
+    if (ps_ring_init(&r->trig_ring, r->trig_storage, PS_REC_TRIG_QUEUE,
+                     sizeof(r->trig_storage[0])) < 0)
+        return -EINVAL; /* cannot happen: a power of two */
     atomic_init(&r->n_trig, 0u);
     for (unsigned i = 0; i < PS_REC_TRIG_COUNT; i++)
         atomic_init(&r->n_trig_by[i], 0u);
@@ -499,7 +502,9 @@ typedef struct {
     bool is_open;
     int ch[CH_COUNT]; /**< channel ids */
     uint32_t seq[CH_COUNT];
-    uint64_t n_pending; /**< records in the open chunk (not yet in the file) */
+    uint64_t n_appended; /**< messages handed to the MCAP writer */
+    uint64_t *rec_end;   /**< per pending record: n_appended after its last message */
+    size_t n_pend, pend_head, pend_cap; /**< records not yet known to be in the file */
     ps_rec_file_stats_t *st;
 } rec_file_t;
 
@@ -510,7 +515,8 @@ typedef struct {
     ps_rec_file_stats_t dump_stats; /**< the dump in progress */
     bool is_dumping;
     uint64_t dump_next, dump_end, dump_trig_idx;
-    uint64_t last_trig_seen;
+    ps_rec_trig_t pending[PS_REC_TRIG_QUEUE]; /**< taken from the ring, not yet handled */
+    uint32_t n_pending;
     uint32_t n_dumps;
     char schema[CH_COUNT][SCHEMA_BUF];
     int schema_len[CH_COUNT];
@@ -591,7 +597,8 @@ static int file_open(writer_t *w, rec_file_t *f, const char *path, ps_rec_file_s
     int rc = ps_mcap_open(&f->mcap, &mc);
     f->is_open = true;
     memset(f->seq, 0, sizeof(f->seq));
-    f->n_pending = 0;
+    f->n_appended = 0;
+    f->n_pend = f->pend_head = 0;
     for (int c = 0; c < CH_COUNT && rc == 0; c++) {
         rc = ps_mcap_add_schema(&f->mcap, CHANNELS[c].def.name, "ros2msg", w->schema[c],
                                 (size_t)w->schema_len[c]);
@@ -644,6 +651,7 @@ static void put_message(rec_file_t *f, writer_t *w, int c, const void *src, cons
     const uint64_t t = t_ns > 0 ? (uint64_t)t_ns : 0u;
     (void)ps_mcap_write_message(&f->mcap, (uint16_t)f->ch[c], f->seq[c]++, t, t, w->msg,
                                 (size_t)n); /* an error fails the writer: seen below */
+    f->n_appended++;
 }
 
 static void put_events(rec_file_t *f, writer_t *w, const ps_rec_tick_t *t)
@@ -672,6 +680,24 @@ static void put_events(rec_file_t *f, writer_t *w, const ps_rec_tick_t *t)
     }
 }
 
+/* A record is in the file once the chunk holding its last message is:
+ * the writer's message count (messages in written chunks) says how far. A
+ * failed writer loses what was pending. */
+static void settle(rec_file_t *f)
+{
+    while (f->n_pend > 0 && f->rec_end[f->pend_head] <= f->mcap.n_messages) {
+        f->st->n_records++;
+        f->pend_head++;
+        f->n_pend--;
+    }
+    if (ps_mcap_error(&f->mcap) != 0) {
+        f->st->n_lost_io += f->n_pend;
+        f->n_pend = 0;
+    }
+    if (f->n_pend == 0)
+        f->pend_head = 0;
+}
+
 /* One record as messages; a file whose writer failed counts it lost. */
 static void file_put(rec_file_t *f, writer_t *w, const ps_rec_tick_t *t)
 {
@@ -691,15 +717,22 @@ static void file_put(rec_file_t *f, writer_t *w, const ps_rec_tick_t *t)
     if (t->has_truth)
         put_message(f, w, CH_TRUTH, t, counts, t->t_ns);
     put_events(f, w, t);
-    /* A record is in the file once the chunk holding its last message is. */
-    f->n_pending++;
-    if (ps_mcap_error(&f->mcap) != 0) {
-        f->st->n_lost_io += f->n_pending;
-        f->n_pending = 0;
-    } else if (f->mcap.chunk_len == 0) {
-        f->st->n_records += f->n_pending;
-        f->n_pending = 0;
+    if (f->n_pend + f->pend_head == f->pend_cap) { /* grow (compacting first) */
+        memmove(f->rec_end, f->rec_end + f->pend_head, f->n_pend * sizeof(uint64_t));
+        f->pend_head = 0;
+        if (f->n_pend == f->pend_cap) {
+            size_t cap = f->pend_cap ? f->pend_cap * 2 : 4096;
+            uint64_t *p = realloc(f->rec_end, cap * sizeof(uint64_t));
+            if (p == NULL) {
+                f->st->n_lost_io++; /* cannot track it: count it lost rather than lie */
+                return;
+            }
+            f->rec_end = p;
+            f->pend_cap = cap;
+        }
     }
+    f->rec_end[f->pend_head + f->n_pend++] = f->n_appended;
+    settle(f);
 }
 
 static void file_close(rec_file_t *f, const ps_mcap_kv_t *extra, size_t n_extra)
@@ -707,11 +740,8 @@ static void file_close(rec_file_t *f, const ps_mcap_kv_t *extra, size_t n_extra)
     if (!f->is_open)
         return;
     ps_rec_file_stats_t *st = f->st;
-    if (ps_mcap_flush(&f->mcap) == 0)
-        st->n_records += f->n_pending;
-    else
-        st->n_lost_io += f->n_pending;
-    f->n_pending = 0;
+    (void)ps_mcap_flush(&f->mcap); /* an error: settle counts the pending records lost */
+    settle(f);
     char written[24], lost_ring[24], lost_io[24];
     snprintf(written, sizeof(written), "%llu", (unsigned long long)st->n_records);
     snprintf(lost_ring, sizeof(lost_ring), "%llu", (unsigned long long)st->n_lost_ring);
@@ -736,6 +766,9 @@ static void file_close(rec_file_t *f, const ps_mcap_kv_t *extra, size_t n_extra)
     memcpy(st->channel_n_messages, f->mcap.channel_n_messages, sizeof(st->channel_n_messages));
     f->is_open = false;
     f->fd = -1;
+    free(f->rec_end);
+    f->rec_end = NULL;
+    f->n_pend = f->pend_head = f->pend_cap = 0;
 }
 
 /* Records before the ring's oldest are gone: count them and skip ahead. */
@@ -840,14 +873,21 @@ static uint32_t pass(writer_t *w, bool is_final)
 {
     ps_recorder_t *r = w->cont.r;
     uint32_t k = 0;
-    const uint64_t trig = atomic_load_explicit(&r->trig_tick, memory_order_acquire);
-    if (trig != w->last_trig_seen) {
-        w->last_trig_seen = trig;
-        const uint32_t bits = atomic_load_explicit(&r->trig_bits, memory_order_relaxed);
-        if (r->cfg.dir != NULL && !w->is_dumping)
-            dump_begin(w, trig - 1u, bits);
-        else if (w->is_dumping)
-            w->dump_stats.triggers |= bits; /* noted in this dump (its /events) */
+    while (w->n_pending < PS_REC_TRIG_QUEUE &&
+           ps_ring_pop(&r->trig_ring, &w->pending[w->n_pending]) == 0)
+        w->n_pending++;
+    /* In order: one inside the dump being written is noted in it (its
+     * /events too); one after it waits for it to end, then starts the next. */
+    while (w->n_pending > 0 && r->cfg.dir != NULL) {
+        const ps_rec_trig_t tr = w->pending[0];
+        if (!w->is_dumping)
+            dump_begin(w, tr.idx, tr.bits);
+        else if (tr.idx < w->dump_end)
+            w->dump_stats.triggers |= tr.bits;
+        else
+            break;
+        memmove(w->pending, w->pending + 1, (w->n_pending - 1u) * sizeof(w->pending[0]));
+        w->n_pending--;
     }
     if (r->cfg.path != NULL)
         k += drain_file(w, &w->cont, &w->cont_next, UINT64_MAX);
@@ -874,7 +914,7 @@ static void *writer_main(void *arg)
         if (pass(w, false) == 0)
             sleep_ns(IDLE_SLEEP_NS);
     }
-    while (pass(w, true) != 0 || w->is_dumping) {
+    while (pass(w, true) != 0 || w->is_dumping || (w->n_pending > 0 && r->cfg.dir != NULL)) {
     }
     char slots[16];
     snprintf(slots, sizeof(slots), "%u", r->n_slots);

@@ -50,6 +50,7 @@
 #include "ps_limits.h"
 #include "ps_loop.h"
 #include "ps_mcap.h"
+#include "ps_ring.h"
 
 /** Crowd contact forces kept per tick (sim, issue 8's crowd): the largest. */
 #define PS_REC_MAX_CONTACTS 16u
@@ -140,6 +141,16 @@ typedef struct {
     ps_rec_truth_t truth;
 } ps_rec_tick_t;
 
+/** A trigger as the loop hands it to the writer. */
+typedef struct {
+    uint64_t idx;  /**< record index */
+    uint32_t bits; /**< ps_rec_trigger_t */
+} ps_rec_trig_t;
+
+/** Triggers queued for the writer; more between two of its passes are noted
+ *  in their records (and /events) but start no dump of their own. */
+#define PS_REC_TRIG_QUEUE 64u
+
 /** A ring slot: sequence stamp and record. */
 typedef struct {
     _Atomic uint64_t seq; /**< i + 1 once record i is complete; UINT64_MAX while written */
@@ -151,7 +162,8 @@ typedef struct {
     const char *dir;   /**< flight dumps folder; NULL: off */
     double pre_s;      /**< flight: seconds kept before a trigger */
     double post_s;     /**< flight: seconds written after it */
-    double ring_s;     /**< ring length in seconds; 0: pre_s + post_s + 1, at least 2 */
+    double ring_s;     /**< ring length in seconds (at least 0.1); 0: pre_s + post_s + 1,
+                            at least 2. Rounded up to a power of two of records */
     uint32_t servo_hz; /**< ticks per second (sizes the ring) */
     ps_mcap_compression_t compression;
     size_t chunk_size;   /**< 0: 256 KiB */
@@ -205,8 +217,8 @@ typedef struct {
     uint32_t n_slots; /**< power of two */
     _Atomic uint64_t head;       /**< records pushed (loop thread writes) */
     _Atomic uint32_t ext_trigger; /**< PS_REC_TRIG_SIGNAL/BUTTON bits posted from outside */
-    _Atomic uint64_t trig_tick;  /**< latest trigger: record index + 1; 0: none */
-    _Atomic uint32_t trig_bits;
+    ps_ring_t trig_ring;         /**< triggers to the writer (ps_rec_trig_t), in order */
+    ps_rec_trig_t trig_storage[PS_REC_TRIG_QUEUE];
     _Atomic uint32_t n_trig;     /**< triggers raised (loop thread writes) */
     _Atomic uint32_t n_trig_by[PS_REC_TRIG_COUNT];
     uint8_t last_state;

@@ -154,7 +154,8 @@ if (nCuts > 0) {
   const ends = chunks.map((c) => Number(c.chunkStartOffset + c.chunkLength));
   const cuts = new Set();
   const dataEnd = Number(indexed.dataEndOffset);
-  for (let i = 0; i < chunks.length && cuts.size < nCuts; i += Math.max(1, Math.floor(chunks.length / nCuts))) {
+  for (let k = 0; k < nCuts && k < chunks.length; k++) {
+    const i = Math.floor((k * chunks.length) / nCuts); // N chunks spread over the file
     const start = Number(chunks[i].chunkStartOffset);
     cuts.add(ends[i]);                                        // exactly at a chunk's end
     cuts.add(start + 1);                                      // one byte into a chunk
