@@ -15,8 +15,9 @@ BUILD_PKGS := gcc libc6-dev make pkg-config libmujoco-dev libcyaml-dev libyaml-d
               libzstd-dev liblz4-dev zlib1g-dev
 TOOL_PKGS  := g++ rt-tests can-utils
 # What `make test` needs beyond building: can-utils' log2long reads the
-# candump-format lines the runtime writes (tests/test_candump.c).
-TEST_PKGS  := can-utils
+# candump-format lines the runtime writes (tests/test_candump.c); gnuplot
+# draws `pushstep log --plot` (tests/test_e2e_recorder.c).
+TEST_PKGS  := can-utils gnuplot-nox
 # Extra packages `make bench` needs: load generator, plots, the analysis script.
 BENCH_PKGS := stress-ng gnuplot-nox python3
 

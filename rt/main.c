@@ -27,6 +27,7 @@
 #include "ps_guard.h"
 #include "ps_logger.h"
 #include "ps_profile.h"
+#include "ps_reclog.h"
 #include "ps_recorder.h"
 #include "ps_rtsetup.h"
 #include "ps_summary.h"
@@ -98,6 +99,7 @@ static const char USAGE[] =
     "       pushstep profile [options] [profile options]\n"
     "       pushstep monitor --board FILE [--log FILE] (see pushstep monitor -h)\n"
     "       pushstep emulate --board FILE --ifaces IF,... (see pushstep emulate -h)\n"
+    "       pushstep log FILE.mcap [--csv OUT] [--plot OUT.png] (see pushstep log -h)\n"
     "Runs the balance controller's fixed-step loop against a board: real hardware\n"
     "or, for board `sim`, the MuJoCo plant with emulated CAN actuators, IMU and GPIO.\n"
     "\n"
@@ -828,6 +830,8 @@ int main(int argc, char **argv)
     /* Line-buffered even into a pipe: whoever reads the output (tee, a
      * supervisor, the tests) sees each transition when it happens. */
     (void)setvbuf(stdout, NULL, _IOLBF, 0); /* before any output: cannot fail */
+    if (argc > 1 && strcmp(argv[1], "log") == 0)
+        return ps_reclog_main(argc - 1, argv + 1);
     if (argc > 1 && (strcmp(argv[1], "emulate") == 0 || strcmp(argv[1], "monitor") == 0)) {
         find_data_dir(g.data_dir, sizeof(g.data_dir));
         return argv[1][0] == 'e' ? ps_emulate_main(argc - 1, argv + 1, g.data_dir)

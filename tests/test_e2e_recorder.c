@@ -256,6 +256,78 @@ static void read_series(const char *path, const char *topic, const char *field, 
     assert_true(series.field_idx >= 0);
 }
 
+/* ---- pushstep log ---------------------------------------------------------- */
+
+static uint64_t count_lines(const char *path)
+{
+    FILE *f = fopen(path, "r");
+    assert_non_null(f);
+    uint64_t n = 0;
+    for (int c; (c = fgetc(f)) != EOF;)
+        n += c == '\n';
+    fclose(f);
+    return n;
+}
+
+/* Summary, CSV and plot of the shove's file; the same file cut short. */
+static void check_log_command(const char *path, uint64_t n_ticks)
+{
+    assert_int_equal(sh("%s log %s", bin(), path), 0);
+    static const char *const SUMMARY[] = {
+        "closed (summary and index present)", "duration 8.000 s", "/joints",
+        "pushstep_msgs/msg/Estimate", "scenario=scenarios/shove.yaml", "records_lost_ring=0",
+        "transition ACTIVE -> DAMPING (FALL)", "trigger    fall", "FALL ", "tick_ns",
+        "latency (us)"};
+    for (size_t i = 0; i < sizeof(SUMMARY) / sizeof(SUMMARY[0]); i++)
+        if (strstr(out, SUMMARY[i]) == NULL)
+            fail_msg("pushstep log summary lacks \"%s\":\n%s", SUMMARY[i], out);
+    char csv[128], png[128];
+    snprintf(csv, sizeof(csv), "%s/e.csv", dir);
+    snprintf(png, sizeof(png), "%s/balance.png", dir);
+    assert_int_equal(sh("%s log %s --csv %s --channels /estimate --signals "
+                        "joints.q_rad.l_knee,truth.push_force_n[0]",
+                        bin(), path, csv),
+                     0);
+    assert_int_equal(count_lines(csv), 1 + n_ticks); /* a header and a row a tick */
+    FILE *f = fopen(csv, "r");
+    assert_non_null(f);
+    static char line[8192];
+    assert_non_null(fgets(line, sizeof(line), f));
+    assert_true(strncmp(line, "t_s,estimate.tick,estimate.t_ns,", 32) == 0);
+    assert_non_null(strstr(line, ",estimate.capture_point_m[0],"));
+    assert_non_null(strstr(line, ",joints.q_rad.l_knee,truth.push_force_n[0]\n"));
+    uint32_t n_push = 0;
+    while (fgets(line, sizeof(line), f) != NULL) {
+        const double t_s = atof(line);
+        const char *last = strrchr(line, ',');
+        if (atof(last + 1) > 299.0) {
+            n_push++;
+            assert_true(t_s >= 4.999 && t_s < 5.101);
+        }
+    }
+    fclose(f);
+    assert_true(n_push >= 99 && n_push <= 101); /* 0.1 s of 300 N */
+    assert_int_equal(sh("%s log %s --plot %s --signals balance --from 4 --to 7", bin(), path, png),
+                     0);
+    f = fopen(png, "rb");
+    assert_non_null(f);
+    uint8_t magic[8];
+    assert_int_equal(fread(magic, 1, 8, f), 8);
+    fclose(f);
+    assert_memory_equal(magic, "\x89PNG\r\n\x1a\n", 8);
+    /* a cut copy: read up to its last complete chunk, and said so */
+    char cut[128];
+    snprintf(cut, sizeof(cut), "%s/cut.mcap", dir);
+    assert_int_equal(sh("head -c 1000000 %s > %s", path, cut), 0);
+    assert_int_equal(sh("%s log %s", bin(), cut), 0);
+    assert_non_null(strstr(out, "NOT CLOSED"));
+    assert_non_null(strstr(out, "cut: reading stopped at byte"));
+    assert_int_equal(sh("%s log %s --signals balance", bin(), path), 2); /* no --csv/--plot */
+    assert_int_equal(sh("%s log %s --csv %s --signals estimate.nope", bin(), path, csv), 2);
+    assert_non_null(strstr(out, "/estimate has no field nope"));
+    assert_int_equal(sh("%s log /nonexistent.mcap", bin()), 1);
+}
+
 /* ---- the shove, in process ---------------------------------------------------- */
 
 static ps_app_t app; /* large: static */
@@ -351,6 +423,7 @@ static void test_e2e_rec_lockstep_shove_guarded_files_match_foxglove_readers(voi
     assert_non_null(strstr(series.events, "ACTIVE -> DAMPING (FALL)"));
     assert_non_null(strstr(series.events, "trigger"));
     assert_non_null(strstr(series.events, "fall"));
+    check_log_command(path, n_ticks);
 }
 
 /* ---- the command line --------------------------------------------------------- */
@@ -361,7 +434,7 @@ static void test_e2e_rec_cli_help_and_unwritable_paths(void **state)
     assert_int_equal(sh("%s --help", bin()), 0);
     static const char *const OPTIONS[] = {"--record FILE.mcap", "--flight DIR", "--flight-pre S",
                                           "--flight-post S", "--record-compression",
-                                          };
+                                          "--record-ring S", "pushstep log"};
     for (size_t i = 0; i < sizeof(OPTIONS) / sizeof(OPTIONS[0]); i++)
         if (strstr(out, OPTIONS[i]) == NULL)
             fail_msg("--help does not mention %s", OPTIONS[i]);
