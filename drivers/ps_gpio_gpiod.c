@@ -24,6 +24,7 @@
 #define CONSUMER_ESTOP     "pushstep-estop"
 #define CONSUMER_HEARTBEAT "pushstep-heartbeat"
 #define CONSUMER_LED       "pushstep-led"
+#define CONSUMER_BUTTON    "pushstep-record-button"
 /* The kernel's event FIFO holds 16; gpiod_line_event_read_fd_multiple reads
  * at most that many per call. */
 #define MAX_EVENT_READS 4u /* reads of EVENT_BATCH events per read_estop call at most */
@@ -179,6 +180,38 @@ static int read_estop(void *ctx, bool *out_pressed_since_last_read)
     return 0;
 }
 
+static int read_button(void *ctx, bool *out_pressed_since_last_read)
+{
+    ps_gpio_gpiod_t *g = ctx;
+    if (out_pressed_since_last_read == NULL)
+        return -EINVAL;
+    if (g->chip == NULL || g->button == NULL)
+        return -EBADF;
+    struct gpiod_line_event ev[EVENT_BATCH];
+    uint64_t n_edges = 0;
+    for (unsigned pass = 0; pass < MAX_EVENT_READS; pass++) {
+        const int n = gpiod_line_event_read_fd_multiple(g->button_fd, ev, EVENT_BATCH);
+        if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK))
+            break;
+        if (n < 0)
+            return -errno;
+        n_edges += (uint64_t)n;
+        if ((unsigned)n < EVENT_BATCH)
+            break;
+    }
+    g->n_button_events += n_edges;
+    const int level = gpiod_line_get_value(g->button);
+    if (level < 0)
+        return -errno;
+    /* Edge types are not trusted (as the e-stop's): a first edge after a
+     * released read is a press; two or more edges hold a press whatever the
+     * level read last was. */
+    *out_pressed_since_last_read =
+        level != 0 || (n_edges > 0 && !g->was_button_pressed) || n_edges >= 2;
+    g->was_button_pressed = level != 0;
+    return 0;
+}
+
 static int set_heartbeat(void *ctx, bool level)
 {
     ps_gpio_gpiod_t *g = ctx;
@@ -207,6 +240,14 @@ static const ps_gpio_ops_t OPS = {
     .close = close_op,
 };
 
+static const ps_gpio_ops_t OPS_BUTTON = {
+    .read_estop = read_estop,
+    .set_heartbeat = set_heartbeat,
+    .set_led = set_led,
+    .close = close_op,
+    .read_button = read_button,
+};
+
 void ps_gpio_gpiod_close(ps_gpio_gpiod_t *g)
 {
     if (g == NULL || g->chip == NULL)
@@ -224,12 +265,14 @@ void ps_gpio_gpiod_close(ps_gpio_gpiod_t *g)
     g->estop = NULL;
     g->heartbeat = NULL;
     g->led = NULL;
+    g->button = NULL;
     g->estop_fd = -1;
+    g->button_fd = -1;
 }
 
 ps_gpio_port_t ps_gpio_gpiod_port(ps_gpio_gpiod_t *g)
 {
-    const ps_gpio_port_t p = {.ops = &OPS, .ctx = g};
+    const ps_gpio_port_t p = {.ops = g->button != NULL ? &OPS_BUTTON : &OPS, .ctx = g};
     return p;
 }
 
@@ -345,6 +388,27 @@ static int bias_flags(ps_gpio_bias_t bias)
     }
 }
 
+/* The record button: both-edge events, non-blocking, its level now. */
+static int open_button(ps_gpio_gpiod_t *g, const ps_gpio_cfg_t *cfg, const line_spec_t *spec,
+                       char *err, size_t err_len)
+{
+    g->button_offset = gpiod_line_offset(g->button);
+    const int flags = cfg->is_button_active_low ? GPIOD_LINE_REQUEST_FLAG_ACTIVE_LOW : 0;
+    if (gpiod_line_request_both_edges_events_flags(g->button, CONSUMER_BUTTON, flags) != 0)
+        return request_failed(g, spec, g->button, "both-edge events", errno, err, err_len);
+    g->button_fd = gpiod_line_event_get_fd(g->button);
+    const int fl = g->button_fd >= 0 ? fcntl(g->button_fd, F_GETFL) : -1;
+    const int level = gpiod_line_get_value(g->button);
+    if (fl < 0 || fcntl(g->button_fd, F_SETFL, fl | O_NONBLOCK) != 0 || level < 0) {
+        const int rc = -errno;
+        ps_err_format(err, err_len, "gpio %s: record button line %u: %s",
+                      gpiod_chip_name(g->chip), g->button_offset, strerror(errno));
+        return rc;
+    }
+    g->was_button_pressed = level != 0;
+    return 0;
+}
+
 int ps_gpio_gpiod_open(ps_gpio_gpiod_t *g, const ps_gpio_cfg_t *cfg, char *err, size_t err_len)
 {
     if (err != NULL && err_len > 0)
@@ -353,6 +417,7 @@ int ps_gpio_gpiod_open(ps_gpio_gpiod_t *g, const ps_gpio_cfg_t *cfg, char *err, 
         return -EINVAL;
     memset(g, 0, sizeof(*g));
     g->estop_fd = -1;
+    g->button_fd = -1;
     if (cfg->chip[0] == '\0' || memchr(cfg->chip, '\0', sizeof(cfg->chip)) == NULL) {
         ps_err_format(err, err_len, "gpio: no chip given (gpio.chip)");
         return -EINVAL;
@@ -382,14 +447,16 @@ int ps_gpio_gpiod_open(ps_gpio_gpiod_t *g, const ps_gpio_cfg_t *cfg, char *err, 
         return -e;
     }
 
-    const line_spec_t spec[3] = {
+    const line_spec_t spec[4] = {
         {"e-stop", CONSUMER_ESTOP, cfg->estop_name, cfg->estop_line},
         {"heartbeat", CONSUMER_HEARTBEAT, cfg->enable_name, cfg->enable_line},
         {"LED", CONSUMER_LED, cfg->led_name, cfg->led_line},
+        {"record button", CONSUMER_BUTTON, cfg->button_name, cfg->button_line},
     };
-    struct gpiod_line *lines[3] = {NULL, NULL, NULL};
+    struct gpiod_line *lines[4] = {NULL, NULL, NULL, NULL};
+    const int n_lines = cfg->has_button ? 4 : 3;
     int rc = 0;
-    for (int i = 0; i < 3 && rc == 0; i++) {
+    for (int i = 0; i < n_lines && rc == 0; i++) {
         if (memchr(spec[i].name, '\0', PS_NAME_LEN) == NULL) {
             ps_err_format(err, err_len, "gpio %s: %s line name not terminated", cfg->chip,
                           spec[i].role);
@@ -416,6 +483,7 @@ int ps_gpio_gpiod_open(ps_gpio_gpiod_t *g, const ps_gpio_cfg_t *cfg, char *err, 
     g->estop_offset = gpiod_line_offset(g->estop);
     g->heartbeat_offset = gpiod_line_offset(g->heartbeat);
     g->led_offset = gpiod_line_offset(g->led);
+    g->button = lines[3];
 
     /* Outputs first, driven low: the relay sees no beat and the LED is off
      * from the moment the lines are ours. */
@@ -443,6 +511,11 @@ int ps_gpio_gpiod_open(ps_gpio_gpiod_t *g, const ps_gpio_cfg_t *cfg, char *err, 
         goto fail;
     }
     g->is_event_ts_monotonic = kernel_stamps_monotonic();
+    if (g->button != NULL) {
+        rc = open_button(g, cfg, &spec[3], err, err_len);
+        if (rc != 0)
+            goto fail;
+    }
 
     /* The level now, after the request, so no edge falls between the two.
      * Edges stamped up to this time are in the level; later ones are events. */

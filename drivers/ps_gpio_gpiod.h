@@ -40,6 +40,13 @@
  * moves the stamps onto CLOCK_MONOTONIC by the clocks' difference at the
  * read. A stamp later than the read (a clock step) is taken as the read.
  *
+ * Record button (optional, cfg has_button): requested for both-edge events
+ * (active-low from cfg), fd non-blocking. read_button drains its events
+ * (bounded as the e-stop's) and reads its level: pressed now, or an edge
+ * since the last read that can only mean a press happened (the first edge
+ * after a read that said released, or two or more edges); no debounce: a
+ * bounce only repeats "pressed", and the recorder takes each press once.
+ *
  * Heartbeat and LED: requested as outputs, initially low/off;
  * set_heartbeat/set_led are one GPIOHANDLE_SET_LINE_VALUES ioctl each. close
  * drives both low before it releases the lines (the orderly exit path); a
@@ -123,7 +130,12 @@ typedef struct {
     struct gpiod_line *estop;
     struct gpiod_line *heartbeat;
     struct gpiod_line *led;
+    struct gpiod_line *button;  /**< the record button; NULL: none */
     int estop_fd;               /**< the e-stop's event fd, O_NONBLOCK; -1 when closed */
+    int button_fd;              /**< the button's event fd, O_NONBLOCK; -1: none */
+    bool was_button_pressed;    /**< the button's level at the last read_button */
+    uint32_t button_offset;     /**< read-only */
+    uint64_t n_button_events;   /**< read-only: button edge events read */
     bool is_event_ts_monotonic; /**< kernel >= 5.7: event stamps are CLOCK_MONOTONIC */
     ps_gpio_debounce_t debounce;
     uint32_t estop_offset;         /**< read-only: the lines as resolved at open */
@@ -151,7 +163,8 @@ typedef struct {
 int ps_gpio_gpiod_open(ps_gpio_gpiod_t *g, const ps_gpio_cfg_t *cfg, char *err, size_t err_len);
 
 /** @pre g open  @return the GPIO port over g (ops: read_estop, set_heartbeat,
- *  set_led, close)  @rt INIT */
+ *  set_led, close, and read_button when the board has the record button)
+ *  @rt INIT */
 ps_gpio_port_t ps_gpio_gpiod_port(ps_gpio_gpiod_t *g);
 
 /** Drive the heartbeat and LED low, release the lines, close the chip. Safe

@@ -35,6 +35,9 @@ typedef struct {
     char led_name[PS_NAME_LEN];
     ps_gpio_bias_t estop_bias;
     uint32_t estop_debounce_us;
+    uint32_t *button_line; /* the record button: optional, line or name */
+    char button_name[PS_NAME_LEN];
+    bool is_button_active_low;
 } gpio_raw_t;
 
 typedef struct {
@@ -83,6 +86,10 @@ static const cyaml_schema_field_t GPIO_FIELDS[] = {
     CYAML_FIELD_ENUM("estop_bias", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, gpio_raw_t, estop_bias,
                      GPIO_BIASES, CYAML_ARRAY_LEN(GPIO_BIASES)),
     CYAML_FIELD_UINT("estop_debounce_us", CYAML_FLAG_OPTIONAL, gpio_raw_t, estop_debounce_us),
+    CYAML_FIELD_UINT_PTR("record_button_line", CYAML_FLAG_OPTIONAL, gpio_raw_t, button_line),
+    CYAML_FIELD_STRING("record_button_name", CYAML_FLAG_OPTIONAL, gpio_raw_t, button_name, 1),
+    CYAML_FIELD_BOOL("record_button_active_low", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT,
+                     gpio_raw_t, is_button_active_low),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_field_t RT_FIELDS[] = {
@@ -119,6 +126,8 @@ static const ps_cfg_rule_t BOARD_RANGES[] = {
     PS_CFG_RULE_U32(0, 0, "gpio.estop_line", ps_board_cfg_t, gpio.estop_line, 0.0, MAX_GPIO_LINE),
     PS_CFG_RULE_U32(0, 0, "gpio.enable_line", ps_board_cfg_t, gpio.enable_line, 0.0, MAX_GPIO_LINE),
     PS_CFG_RULE_U32(0, 0, "gpio.led_line", ps_board_cfg_t, gpio.led_line, 0.0, MAX_GPIO_LINE),
+    PS_CFG_RULE_U32(0, 0, "gpio.record_button_line", ps_board_cfg_t, gpio.button_line, 0.0,
+                    MAX_GPIO_LINE),
     PS_CFG_RULE_U32(0, 0, "gpio.estop_debounce_us", ps_board_cfg_t, gpio.estop_debounce_us, 0.0,
                     PS_GPIO_DEBOUNCE_MAX_US),
     PS_CFG_RULE_U32(0, 0, "rt.priority", ps_board_cfg_t, rt.priority, 0.0, 98.0),
@@ -166,8 +175,11 @@ static int check_board(ps_cfg_ctx_t *c, const ps_board_cfg_t *b)
         {"gpio.estop_line", "gpio.estop_name", b->gpio.estop_line, b->gpio.estop_name},
         {"gpio.enable_line", "gpio.enable_name", b->gpio.enable_line, b->gpio.enable_name},
         {"gpio.led_line", "gpio.led_name", b->gpio.led_line, b->gpio.led_name},
+        {"gpio.record_button_line", "gpio.record_button_name", b->gpio.button_line,
+         b->gpio.button_name},
     };
-    for (size_t i = 1; i < sizeof(lines) / sizeof(lines[0]); i++) {
+    const size_t n_lines = sizeof(lines) / sizeof(lines[0]) - (b->gpio.has_button ? 0u : 1u);
+    for (size_t i = 1; i < n_lines; i++) {
         for (size_t k = 0; k < i; k++) {
             const bool is_named_i = lines[i].name[0] != '\0';
             const bool is_named_k = lines[k].name[0] != '\0';
@@ -213,6 +225,13 @@ static int gpio_from_raw(ps_cfg_ctx_t *c, const gpio_raw_t *r, ps_gpio_cfg_t *ou
         rc = gpio_line_from_raw(c, "enable", r->enable_line, r->enable_name, &out->enable_line);
     if (rc == 0)
         rc = gpio_line_from_raw(c, "led", r->led_line, r->led_name, &out->led_line);
+    /* the record button is optional: no line and no name, no button */
+    out->has_button = r->button_line != NULL || r->button_name[0] != '\0';
+    out->is_button_active_low = r->is_button_active_low;
+    memcpy(out->button_name, r->button_name, sizeof(out->button_name));
+    if (rc == 0 && out->has_button)
+        rc = gpio_line_from_raw(c, "record_button", r->button_line, r->button_name,
+                                &out->button_line);
     return rc;
 }
 

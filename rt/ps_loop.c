@@ -478,6 +478,10 @@ static void stage_state_machine(ps_loop_t *loop)
         loop->counters.has_fallen = true;
     loop->last.cond = cond;
     loop->last.is_estop_input = is_estop_pressed;
+    bool is_button = false;
+    if (ps_gpio_read_button(&loop->cfg.gpio, &is_button) < 0)
+        loop->counters.n_gpio_errors++;
+    loop->last.is_button_pressed = is_button;
 
     ps_sm_state_t next = ps_sm_next(loop->state, cond);
     if (next == loop->state)

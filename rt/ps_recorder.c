@@ -374,7 +374,8 @@ void ps_recorder_on_tick(void *ctx, const ps_loop_t *loop)
     t->has_truth = r->truth.read != NULL && r->truth.read(r->truth.ctx, &t->truth);
     if (!t->has_truth)
         memset(&t->truth, 0, sizeof(t->truth));
-    t->triggers = find_triggers(r, t, loop->last.is_button_pressed);
+    t->triggers = find_triggers(r, t, loop->last.is_button_pressed && !r->was_button);
+    r->was_button = loop->last.is_button_pressed;
     r->last_cond = t->cond;
     r->last_state = t->state;
     ps_recorder_commit(r);
@@ -718,7 +719,8 @@ static void file_put(rec_file_t *f, writer_t *w, const ps_rec_tick_t *t)
         put_message(f, w, CH_TRUTH, t, counts, t->t_ns);
     put_events(f, w, t);
     if (f->n_pend + f->pend_head == f->pend_cap) { /* grow (compacting first) */
-        memmove(f->rec_end, f->rec_end + f->pend_head, f->n_pend * sizeof(uint64_t));
+        if (f->pend_head > 0)
+            memmove(f->rec_end, f->rec_end + f->pend_head, f->n_pend * sizeof(uint64_t));
         f->pend_head = 0;
         if (f->n_pend == f->pend_cap) {
             size_t cap = f->pend_cap ? f->pend_cap * 2 : 4096;

@@ -62,7 +62,7 @@ typedef enum {
     PS_REC_TRIG_FALL = 1u << 1,     /**< a fall detected while in charge */
     PS_REC_TRIG_WATCHDOG = 1u << 2, /**< stale reply/IMU or late policy while in charge */
     PS_REC_TRIG_OVERRUN = 1u << 3,  /**< overrun burst: the OVERRUN condition rose */
-    PS_REC_TRIG_BUTTON = 1u << 4,   /**< the GPIO record button */
+    PS_REC_TRIG_BUTTON = 1u << 4,   /**< the GPIO record button (its press, not its hold) */
     PS_REC_TRIG_SIGNAL = 1u << 5,   /**< ps_recorder_trigger (SIGUSR1) */
 } ps_rec_trigger_t;
 #define PS_REC_TRIG_COUNT 6u
@@ -223,6 +223,7 @@ typedef struct {
     _Atomic uint32_t n_trig_by[PS_REC_TRIG_COUNT];
     uint8_t last_state;
     uint32_t last_cond;
+    bool was_button; /**< the button read pressed last tick (a press triggers once) */
     ps_rec_truth_src_t truth;
     int64_t io_delay_ns;
     /* writer side */

@@ -132,6 +132,10 @@ static void run_scenario(ps_sim_t *s, int64_t rel_ns)
             a->is_motor_mode = false; /* a faulted drive gives no torque */
             break;
         }
+        case PS_EVENT_RECORD_BUTTON: /* a press shorter than a tick: latched until read */
+            ps_gpio_sim_set_button(&s->gpio, true);
+            ps_gpio_sim_set_button(&s->gpio, false);
+            break;
         case PS_EVENT_COUNT:
         default:
             break;

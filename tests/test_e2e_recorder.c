@@ -634,6 +634,37 @@ static void test_e2e_rec_cli_sigusr1_dumps_the_window_around_it(void **state)
     cJSON_Delete(c);
 }
 
+/* The GPIO record button (a scenario event on the simulated line) starts
+ * a dump, in lockstep: 1 s before the press, 0.5 s after. */
+static void test_e2e_rec_cli_gpio_button_dumps_the_window(void **state)
+{
+    (void)state;
+    char scen[128], sum[128];
+    snprintf(scen, sizeof(scen), "%s/button.yaml", dir);
+    snprintf(sum, sizeof(sum), "%s/s.json", dir);
+    FILE *f = fopen(scen, "w");
+    assert_non_null(f);
+    fputs("name: button\nduration_s: 4\nseed: 1\nevents:\n  - {t_s: 0.2, kind: start}\n"
+          "  - {t_s: 2.0, kind: harness_release}\n  - {t_s: 2.5, kind: record_button}\n",
+          f);
+    fclose(f);
+    assert_int_equal(sh("%s --lockstep --quiet --scenario %s --flight %s --flight-pre 1 "
+                        "--flight-post 0.5 --summary %s",
+                        bin(), scen, dir, sum),
+                     0);
+    cJSON *j = read_json(sum);
+    const cJSON *r = get(j, "recorder");
+    assert_int_equal(num(r, "triggers"), 1);
+    assert_int_equal(num(get(r, "triggers_by"), "button"), 1);
+    const cJSON *file = cJSON_GetArrayItem(get(get(r, "flight"), "files"), 0);
+    assert_non_null(file);
+    assert_string_equal(cJSON_GetStringValue(get(file, "trigger")), "button");
+    assert_int_equal(num(file, "records"), 1501);
+    /* the press at 2.5 s is read by the loop's next tick */
+    assert_true(num(file, "trigger_record") >= 2500 && num(file, "trigger_record") <= 2502);
+    cJSON_Delete(j);
+}
+
 static int setup(void **state)
 {
     (void)state;
@@ -667,6 +698,8 @@ int main(void)
                                         setup, teardown),
         cmocka_unit_test_setup_teardown(test_e2e_rec_cli_sigusr1_dumps_the_window_around_it,
                                         setup, teardown),
+        cmocka_unit_test_setup_teardown(test_e2e_rec_cli_gpio_button_dumps_the_window, setup,
+                                        teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
