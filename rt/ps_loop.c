@@ -18,6 +18,7 @@ static const char *const STAGE_NAMES[PS_STAGE_COUNT] = {
     [PS_STAGE_TICK_PLAIN] = "tick_plain",
     [PS_STAGE_TICK_POLICY] = "tick_policy",
     [PS_STAGE_REACTION] = "reaction",
+    [PS_STAGE_TAP] = "tap",
 };
 _Static_assert(sizeof(STAGE_NAMES) / sizeof(STAGE_NAMES[0]) == PS_STAGE_COUNT,
                "one name per stage");
@@ -752,8 +753,11 @@ void ps_loop_tick(ps_loop_t *loop, int64_t deadline_ns)
         fill_record(loop, PS_REC_STATUS, &rec);
         push_record(loop, &rec);
     }
-    if (loop->cfg.tap.on_tick != NULL)
+    if (loop->cfg.tap.on_tick != NULL) {
+        const int64_t t6 = ps_clock_now_ns(clk);
         loop->cfg.tap.on_tick(loop->cfg.tap.ctx, loop);
+        ps_perf_record(&loop->perf[PS_STAGE_TAP], ps_clock_now_ns(clk) - t6);
+    }
 }
 
 void ps_loop_request(ps_loop_t *loop, uint32_t request_bits)

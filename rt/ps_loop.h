@@ -95,6 +95,8 @@ typedef enum {
     PS_STAGE_REACTION,    /**< receive stamp of the newest reply taken to the end of the
                                write stage, on the loop's clock; ticks that took a reply
                                and sent frames */
+    PS_STAGE_TAP,         /**< the tap after the tick (the flight recorder's copy); only
+                               when a tap is set */
     PS_STAGE_COUNT
 } ps_stage_t;
 
