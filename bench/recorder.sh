@@ -37,6 +37,7 @@ mkdir -p "$RUN" "$RESULTS"
 ARGS=(profile --board "$BOARD" --robot "$ROBOT" --duration "$BLOCK_S" --quiet)
 if chrt -f 1 true 2>/dev/null; then ARGS+=(--require-rt); fi
 : >"$RUN/blocks.tsv"
+LOAD0=$(cut -d' ' -f1-3 /proc/loadavg)
 
 block() { # mode index
     local mode=$1 i=$2 dir=$RUN/$1-$2 extra=()
@@ -64,9 +65,11 @@ for ((p = 1; p <= PAIRS; p++)); do
     fi
 done
 
-"$PY" - "$RUN/blocks.tsv" "$RESULTS/recorder.json" "$RESULTS/summary.md" "$PAIRS" "$BLOCK_S" <<'EOF'
+LOAD1=$(cut -d' ' -f1-3 /proc/loadavg)
+"$PY" - "$RUN/blocks.tsv" "$RESULTS/recorder.json" "$RESULTS/summary.md" "$PAIRS" "$BLOCK_S" \
+    "$LOAD0" "$LOAD1" <<'EOF'
 import json, os, sys
-blocks_path, out_path, md_path, pairs, block_s = sys.argv[1:6]
+blocks_path, out_path, md_path, pairs, block_s, load0, load1 = sys.argv[1:8]
 blocks = []
 for line in open(blocks_path):
     mode, idx, path, cmd = line.rstrip("\n").split("\t")
@@ -97,6 +100,9 @@ res = {
     "what": "pushstep profile blocks without and with the flight recorder (--record FILE "
             "--flight DIR, defaults), alternated off/on, on/off (ABBA) in one run",
     "pairs": int(pairs), "block_s": float(block_s),
+    "loadavg_start": load0, "loadavg_end": load1,
+    "overruns_off": sum(b["overruns"] for b in blocks if b["mode"] == "off"),
+    "overruns_on": sum(b["overruns"] for b in on),
     "tick_off": {k: agg("off", "tick", k) for k in ("p50_us", "p99_us", "p999_us", "max_us")},
     "tick_on": {k: agg("on", "tick", k) for k in ("p50_us", "p99_us", "p999_us", "max_us")},
     "tap_on": {k: agg("on", "tap", k) for k in ("p50_us", "p99_us", "p999_us", "max_us")},
@@ -114,7 +120,9 @@ lines = ["", "## Flight recorder cost", "",
          "%s pairs of %s s `pushstep profile` blocks, recording off and on alternated (ABBA) in "
          "one run; recording = `--record FILE --flight DIR` at the defaults (zstd chunks, "
          "ring of %s records). Means over the blocks of each block's percentile." % (
-             pairs, block_s, on[0]["ring_slots"] if on else "?"), "",
+             pairs, block_s, on[0]["ring_slots"] if on else "?"),
+         "Load average (1, 5, 15 min) at the start %s, at the end %s (other work on the "
+         "machine: the maxima are its stalls as much as the loop's)." % (load0, load1), "",
          "| figure | off | on | on / off |", "|---|---|---|---|"]
 for k, name in (("p50_us", "tick p50"), ("p99_us", "tick p99"), ("p999_us", "tick p99.9"),
                 ("max_us", "tick max")):
@@ -129,6 +137,8 @@ lines += ["| bytes written per second of loop time | - | %.0f B/s | |" % res["by
           "| records lost (ring overwritten before written, or I/O) | - | %d of %d | |" % (
               res["records_lost"], res["records_pushed"]),
           "| mallocs on the loop thread after init | - | %d | |" % res["mallocs_after_init_on"],
+          "| overruns (all blocks of the mode) | %d | %d | |" % (res["overruns_off"],
+                                                          res["overruns_on"]),
           "", "    " + (on[0]["command"] if on else ""), ""]
 if os.path.exists(md_path):
     with open(md_path, "a") as f:
