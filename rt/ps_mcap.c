@@ -38,11 +38,11 @@ enum {
 
 static const uint8_t MAGIC[PS_MCAP_MAGIC_LEN] = {0x89, 'M', 'C', 'A', 'P', '0', '\r', '\n'};
 
-#define REC_HEAD_LEN      9u /* opcode + u64 length */
-#define DEFAULT_CHUNK     (512u * 1024u)
-#define MESSAGE_HEAD_LEN  (2u + 4u + 8u + 8u)
-#define MAX_READ_REC_LEN  (1ull << 31) /* a record this long is damage, not data */
-#define MAX_UNCOMPRESSED  (1ull << 31)
+#define REC_HEAD_LEN     9u /* opcode + u64 length */
+#define DEFAULT_CHUNK    (512u * 1024u)
+#define MESSAGE_HEAD_LEN (2u + 4u + 8u + 8u)
+#define MAX_READ_REC_LEN (1ull << 31) /* a record this long is damage, not data */
+#define MAX_UNCOMPRESSED (1ull << 31)
 
 /* ---- a growable byte buffer ------------------------------------------------ */
 
@@ -811,7 +811,7 @@ static int on_metadata_rec(rctx_t *c, rd_t *r)
         n += !m.is_bad;
     }
     c->info->n_metadata++;
-    int rc = m.is_bad ? -EPROTO
+    int rc = m.is_bad                      ? -EPROTO
              : c->ops->on_metadata != NULL ? c->ops->on_metadata(c->ctx, name, kv, n)
                                            : 0;
     free(store);
@@ -1022,7 +1022,8 @@ int ps_mcap_read_file(const char *path, const ps_mcap_read_ops_t *ops, void *ctx
             has_header = true;
         } else if (op == OP_FOOTER) {
             const size_t end = pos + REC_HEAD_LEN + (size_t)rlen;
-            if (len - end >= PS_MCAP_MAGIC_LEN && memcmp(file + end, MAGIC, PS_MCAP_MAGIC_LEN) == 0) {
+            if (len - end >= PS_MCAP_MAGIC_LEN &&
+                memcmp(file + end, MAGIC, PS_MCAP_MAGIC_LEN) == 0) {
                 out->has_footer = true;
                 out->valid_bytes = end + PS_MCAP_MAGIC_LEN;
             } else {

@@ -91,10 +91,10 @@ typedef struct {
 
 typedef struct {
     ps_mcap_cfg_t cfg;
-    int err;         /**< 0, or the first write/sync error (read-only) */
-    uint64_t pos;    /**< bytes written to the file (read-only) */
-    uint32_t crc;    /**< running CRC32 of the data section */
-    uint8_t *chunk;  /**< uncompressed records of the open chunk */
+    int err;        /**< 0, or the first write/sync error (read-only) */
+    uint64_t pos;   /**< bytes written to the file (read-only) */
+    uint32_t crc;   /**< running CRC32 of the data section */
+    uint8_t *chunk; /**< uncompressed records of the open chunk */
     size_t chunk_len, chunk_cap;
     uint8_t *zbuf; /**< compressed chunk record + message indexes */
     size_t zbuf_cap;
@@ -115,8 +115,8 @@ typedef struct {
     bool is_channel_written[PS_MCAP_MAX_CHANNELS];
     uint16_t n_channels;
     /* statistics */
-    uint64_t n_messages;        /**< messages written to the file (read-only) */
-    uint64_t n_lost;            /**< messages that never reached the file (read-only) */
+    uint64_t n_messages; /**< messages written to the file (read-only) */
+    uint64_t n_lost;     /**< messages that never reached the file (read-only) */
     uint64_t channel_n_messages[PS_MCAP_MAX_CHANNELS]; /**< in the file (read-only) */
     uint64_t start_time, end_time;
     uint32_t n_metadata;

@@ -16,12 +16,12 @@
 #include "ps_rosmsg.h"
 #include "ps_sm.h"
 
-#define MAX_CH       64u
-#define MAX_SCHEMAS  64u
-#define MAX_COLS     512u
-#define MAX_JOINTS   64u
-#define MAX_TIMING   16u
-#define TEXT_CAP     16384u
+#define MAX_CH      64u
+#define MAX_SCHEMAS 64u
+#define MAX_COLS    512u
+#define MAX_JOINTS  64u
+#define MAX_TIMING  16u
+#define TEXT_CAP    16384u
 
 static const char USAGE[] =
     "usage: pushstep log FILE.mcap [--csv OUT.csv] [--plot OUT.png]\n"
@@ -183,8 +183,8 @@ static int on_metadata(void *ctx, const char *name, const ps_mcap_kv_t *kv, size
             split_joints(lg, kv[i].value);
             continue; /* long; the joints are the CSV's column names */
         }
-        used += (size_t)snprintf(lg->meta + used, TEXT_CAP - used, " %s=%s", kv[i].key,
-                                 kv[i].value);
+        used +=
+            (size_t)snprintf(lg->meta + used, TEXT_CAP - used, " %s=%s", kv[i].key, kv[i].value);
     }
     if (used < TEXT_CAP - 1)
         strcat(lg->meta, "\n");
@@ -242,8 +242,8 @@ static void summary_value(void *ctx, const ps_rosmsg_value_t *v)
     }
 }
 
-static int on_message_summary(void *ctx, uint16_t id, uint32_t seq, uint64_t t,
-                              const uint8_t *data, size_t len)
+static int on_message_summary(void *ctx, uint16_t id, uint32_t seq, uint64_t t, const uint8_t *data,
+                              size_t len)
 {
     log_t *lg = ctx;
     (void)seq;
@@ -270,8 +270,8 @@ static int on_message_summary(void *ctx, uint16_t id, uint32_t seq, uint64_t t,
     c->has_first = true;
     if (strcmp(c->topic, "/events") == 0 && lg->n_events < 200) {
         char line[320];
-        snprintf(line, sizeof(line), "  t=%8.3fs %-10s %s\n", (double)(t - lg->t0) * 1e-9,
-                 lg->kind, lg->text);
+        snprintf(line, sizeof(line), "  t=%8.3fs %-10s %s\n", (double)(t - lg->t0) * 1e-9, lg->kind,
+                 lg->text);
         const size_t used = strlen(lg->events);
         snprintf(lg->events + used, TEXT_CAP - used, "%s", line);
         lg->n_events++;
@@ -406,8 +406,7 @@ static int add_signal(log_t *lg, const char *sig, bool is_optional)
     if (c == NULL || def == NULL) {
         if (is_optional)
             return 0;
-        fprintf(stderr, "pushstep log: %s: no channel (with a ros2msg schema) by that name\n",
-                sig);
+        fprintf(stderr, "pushstep log: %s: no channel (with a ros2msg schema) by that name\n", sig);
         return -ENOENT;
     }
     char field[PS_ROSMSG_NAME_LEN] = "", rest[64] = "";
@@ -509,8 +508,8 @@ static void export_value(void *ctx, const ps_rosmsg_value_t *v)
     }
 }
 
-static int on_message_export(void *ctx, uint16_t id, uint32_t seq, uint64_t t,
-                             const uint8_t *data, size_t len)
+static int on_message_export(void *ctx, uint16_t id, uint32_t seq, uint64_t t, const uint8_t *data,
+                             size_t len)
 {
     log_t *lg = ctx;
     (void)seq;
@@ -625,8 +624,8 @@ static int run_export(log_t *lg)
     if (lg->out[0] != NULL && fclose(lg->out[0]) != 0)
         status = 1;
     if (lg->out[0] != NULL)
-        printf("csv: %llu rows of %u columns to %s\n", (unsigned long long)lg->n_rows,
-               lg->n_cols, lg->csv);
+        printf("csv: %llu rows of %u columns to %s\n", (unsigned long long)lg->n_rows, lg->n_cols,
+               lg->csv);
     if (lg->out[1] != NULL) {
         fclose(lg->out[1]);
         if (status == 0 && plot(lg, data_path) < 0)

@@ -16,12 +16,12 @@
 #include "ps_rosmsg.h"
 #include "ps_rtsetup.h"
 
-#define IDLE_SLEEP_NS   (5 * PS_NS_PER_MS)
+#define IDLE_SLEEP_NS    (5 * PS_NS_PER_MS)
 #define RECORDS_PER_PASS 2048u /* per file, between looks at the other file and triggers */
-#define DEFAULT_CHUNK   (256u * 1024u)
-#define MSG_BUF         16384u
-#define SCHEMA_BUF      8192u
-#define GRAVITY_M_S2    9.81f
+#define DEFAULT_CHUNK    (256u * 1024u)
+#define MSG_BUF          16384u
+#define SCHEMA_BUF       8192u
+#define GRAVITY_M_S2     9.81f
 
 static const char *const TRIGGER_NAMES[PS_REC_TRIG_COUNT] = {
     "estop", "fall", "watchdog", "overrun", "button", "signal",
@@ -40,9 +40,18 @@ const char *ps_recorder_trigger_name(ps_rec_trigger_t bit)
 enum { CNT_JOINTS = 0, CNT_BUSES, CNT_CONTACTS, CNT_COUNT };
 
 #define OFF(m) offsetof(ps_rec_tick_t, m)
-#define SCALAR(n, t, m, doc) {n, PS_ROSMSG_##t, PS_ROSMSG_SCALAR, 0, 1, OFF(m), doc}
-#define ARRAY(n, t, m, k, doc) {n, PS_ROSMSG_##t, PS_ROSMSG_ARRAY, 0, k, OFF(m), doc}
-#define SEQ(n, t, m, c, cap, doc) {n, PS_ROSMSG_##t, PS_ROSMSG_SEQUENCE, c, cap, OFF(m), doc}
+#define SCALAR(n, t, m, doc)                                                                       \
+    {                                                                                              \
+        n, PS_ROSMSG_##t, PS_ROSMSG_SCALAR, 0, 1, OFF(m), doc                                      \
+    }
+#define ARRAY(n, t, m, k, doc)                                                                     \
+    {                                                                                              \
+        n, PS_ROSMSG_##t, PS_ROSMSG_ARRAY, 0, k, OFF(m), doc                                       \
+    }
+#define SEQ(n, t, m, c, cap, doc)                                                                  \
+    {                                                                                              \
+        n, PS_ROSMSG_##t, PS_ROSMSG_SEQUENCE, c, cap, OFF(m), doc                                  \
+    }
 #define JSEQ(n, t, m, doc) SEQ(n, t, m, CNT_JOINTS, PS_MAX_JOINTS, doc)
 #define BSEQ(n, t, m, doc) SEQ(n, t, m, CNT_BUSES, PS_MAX_BUSES, doc)
 #define CSEQ(n, t, m, doc) SEQ(n, t, m, CNT_CONTACTS, PS_REC_MAX_CONTACTS, doc)
@@ -141,10 +150,18 @@ static const ps_rosmsg_field_t POLICY[] = {
 };
 
 #define TOFF(m) (offsetof(ps_rec_tick_t, truth) + offsetof(ps_rec_truth_t, m))
-#define TSCALAR(n, t, m, doc) {n, PS_ROSMSG_##t, PS_ROSMSG_SCALAR, 0, 1, TOFF(m), doc}
-#define TARRAY(n, t, m, k, doc) {n, PS_ROSMSG_##t, PS_ROSMSG_ARRAY, 0, k, TOFF(m), doc}
+#define TSCALAR(n, t, m, doc)                                                                      \
+    {                                                                                              \
+        n, PS_ROSMSG_##t, PS_ROSMSG_SCALAR, 0, 1, TOFF(m), doc                                     \
+    }
+#define TARRAY(n, t, m, k, doc)                                                                    \
+    {                                                                                              \
+        n, PS_ROSMSG_##t, PS_ROSMSG_ARRAY, 0, k, TOFF(m), doc                                      \
+    }
 #define TCSEQ(n, t, m, doc)                                                                        \
-    {n, PS_ROSMSG_##t, PS_ROSMSG_SEQUENCE, CNT_CONTACTS, PS_REC_MAX_CONTACTS, TOFF(m), doc}
+    {                                                                                              \
+        n, PS_ROSMSG_##t, PS_ROSMSG_SEQUENCE, CNT_CONTACTS, PS_REC_MAX_CONTACTS, TOFF(m), doc      \
+    }
 
 static const ps_rosmsg_field_t TRUTH[] = {
     STAMP,
@@ -181,10 +198,23 @@ static const ps_rosmsg_field_t EVENT[] = {
     {"text", PS_ROSMSG_STRING, PS_ROSMSG_SCALAR, 0, 200, offsetof(rec_event_t, text), NULL},
 };
 
-#define DEF(n, f) {n, f, sizeof(f) / sizeof(f[0])}
+#define DEF(n, f)                                                                                  \
+    {                                                                                              \
+        n, f, sizeof(f) / sizeof(f[0])                                                             \
+    }
 
-enum { CH_JOINTS, CH_IMU, CH_ESTIMATE, CH_STATE, CH_TIMING, CH_BUSES, CH_POLICY, CH_TRUTH,
-       CH_EVENTS, CH_COUNT };
+enum {
+    CH_JOINTS,
+    CH_IMU,
+    CH_ESTIMATE,
+    CH_STATE,
+    CH_TIMING,
+    CH_BUSES,
+    CH_POLICY,
+    CH_TRUTH,
+    CH_EVENTS,
+    CH_COUNT
+};
 
 static const struct {
     const char *topic;
@@ -616,8 +646,8 @@ static int file_open(writer_t *w, rec_file_t *f, const char *path, ps_rec_file_s
             n_meta = 2;
         }
         if (rc > 0)
-            rc = ps_mcap_add_channel(&f->mcap, (uint16_t)rc, CHANNELS[c].topic, "cdr", meta,
-                                     n_meta);
+            rc =
+                ps_mcap_add_channel(&f->mcap, (uint16_t)rc, CHANNELS[c].topic, "cdr", meta, n_meta);
         if (rc >= 0) {
             f->ch[c] = rc;
             rc = 0;

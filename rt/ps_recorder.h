@@ -121,7 +121,7 @@ typedef struct {
     /* estimate (ground frame of policy/ps_state.h) */
     float roll_rad, pitch_rad;
     float com_m[3], com_vel_m_s[3], cop_m[2];
-    float capture_point_m[2]; /**< com_xy + com_vel_xy / sqrt(g / com_z) */
+    float capture_point_m[2];                 /**< com_xy + com_vel_xy / sqrt(g / com_z) */
     float support_min_m[2], support_max_m[2]; /**< box around the soles in contact */
     float foot_left_m[3], foot_right_m[3];
     uint8_t is_contact_left, is_contact_right, is_fallen;
@@ -196,15 +196,15 @@ typedef struct {
 #define PS_REC_MAX_DUMP_STATS 16u
 
 typedef struct {
-    uint32_t n_slots;       /**< ring size in records */
-    uint64_t n_pushed;      /**< records the loop put into the ring */
-    uint32_t n_channels;    /**< channels defined (not all appear in every file) */
+    uint32_t n_slots;    /**< ring size in records */
+    uint64_t n_pushed;   /**< records the loop put into the ring */
+    uint32_t n_channels; /**< channels defined (not all appear in every file) */
     char channel_topic[PS_MCAP_MAX_CHANNELS][32];
-    ps_rec_file_stats_t cont;              /**< continuous file */
-    uint32_t n_triggers;                   /**< triggers raised */
+    ps_rec_file_stats_t cont; /**< continuous file */
+    uint32_t n_triggers;      /**< triggers raised */
     uint32_t n_triggers_by[PS_REC_TRIG_COUNT];
-    uint32_t n_dumps;                      /**< flight dumps started */
-    uint32_t n_dumps_failed;               /**< ... that ended with an error */
+    uint32_t n_dumps;                                /**< flight dumps started */
+    uint32_t n_dumps_failed;                         /**< ... that ended with an error */
     ps_rec_file_stats_t dump[PS_REC_MAX_DUMP_STATS]; /**< the first dumps */
     uint64_t bytes_total;
 } ps_recorder_stats_t;
@@ -214,12 +214,12 @@ typedef struct {
     char path[PS_PATH_LEN];
     char dir[PS_PATH_LEN];
     ps_rec_slot_t *slots;
-    uint32_t n_slots; /**< power of two */
-    _Atomic uint64_t head;       /**< records pushed (loop thread writes) */
+    uint32_t n_slots;             /**< power of two */
+    _Atomic uint64_t head;        /**< records pushed (loop thread writes) */
     _Atomic uint32_t ext_trigger; /**< PS_REC_TRIG_SIGNAL/BUTTON bits posted from outside */
-    ps_ring_t trig_ring;         /**< triggers to the writer (ps_rec_trig_t), in order */
+    ps_ring_t trig_ring;          /**< triggers to the writer (ps_rec_trig_t), in order */
     ps_rec_trig_t trig_storage[PS_REC_TRIG_QUEUE];
-    _Atomic uint32_t n_trig;     /**< triggers raised (loop thread writes) */
+    _Atomic uint32_t n_trig; /**< triggers raised (loop thread writes) */
     _Atomic uint32_t n_trig_by[PS_REC_TRIG_COUNT];
     uint8_t last_state;
     uint32_t last_cond;
@@ -230,7 +230,7 @@ typedef struct {
     pthread_t thread;
     bool has_thread;
     atomic_bool should_stop;
-    void *w; /**< writer-thread state (rt/ps_recorder.c) */
+    void *w;                   /**< writer-thread state (rt/ps_recorder.c) */
     ps_recorder_stats_t stats; /**< final after ps_recorder_stop */
 } ps_recorder_t;
 

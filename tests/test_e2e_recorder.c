@@ -273,11 +273,17 @@ static uint64_t count_lines(const char *path)
 static void check_log_command(const char *path, uint64_t n_ticks)
 {
     assert_int_equal(sh("%s log %s", bin(), path), 0);
-    static const char *const SUMMARY[] = {
-        "closed (summary and index present)", "duration 8.000 s", "/joints",
-        "pushstep_msgs/msg/Estimate", "scenario=scenarios/shove.yaml", "records_lost_ring=0",
-        "transition ACTIVE -> DAMPING (FALL)", "trigger    fall", "FALL ", "tick_ns",
-        "latency (us)"};
+    static const char *const SUMMARY[] = {"closed (summary and index present)",
+                                          "duration 8.000 s",
+                                          "/joints",
+                                          "pushstep_msgs/msg/Estimate",
+                                          "scenario=scenarios/shove.yaml",
+                                          "records_lost_ring=0",
+                                          "transition ACTIVE -> DAMPING (FALL)",
+                                          "trigger    fall",
+                                          "FALL ",
+                                          "tick_ns",
+                                          "latency (us)"};
     for (size_t i = 0; i < sizeof(SUMMARY) / sizeof(SUMMARY[0]); i++)
         if (strstr(out, SUMMARY[i]) == NULL)
             fail_msg("pushstep log summary lacks \"%s\":\n%s", SUMMARY[i], out);
@@ -337,8 +343,8 @@ static void test_e2e_rec_lockstep_shove_guarded_files_match_foxglove_readers(voi
 {
     (void)state;
     char err[PS_ERR_MSG_LEN] = "";
-    ps_app_opts_t o = {.data_dir = ".", .board = "sim", .scenario = "scenarios/shove.yaml",
-                       .is_lockstep = true};
+    ps_app_opts_t o = {
+        .data_dir = ".", .board = "sim", .scenario = "scenarios/shove.yaml", .is_lockstep = true};
     int rc = ps_app_init(&app, &o, err, sizeof(err));
     if (rc != 0)
         fail_msg("ps_app_init: %s", err);
@@ -432,9 +438,9 @@ static void test_e2e_rec_cli_help_and_unwritable_paths(void **state)
 {
     (void)state;
     assert_int_equal(sh("%s --help", bin()), 0);
-    static const char *const OPTIONS[] = {"--record FILE.mcap", "--flight DIR", "--flight-pre S",
-                                          "--flight-post S", "--record-compression",
-                                          "--record-ring S", "pushstep log"};
+    static const char *const OPTIONS[] = {
+        "--record FILE.mcap",   "--flight DIR",    "--flight-pre S", "--flight-post S",
+        "--record-compression", "--record-ring S", "pushstep log"};
     for (size_t i = 0; i < sizeof(OPTIONS) / sizeof(OPTIONS[0]); i++)
         if (strstr(out, OPTIONS[i]) == NULL)
             fail_msg("--help does not mention %s", OPTIONS[i]);
@@ -587,9 +593,8 @@ static void test_e2e_rec_cli_power_cut_file_readable_up_to_last_chunk(void **sta
     cJSON_Delete(c);
     ps_mcap_read_info_t info;
     char err[256];
-    assert_int_equal(ps_mcap_read_file(path, &(ps_mcap_read_ops_t){0}, NULL, &info, err,
-                                       sizeof(err)),
-                     0);
+    assert_int_equal(
+        ps_mcap_read_file(path, &(ps_mcap_read_ops_t){0}, NULL, &info, err, sizeof(err)), 0);
     assert_int_equal((double)info.n_messages, n);
     assert_false(info.has_footer);
     assert_true(info.n_chunks > 0);
@@ -604,9 +609,9 @@ static void test_e2e_rec_cli_sigusr1_dumps_the_window_around_it(void **state)
     (void)state;
     char sum[128];
     snprintf(sum, sizeof(sum), "%s/s.json", dir);
-    char *const argv[] = {(char *)bin(),  "--lockstep",    "--duration", "0",         "--quiet",
-                          "--flight",     dir,             "--flight-pre", "1",       "--flight-post",
-                          "0.5",          "--summary",     sum,          NULL};
+    char *const argv[] = {
+        (char *)bin(),  "--lockstep", "--duration",    "0",   "--quiet",   "--flight", dir,
+        "--flight-pre", "1",          "--flight-post", "0.5", "--summary", sum,        NULL};
     pid_t pid = spawn_bg(argv);
     sleep_s(1.0); /* start-up (model load) and more than a second of loop time */
     kill(pid, SIGUSR1);
@@ -690,14 +695,14 @@ int main(void)
                                         teardown),
         cmocka_unit_test_setup_teardown(test_e2e_rec_cli_disk_full_loop_runs_on_records_counted,
                                         setup, teardown),
-        cmocka_unit_test_setup_teardown(
-            test_e2e_rec_cli_size_limit_mid_run_file_keeps_whole_chunks, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_e2e_rec_cli_size_limit_mid_run_file_keeps_whole_chunks,
+                                        setup, teardown),
         cmocka_unit_test_setup_teardown(test_e2e_rec_cli_slow_disk_reports_lost_records, setup,
                                         teardown),
         cmocka_unit_test_setup_teardown(test_e2e_rec_cli_power_cut_file_readable_up_to_last_chunk,
                                         setup, teardown),
-        cmocka_unit_test_setup_teardown(test_e2e_rec_cli_sigusr1_dumps_the_window_around_it,
-                                        setup, teardown),
+        cmocka_unit_test_setup_teardown(test_e2e_rec_cli_sigusr1_dumps_the_window_around_it, setup,
+                                        teardown),
         cmocka_unit_test_setup_teardown(test_e2e_rec_cli_gpio_button_dumps_the_window, setup,
                                         teardown),
     };

@@ -44,11 +44,11 @@ static const ps_rosmsg_def_t SMALL = {"t/msg/Small", SMALL_FIELDS, 5};
  * floats at 20; s's length (3, with the NUL) at 28, "hi\0" at 32; f at 35. */
 static const uint8_t SMALL_GOLDEN[] = {
     0x00, 0x01, 0x00, 0x00,                         /* CDR_LE */
-    0x07, 0, 0, 0, 0, 0, 0, 0,                      /* a = 7, padding */
+    0x07, 0,    0,    0,    0,    0,    0,    0,    /* a = 7, padding */
     0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0xf8, 0x3f, /* b = 1.5 */
     0x02, 0x00, 0x00, 0x00,                         /* c: 2 elements */
     0x00, 0x00, 0x80, 0x3f, 0x00, 0x00, 0x00, 0xc0, /* 1.0f, -2.0f */
-    0x03, 0x00, 0x00, 0x00, 'h', 'i', 0x00,         /* s = "hi" */
+    0x03, 0x00, 0x00, 0x00, 'h',  'i',  0x00,       /* s = "hi" */
     0x01, 0x00,                                     /* f = {true, false} */
 };
 
@@ -70,8 +70,7 @@ static void test_rosmsg_schema_text_lists_fields(void **state)
     char text[256];
     int n = ps_rosmsg_schema_text(&SMALL, text, sizeof(text));
     assert_true(n > 0);
-    assert_string_equal(text,
-                        "uint8 a\nfloat64 b  # metres\nfloat32[] c\nstring s\nbool[2] f\n");
+    assert_string_equal(text, "uint8 a\nfloat64 b  # metres\nfloat32[] c\nstring s\nbool[2] f\n");
     assert_int_equal(ps_rosmsg_schema_text(&SMALL, text, 10), -ENOSPC);
 }
 
@@ -464,8 +463,7 @@ static void test_mcap_read_refuses_non_mcap_and_missing_file(void **state)
     fclose(f);
     ps_mcap_read_info_t info;
     char err[256];
-    assert_int_equal(ps_mcap_read_file(tmp_path, &GOT_OPS, NULL, &info, err, sizeof(err)),
-                     -EPROTO);
+    assert_int_equal(ps_mcap_read_file(tmp_path, &GOT_OPS, NULL, &info, err, sizeof(err)), -EPROTO);
     assert_non_null(strstr(err, "not an MCAP file"));
     assert_int_equal(
         ps_mcap_read_file("/nonexistent/x.mcap", &GOT_OPS, NULL, &info, err, sizeof(err)), -ENOENT);

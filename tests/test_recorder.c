@@ -173,7 +173,7 @@ static void test_ring_overwrites_oldest_and_reader_sees_lost(void **state)
     assert_int_equal(ps_recorder_read(&rec, 0, &t), -EAGAIN);
     ticks(3000);
     assert_int_equal(ps_recorder_read(&rec, 3000, &t), -EAGAIN);
-    assert_int_equal(ps_recorder_read(&rec, 0, &t), -ESTALE);       /* overwritten */
+    assert_int_equal(ps_recorder_read(&rec, 0, &t), -ESTALE); /* overwritten */
     assert_int_equal(ps_recorder_read(&rec, 3000 - 2049, &t), -ESTALE);
     assert_int_equal(ps_recorder_read(&rec, 3000 - 2048, &t), 0); /* the oldest kept */
     assert_int_equal(t.tick, 3000 - 2048);
