@@ -104,6 +104,9 @@ typedef struct {
     bool is_export;
     col_t cols[MAX_COLS];
     uint32_t n_cols;
+    /** column of each element, by channel and field (NULL: none chosen; -1: element not
+     *  chosen), so a decoded value finds its column at once */
+    int32_t *col_of[MAX_CH][PS_ROSMSG_MAX_FIELDS];
     double row[MAX_COLS];
     double col_min[MAX_COLS], col_max[MAX_COLS]; /**< over the rows written */
     bool has_row;
@@ -376,6 +379,17 @@ static int add_col(log_t *lg, int ch, uint32_t field, uint32_t elem)
         snprintf(col.name, sizeof(col.name), "%s.%s.%s", topic, f->name, lg->joints[elem]);
     else
         snprintf(col.name, sizeof(col.name), "%s.%s[%u]", topic, f->name, elem);
+    int32_t **map = &lg->col_of[ch][field];
+    const uint32_t n_elems = c->n_elems[field] > 0 ? c->n_elems[field] : 1u;
+    if (*map == NULL) {
+        *map = malloc(n_elems * sizeof(int32_t));
+        if (*map == NULL)
+            return -ENOMEM;
+        for (uint32_t e = 0; e < n_elems; e++)
+            (*map)[e] = -1;
+    }
+    if (elem < n_elems)
+        (*map)[elem] = (int32_t)lg->n_cols;
     lg->cols[lg->n_cols++] = col;
     return 0;
 }
@@ -501,11 +515,10 @@ static void emit_row(log_t *lg)
 static void export_value(void *ctx, const ps_rosmsg_value_t *v)
 {
     log_t *lg = ctx;
-    for (uint32_t i = 0; i < lg->n_cols; i++) {
-        const col_t *c = &lg->cols[i];
-        if ((int)c->ch == lg->cur_ch && c->field == v->field_idx && c->elem == v->elem_idx)
-            lg->row[i] = v->value;
-    }
+    const int32_t *map = lg->col_of[lg->cur_ch][v->field_idx];
+    const uint32_t n = lg->chans[lg->cur_ch].n_elems[v->field_idx];
+    if (map != NULL && v->elem_idx < (n > 0 ? n : 1u) && map[v->elem_idx] >= 0)
+        lg->row[map[v->elem_idx]] = v->value;
 }
 
 static int on_message_export(void *ctx, uint16_t id, uint32_t seq, uint64_t t, const uint8_t *data,
@@ -516,8 +529,8 @@ static int on_message_export(void *ctx, uint16_t id, uint32_t seq, uint64_t t, c
     int idx;
     chan_t *c = chan_by_id(lg, id, &idx);
     bool is_used = false;
-    for (uint32_t i = 0; c != NULL && i < lg->n_cols && !is_used; i++)
-        is_used = lg->cols[i].ch == idx;
+    for (uint32_t f = 0; c != NULL && f < PS_ROSMSG_MAX_FIELDS && !is_used; f++)
+        is_used = lg->col_of[idx][f] != NULL;
     if (!is_used)
         return 0;
     if (lg->has_row && t != lg->row_t)
@@ -729,6 +742,9 @@ int ps_reclog_main(int argc, char **argv)
     }
     for (uint32_t k = 0; k < MAX_TIMING; k++)
         free(lg->timing[k].v);
+    for (uint32_t ch = 0; ch < MAX_CH; ch++)
+        for (uint32_t f = 0; f < PS_ROSMSG_MAX_FIELDS; f++)
+            free(lg->col_of[ch][f]);
     free(schemas);
     free(lg);
     return status;
