@@ -653,9 +653,13 @@ static int file_open(writer_t *w, rec_file_t *f, const char *path, ps_rec_file_s
             rc = 0;
         }
     }
-    char hz[16], slots[16];
+    char hz[16], slots[16], when[32] = "";
     snprintf(hz, sizeof(hz), "%u", r->cfg.servo_hz);
     snprintf(slots, sizeof(slots), "%u", r->n_slots);
+    const time_t now = time(NULL);
+    struct tm utc;
+    if (gmtime_r(&now, &utc) != NULL)
+        (void)strftime(when, sizeof(when), "%Y-%m-%dT%H:%M:%SZ", &utc); /* fits */
     const ps_mcap_kv_t run[] = {
         {"board", r->cfg.board_name ? r->cfg.board_name : ""},
         {"robot", r->cfg.robot_name ? r->cfg.robot_name : ""},
@@ -665,6 +669,7 @@ static int file_open(writer_t *w, rec_file_t *f, const char *path, ps_rec_file_s
         {"bus_names", w->bus_list},
         {"clock", r->cfg.clock_name ? r->cfg.clock_name : ""},
         {"ring_slots", slots},
+        {"file_opened_utc", when},
     };
     if (rc == 0)
         rc = ps_mcap_write_metadata(&f->mcap, "pushstep.run", run, sizeof(run) / sizeof(run[0]));
