@@ -471,9 +471,7 @@ static void on_trigger_signal(int sig)
 }
 
 /* --record / --flight, once the configuration is good: the ring (touched
- * now), the files checked, the loop tapped; SIGUSR1 triggers a dump and a
- * full disk (or a file size limit, SIGXFSZ) fails writes instead of the
- * process. */
+ * now), the files checked, the loop tapped. */
 static int setup_recorder(char *err, size_t len)
 {
     ps_recorder_cfg_t rc_cfg = {
@@ -491,6 +489,16 @@ static int setup_recorder(char *err, size_t len)
     if (rc < 0)
         return rc;
     ps_app_attach_recorder(&g.app, &g.rec);
+    atomic_store(&g.is_recording, true); /* SIGUSR1 triggers from now on */
+    return 0;
+}
+
+/* With --record or --flight, from the start of main: SIGUSR1 asks for a dump
+ * (ignored until the recorder is ready, instead of killing a process that
+ * is still loading its model), and a file size limit fails writes instead
+ * of the process (SIGXFSZ ignored). */
+static int install_recorder_signals(void)
+{
     struct sigaction sa;
     memset(&sa, 0, sizeof(sa));
     sa.sa_handler = on_trigger_signal;
@@ -501,7 +509,6 @@ static int setup_recorder(char *err, size_t len)
     sigemptyset(&ign.sa_mask);
     if (sigaction(SIGUSR1, &sa, NULL) < 0 || sigaction(SIGXFSZ, &ign, NULL) < 0)
         return -errno;
-    atomic_store(&g.is_recording, true);
     return 0;
 }
 
@@ -843,6 +850,10 @@ int main(int argc, char **argv)
     }
     if (parse_options(argc, argv, &g.opt) < 0)
         return 2;
+    if ((g.opt.record_path != NULL || g.opt.flight_dir != NULL) && install_recorder_signals() < 0) {
+        fprintf(stderr, "pushstep: cannot install the SIGUSR1/SIGXFSZ handlers\n");
+        return 1;
+    }
     find_data_dir(g.data_dir, sizeof(g.data_dir));
     char err[PS_ERR_MSG_LEN];
     if (g.opt.candump_path != NULL && alloc_candump_ring(err, sizeof(err)) < 0) {

@@ -549,13 +549,15 @@ static void test_e2e_rec_cli_slow_disk_reports_lost_records(void **state)
     cJSON_Delete(c);
 }
 
-static pid_t spawn_bg(char *const argv[])
+/* Start argv in the background, stdout and stderr to log (or /dev/null). */
+static pid_t spawn_bg(char *const argv[], const char *log)
 {
     pid_t pid;
     posix_spawn_file_actions_t fa;
     posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_addopen(&fa, 1, "/dev/null", O_WRONLY, 0);
-    posix_spawn_file_actions_addopen(&fa, 2, "/dev/null", O_WRONLY, 0);
+    const char *to = log != NULL ? log : "/dev/null";
+    posix_spawn_file_actions_addopen(&fa, 1, to, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_adddup2(&fa, 1, 2);
     assert_int_equal(posix_spawn(&pid, argv[0], &fa, NULL, argv, environ), 0);
     posix_spawn_file_actions_destroy(&fa);
     return pid;
@@ -575,7 +577,7 @@ static void test_e2e_rec_cli_power_cut_file_readable_up_to_last_chunk(void **sta
     char path[128];
     snprintf(path, sizeof(path), "%s/cut.mcap", dir);
     char *const argv[] = {(char *)bin(), "--duration", "30", "--quiet", "--record", path, NULL};
-    pid_t pid = spawn_bg(argv);
+    pid_t pid = spawn_bg(argv, NULL);
     struct stat st = {0};
     for (int i = 0; i < 400 && (stat(path, &st) != 0 || st.st_size < 150000); i++)
         sleep_s(0.05);
@@ -612,8 +614,14 @@ static void test_e2e_rec_cli_sigusr1_dumps_the_window_around_it(void **state)
     char *const argv[] = {
         (char *)bin(),  "--lockstep", "--duration",    "0",   "--quiet",   "--flight", dir,
         "--flight-pre", "1",          "--flight-post", "0.5", "--summary", sum,        NULL};
-    pid_t pid = spawn_bg(argv);
-    sleep_s(1.0); /* start-up (model load) and more than a second of loop time */
+    char log[128];
+    snprintf(log, sizeof(log), "%s/run.log", dir);
+    pid_t pid = spawn_bg(argv, log);
+    /* the loop runs once "running lockstep" is printed (the model is loaded,
+     * the recorder ready); then some loop time for the pre window */
+    for (int i = 0; i < 600 && sh("grep -q 'running lockstep' %s", log) != 0; i++)
+        sleep_s(0.02);
+    sleep_s(0.5);
     kill(pid, SIGUSR1);
     sleep_s(0.8);
     kill(pid, SIGTERM);
