@@ -683,7 +683,8 @@ static void put_message(rec_file_t *f, writer_t *w, int c, const void *src, cons
 {
     const int n = ps_rosmsg_encode(&CHANNELS[c].def, src, counts, w->msg, sizeof(w->msg));
     if (n < 0)
-        return; /* cannot happen: MSG_BUF holds the largest message (test_recorder) */
+        return; /* cannot happen: MSG_BUF holds the largest message (test_recorder's
+                   test_largest_record_every_channel_written) */
     const uint64_t t = t_ns > 0 ? (uint64_t)t_ns : 0u;
     (void)ps_mcap_write_message(&f->mcap, (uint16_t)f->ch[c], f->seq[c]++, t, t, w->msg,
                                 (size_t)n); /* an error fails the writer: seen below */

@@ -313,6 +313,89 @@ static void test_flight_run_ending_in_post_window_closes_dump(void **state)
     assert_int_equal(f.n_state, 401);
 }
 
+/* ---- the largest record fits every message ---------------------------------- */
+
+static bool full_truth(void *ctx, ps_rec_truth_t *out)
+{
+    (void)ctx;
+    memset(out, 0, sizeof(*out));
+    out->n_contacts = PS_REC_MAX_CONTACTS;
+    out->push_force_n[0] = 300.0f;
+    return true;
+}
+
+typedef struct {
+    char topic[PS_MCAP_MAX_CHANNELS][32];
+    uint64_t n[PS_MCAP_MAX_CHANNELS];
+    size_t max_len;
+} per_channel_t;
+
+static int pc_channel(void *ctx, uint16_t id, uint16_t schema, const char *topic, const char *enc)
+{
+    per_channel_t *p = ctx;
+    (void)schema;
+    (void)enc;
+    snprintf(p->topic[id], sizeof(p->topic[id]), "%s", topic);
+    return 0;
+}
+
+static int pc_message(void *ctx, uint16_t ch, uint32_t seq, uint64_t t, const uint8_t *data,
+                      size_t len)
+{
+    per_channel_t *p = ctx;
+    (void)seq;
+    (void)t;
+    (void)data;
+    p->n[ch]++;
+    if (len > p->max_len)
+        p->max_len = len;
+    return 0;
+}
+
+/* Every joint, bus and contact the compile-time maxima allow, on a policy
+ * tick in simulation: every channel's message is encoded and written. */
+static void test_largest_record_every_channel_written(void **state)
+{
+    (void)state;
+    static char names[PS_MAX_JOINTS][PS_NAME_LEN];
+    for (unsigned j = 0; j < PS_MAX_JOINTS; j++)
+        snprintf(names[j], sizeof(names[j]), "joint_with_a_long_name_%02u", j);
+    char path[128];
+    snprintf(path, sizeof(path), "%s/max.mcap", dir);
+    ps_recorder_cfg_t cfg = base_cfg();
+    cfg.path = path;
+    cfg.joint_name = (const char(*)[PS_NAME_LEN])names;
+    cfg.n_joints = PS_MAX_JOINTS;
+    init_rec(cfg);
+    ps_recorder_set_truth(&rec, (ps_rec_truth_src_t){.read = full_truth});
+    board.n_buses = PS_MAX_BUSES;
+    loop.meas.n_joints = PS_MAX_JOINTS;
+    loop.last.is_policy_run = true;
+    assert_int_equal(ps_recorder_start(&rec), 0);
+    tick(PS_SM_ACTIVE, 0, false);
+    tick(PS_SM_ESTOP, PS_SM_C_ESTOP_INPUT | PS_SM_C_REQ_ESTOP | PS_SM_C_BUS_OFF, false);
+    ps_recorder_stop(&rec);
+    assert_int_equal(rec.stats.cont.n_records, 2);
+    per_channel_t p;
+    memset(&p, 0, sizeof(p));
+    const ps_mcap_read_ops_t ops = {NULL, pc_channel, pc_message, NULL};
+    ps_mcap_read_info_t info;
+    char err[256];
+    assert_int_equal(ps_mcap_read_file(path, &ops, &p, &info, err, sizeof(err)), 0);
+    assert_true(info.has_footer);
+    static const char *const PER_TICK[] = {"/joints", "/imu",   "/estimate", "/state",
+                                           "/timing", "/buses", "/policy",   "/truth"};
+    for (size_t k = 0; k < sizeof(PER_TICK) / sizeof(PER_TICK[0]); k++) {
+        uint64_t n = 0;
+        for (unsigned c = 0; c < PS_MCAP_MAX_CHANNELS; c++)
+            if (strcmp(p.topic[c], PER_TICK[k]) == 0)
+                n = p.n[c];
+        if (n != 2)
+            fail_msg("%s: %llu messages, want 2", PER_TICK[k], (unsigned long long)n);
+    }
+    print_message("largest message: %zu bytes\n", p.max_len);
+}
+
 /* ---- disk trouble -------------------------------------------------------- */
 
 static void test_disk_full_counts_every_record_lost_io(void **state)
@@ -396,6 +479,7 @@ int main(void)
                                         setup, teardown),
         cmocka_unit_test_setup_teardown(test_flight_run_ending_in_post_window_closes_dump, setup,
                                         teardown),
+        cmocka_unit_test_setup_teardown(test_largest_record_every_channel_written, setup, teardown),
         cmocka_unit_test_setup_teardown(test_disk_full_counts_every_record_lost_io, setup,
                                         teardown),
         cmocka_unit_test_setup_teardown(test_dump_that_cannot_be_created_is_counted_failed, setup,
