@@ -639,6 +639,11 @@ static void print_plan(const ps_app_t *app)
                app->board.buses[b].ifname, p->n_sources[b], p->tick_bits_max[b],
                p->tick_capacity_bits[b], p->load_peak[b] * 100, p->load_avg[b] * 100,
                (double)app->board.bus_budget * 100);
+    for (uint32_t b = 0; b < p->n_buses; b++) {
+        char risk[200]; /* a controller that may drop what the plan has it receive */
+        if (ps_canbus_rx_risk(&app->board.buses[b], p, b, risk, sizeof(risk)) > 0)
+            printf("warning: bus %s\n", risk);
+    }
 }
 
 /* --replay: what the log fed, what the loop sent, and how the loop's
