@@ -21,6 +21,7 @@
 
 #include "../drivers/ps_candump.h"
 #include "ps_app.h"
+#include "ps_doctor.h"
 #include "ps_emulate.h"
 #include "ps_monitor.h"
 #include "ps_err.h"
@@ -90,6 +91,7 @@ static const char USAGE[] =
     "       pushstep profile [options] [profile options]\n"
     "       pushstep monitor --board FILE [--log FILE] (see pushstep monitor -h)\n"
     "       pushstep emulate --board FILE --ifaces IF,... (see pushstep emulate -h)\n"
+    "       pushstep doctor [--board FILE] (see pushstep doctor -h)\n"
     "Runs the balance controller's fixed-step loop against a board: real hardware\n"
     "or, for board `sim`, the MuJoCo plant with emulated CAN actuators, IMU and GPIO.\n"
     "\n"
@@ -701,6 +703,10 @@ int main(int argc, char **argv)
         find_data_dir(g.data_dir, sizeof(g.data_dir));
         return argv[1][0] == 'e' ? ps_emulate_main(argc - 1, argv + 1, g.data_dir)
                                  : ps_monitor_main(argc - 1, argv + 1, g.data_dir);
+    }
+    if (argc > 1 && strcmp(argv[1], "doctor") == 0) {
+        find_data_dir(g.data_dir, sizeof(g.data_dir));
+        return ps_doctor_main(argc - 1, argv + 1, g.data_dir);
     }
     if (block_stop_signals(SIG_BLOCK) < 0 || install_signals() < 0) {
         fprintf(stderr, "pushstep: cannot install the SIGINT/SIGTERM handler\n");
