@@ -14,8 +14,9 @@ BUILD_PKGS := gcc libc6-dev make pkg-config libmujoco-dev libcyaml-dev libyaml-d
               libcmocka-dev libcjson-dev libmnl-dev libgpiod-dev
 TOOL_PKGS  := g++ rt-tests can-utils
 # What `make test` needs beyond building: can-utils' log2long reads the
-# candump-format lines the runtime writes (tests/test_candump.c).
-TEST_PKGS  := can-utils
+# candump-format lines the runtime writes (tests/test_candump.c); systemd's
+# systemd-analyze reads the shipped unit (tools/test-install.sh).
+TEST_PKGS  := can-utils systemd
 # Extra packages `make bench` needs: load generator, plots, the analysis script.
 BENCH_PKGS := stress-ng gnuplot-nox python3
 
@@ -47,7 +48,8 @@ HW_SRCS := $(wildcard tests/hw/test_hw_*.c)
 HW_BINS := $(patsubst tests/hw/%.c,$(BUILD)/tests/hw/%,$(HW_SRCS))
 QEMU_WORK ?= $(BUILD)/qemu
 
-.PHONY: all deps deps-build deps-test deps-bench run test test-hw clean format help bench bench-hw
+.PHONY: all deps deps-build deps-test deps-bench run test test-hw clean format help bench bench-hw \
+        install
 all: $(BUILD)/pushstep
 
 help:
@@ -65,6 +67,9 @@ help:
 	@echo "             bench/results/*.json and summary.md (see docs/latency.md)"
 	@echo "make bench-hw the real drivers' figures in the test VM (e-stop reaction,"
 	@echo "             loop reaction, frames per bus): bench/results/hw.json"
+	@echo "make install PREFIX=/usr/local [DESTDIR=]: the binary, its data (boards, robots,"
+	@echo "             scenarios, models) in PREFIX/share/pushstep, the systemd unit"
+	@echo "             pushstep@.service and the udev rules (docs/deploy.md)"
 	@echo "make format  clang-format every C source in place"
 	@echo "make clean   remove $(BUILD)/"
 
@@ -108,7 +113,7 @@ run: deps-build $(BUILD)/pushstep
 
 test: deps-test $(BUILD)/pushstep $(TEST_BINS) $(HW_BINS)
 	@PUSHSTEP_BIN=$(BUILD)/pushstep QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh \
-	    tools/check-layers.sh $(TEST_BINS) tools/qemu/test-hw.sh
+	    tools/check-layers.sh $(TEST_BINS) tools/test-install.sh tools/qemu/test-hw.sh
 
 test-hw: deps-test $(BUILD)/pushstep $(HW_BINS)
 	@PUSHSTEP_BIN=$(BUILD)/pushstep QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh tools/qemu/test-hw.sh
@@ -119,6 +124,28 @@ bench: deps-bench $(BUILD)/pushstep
 
 bench-hw: deps-test $(BUILD)/pushstep
 	@QEMU_WORK=$(QEMU_WORK) bash bench/hw.sh
+
+# Installation (docs/deploy.md). The data the binary looks up by name go to
+# PREFIX/share/pushstep, where an installed PREFIX/bin/pushstep finds them.
+PREFIX   ?= /usr/local
+DESTDIR  ?=
+BINDIR   := $(PREFIX)/bin
+DATADIR  := $(PREFIX)/share/pushstep
+DOCDIR   := $(PREFIX)/share/doc/pushstep
+UNITDIR  ?= $(PREFIX)/lib/systemd/system
+UDEVDIR  ?= $(PREFIX)/lib/udev/rules.d
+DATA_DIRS := boards robots scenarios sim/models
+
+install: $(BUILD)/pushstep
+	install -D -m 0755 $(BUILD)/pushstep $(DESTDIR)$(BINDIR)/pushstep
+	for d in $(DATA_DIRS); do install -d $(DESTDIR)$(DATADIR)/$$d && \
+	    cp -R --no-preserve=mode,ownership $$d/. $(DESTDIR)$(DATADIR)/$$d/ || exit 1; done
+	install -D -m 0755 tools/plot-profile.sh $(DESTDIR)$(DATADIR)/tools/plot-profile.sh
+	install -d $(DESTDIR)$(UNITDIR) $(DESTDIR)$(UDEVDIR) $(DESTDIR)$(DOCDIR)
+	sed -e 's|@BINDIR@|$(BINDIR)|g' -e 's|@DOCDIR@|$(DOCDIR)|g' tools/systemd/pushstep@.service \
+	    > $(DESTDIR)$(UNITDIR)/pushstep@.service
+	install -m 0644 tools/udev/60-pushstep.rules $(DESTDIR)$(UDEVDIR)/60-pushstep.rules
+	install -m 0644 README.md docs/deploy.md docs/config.md $(DESTDIR)$(DOCDIR)/
 
 format:
 	clang-format -i $$(git ls-files '*.c' '*.h')

@@ -144,7 +144,9 @@ static const char USAGE[] =
     "repeated overruns, refused frames) HOLDs the last safe pose until the operator\n"
     "stops or restarts, a fall, or control.hold_s; see docs/safety.md.\n"
     "Board, robot and scenario NAMEs are looked up in $PUSHSTEP_DATA_DIR, else next\n"
-    "to the binary's folder (build/.. = the repository), else the current folder.\n"
+    "to the binary's folder (build/.. = the repository), else in share/pushstep\n"
+    "beside it (installed: PREFIX/bin/.. -> PREFIX/share/pushstep), else the\n"
+    "current folder.\n"
     "Exit status: 0 ok, 1 runtime failure, 2 bad usage or configuration.\n";
 
 /* ---- options and paths ------------------------------------------------ */
@@ -305,7 +307,9 @@ static int parse_options(int argc, char **argv, options_t *o)
 
 /* Where boards/, robots/, scenarios/ and sim/models/ are: $PUSHSTEP_DATA_DIR,
  * else one level above the binary (build/pushstep -> repository root) when
- * boards/ is there, else the current directory. */
+ * boards/ is there, else share/pushstep beside the binary's folder (an
+ * installed PREFIX/bin/pushstep -> PREFIX/share/pushstep), else the current
+ * directory. */
 static void find_data_dir(char *out, size_t len)
 {
     const char *env = getenv("PUSHSTEP_DATA_DIR");
@@ -317,11 +321,15 @@ static void find_data_dir(char *out, size_t len)
     ssize_t n = readlink("/proc/self/exe", exe, sizeof(exe) - 1);
     if (n > 0) {
         exe[n] = '\0';
-        snprintf(out, len, "%s/..", dirname(exe));
-        char probe[PATH_MAX + 16];
-        snprintf(probe, sizeof(probe), "%s/boards", out);
-        if (access(probe, R_OK) == 0)
-            return;
+        static const char *const BESIDE[] = {"..", "../share/pushstep"};
+        const char *bin_dir = dirname(exe);
+        for (size_t i = 0; i < sizeof(BESIDE) / sizeof(BESIDE[0]); i++) {
+            snprintf(out, len, "%s/%s", bin_dir, BESIDE[i]);
+            char probe[PATH_MAX + 16];
+            snprintf(probe, sizeof(probe), "%s/boards", out);
+            if (access(probe, R_OK) == 0)
+                return;
+        }
     }
     snprintf(out, len, ".");
 }
