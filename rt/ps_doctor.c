@@ -237,14 +237,45 @@ static void check_privileges(const ps_doctor_cfg_t *c, ps_doctor_report_t *r)
     }
 }
 
+/* The CPUs this process may put a thread on: its cgroup's effective cpuset
+ * (cgroup v2: /proc/self/cgroup "0::/PATH", the nearest cpuset.cpus.effective
+ * from /sys/fs/cgroup/PATH up to the root). Not the affinity mask
+ * (Cpus_allowed_list): with isolcpus every task inherits one without the
+ * isolated CPUs, and a thread may still pin itself to any CPU of its cpuset,
+ * which is what the loop does. "" when no cpuset is found (no limit known). */
+static void cpuset_of_self(const ps_doctor_cfg_t *c, char *out, size_t len)
+{
+    out[0] = '\0';
+    char cg[TEXT_LEN], path[PATH_MAX];
+    if (read_text(c, "/proc/self/cgroup", cg, sizeof(cg)) < 0)
+        return;
+    const char *v2 = strstr(cg, "0::");
+    if (v2 != NULL && (v2 == cg || v2[-1] == '\n')) {
+        const char *p = v2 + 3;
+        const char *eol = strchr(p, '\n');
+        (void)snprintf(path, sizeof(path), "/sys/fs/cgroup%.*s",
+                       (int)(eol != NULL ? (size_t)(eol - p) : strlen(p)), p);
+        for (;;) {
+            char file[PATH_MAX + 32];
+            (void)snprintf(file, sizeof(file), "%s/cpuset.cpus.effective", path);
+            if (read_text(c, file, out, len) == 0 && out[0] != '\0')
+                return;
+            char *slash = strrchr(path, '/');
+            if (slash == NULL || strcmp(path, "/sys/fs/cgroup") == 0)
+                break;
+            *slash = '\0';
+        }
+    }
+    out[0] = '\0';
+}
+
 static void check_cpu(const ps_doctor_cfg_t *c, ps_doctor_report_t *r)
 {
     const int cpu = c->board->rt.loop_cpu;
-    char online[SHORT_LEN], status[TEXT_LEN], allowed[SHORT_LEN], fix[512];
+    char online[SHORT_LEN], allowed[SHORT_LEN], fix[512];
     if (read_text(c, "/sys/devices/system/cpu/online", online, sizeof(online)) < 0)
         (void)snprintf(online, sizeof(online), "?");
-    (void)read_text(c, "/proc/self/status", status, sizeof(status));
-    status_field(status, "Cpus_allowed_list", allowed, sizeof(allowed));
+    cpuset_of_self(c, allowed, sizeof(allowed));
     const bool is_real = c->board->kind == PS_BOARD_LINUX;
     if (cpu < 0) {
         add(r, PS_DOCTOR_NOTE, "loop cpu", NULL, "the board pins the loop to no CPU");
@@ -259,11 +290,11 @@ static void check_cpu(const ps_doctor_cfg_t *c, ps_doctor_report_t *r)
     }
     if (allowed[0] != '\0' && !cpulist_has(allowed, cpu)) {
         (void)snprintf(fix, sizeof(fix),
-                       "include CPU %d in CPUAffinity= of the unit (and in `taskset -c` of a "
-                       "shell)",
+                       "include CPU %d in AllowedCPUs= of the unit (or of the cgroup it runs "
+                       "in: `systemctl show -p AllowedCPUs`)",
                        cpu);
         add(r, is_real ? PS_DOCTOR_FAIL : PS_DOCTOR_WARN, "loop cpu", fix,
-            "CPU %d is online but not in this process's CPU set (%s)", cpu, allowed);
+            "CPU %d is online but not in this process's cpuset (%s)", cpu, allowed);
     } else {
         add(r, PS_DOCTOR_OK, "loop cpu", NULL, "CPU %d online and allowed (online %s)", cpu,
             online);

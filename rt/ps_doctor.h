@@ -8,8 +8,8 @@
  *                 (CAP_SYS_NICE in /proc/self/status, or RLIMIT_RTPRIO in
  *                 /proc/self/limits)
  *   memlock       mlockall permitted (CAP_IPC_LOCK, or RLIMIT_MEMLOCK unlimited)
- *   loop cpu      the board's loop CPU online and in this process's
- *                 Cpus_allowed_list
+ *   loop cpu      the board's loop CPU online and in this process's cgroup
+ *                 cpuset (cpuset.cpus.effective)
  *   isolation     the loop CPU in /sys/devices/system/cpu/isolated (and nohz_full)
  *   governor      cpufreq governor `performance` on the loop CPU (or no cpufreq)
  *   clock source  tsc / arch_sys_counter (kvm-clock in a VM)

@@ -218,7 +218,7 @@ static void test_doctor_plain_target_every_fix_named(void **state)
            "echo '@pushstep - rtprio 80' | sudo tee -a /etc/security/limits.d/pushstep.conf");
     expect(f, "memlock", PS_DOCTOR_FAIL, "RLIMIT_MEMLOCK 8388608 bytes",
            "echo '@pushstep - memlock unlimited'");
-    expect(f, "loop cpu", PS_DOCTOR_FAIL, "not in this process's CPU set (0-2)", "CPUAffinity=");
+    expect(f, "loop cpu", PS_DOCTOR_FAIL, "not in this process's cpuset (0-2)", "AllowedCPUs=");
     expect(f, "isolation", PS_DOCTOR_WARN, "CPU 3 is not isolated",
            "isolcpus=3 nohz_full=3 rcu_nocbs=3");
     expect(f, "governor", PS_DOCTOR_WARN, "\"ondemand\"",
