@@ -49,7 +49,7 @@ HW_BINS := $(patsubst tests/hw/%.c,$(BUILD)/tests/hw/%,$(HW_SRCS))
 QEMU_WORK ?= $(BUILD)/qemu
 
 .PHONY: all deps deps-build deps-test deps-bench run test test-hw clean format help bench bench-hw \
-        install
+        install deb test-deb
 all: $(BUILD)/pushstep
 
 help:
@@ -70,6 +70,9 @@ help:
 	@echo "make install PREFIX=/usr/local [DESTDIR=]: the binary, its data (boards, robots,"
 	@echo "             scenarios, models) in PREFIX/share/pushstep, the systemd unit"
 	@echo "             pushstep@.service and the udev rules (docs/deploy.md)"
+	@echo "make deb [ARCH=aarch64]: the Debian package (dpkg-buildpackage, packaging in"
+	@echo "             tools/debian/) in $(BUILD)/deb/; make test-deb also checks its"
+	@echo "             contents and runs the packaged binary"
 	@echo "make format  clang-format every C source in place"
 	@echo "make clean   remove $(BUILD)/"
 
@@ -94,7 +97,7 @@ $(BUILD)/san/%.o: %.c
 	$(CC) $(CFLAGS) $(SANFLAGS) -c $< -o $@
 
 $(BUILD)/pushstep: $(call OBJ,$(MAIN_SRC)) $(LIB_OBJS)
-	$(CC) $(CFLAGS) -o $@ $^ $(LDLIBS)
+	$(CC) $(CFLAGS) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 
 $(addprefix $(BUILD)/tests/,$(SAN_TESTS)): $(BUILD)/tests/%: $(BUILD)/san/tests/%.o $(LIB_SANOBJS) $(FAKE_SANOBJS)
 	@mkdir -p $(@D)
@@ -146,6 +149,17 @@ install: $(BUILD)/pushstep
 	    > $(DESTDIR)$(UNITDIR)/pushstep@.service
 	install -m 0644 tools/udev/60-pushstep.rules $(DESTDIR)$(UDEVDIR)/60-pushstep.rules
 	install -m 0644 README.md docs/deploy.md docs/config.md $(DESTDIR)$(DOCDIR)/
+
+# The Debian package (tools/make-deb.sh). DEB_PKGS: what building it needs.
+DEB_PKGS := dpkg-dev debhelper fakeroot
+
+deb: deps-build
+	@bash tools/deps.sh $(DEB_PKGS)
+	@bash tools/make-deb.sh $(BUILD) $(ARCH)
+
+test-deb: deb
+	@bash tools/deps.sh lintian
+	@PUSHSTEP_DEB_DIR=$(BUILD)/deb bash tools/run-tests.sh tools/test-deb.sh
 
 format:
 	clang-format -i $$(git ls-files '*.c' '*.h')
