@@ -6,7 +6,10 @@
 # `apt install ./...deb` (checked in a fresh chroot; see the commit notes).
 set -uo pipefail
 DIR=${PUSHSTEP_DEB_DIR:-build/deb}
-ARCH=$(dpkg --print-architecture)
+ARCH=${PUSHSTEP_DEB_ARCH:-$(dpkg --print-architecture)}
+# An arm64 package on another machine: its binary runs under qemu-user.
+RUN=()
+[ "$ARCH" = "$(dpkg --print-architecture)" ] || RUN=(qemu-aarch64)
 DEB=$(ls -t "$DIR"/pushstep_*_"$ARCH".deb 2>/dev/null | head -1)
 T=$(mktemp -d /tmp/ps-deb.XXXXXX); trap 'rm -rf "$T"' EXIT
 pass=0; fail=0
@@ -42,12 +45,12 @@ fi
 
 dpkg-deb -x "$DEB" "$T/root"
 mkdir -p "$T/empty"; cd "$T/empty" || exit 1
-if env -u PUSHSTEP_DATA_DIR "$T/root/usr/bin/pushstep" --help >/dev/null; then ok deb_binary_help
+if env -u PUSHSTEP_DATA_DIR "${RUN[@]}" "$T/root/usr/bin/pushstep" --help >/dev/null; then ok deb_binary_help
 else bad deb_binary_help "rc $?"; fi
-out=$(env -u PUSHSTEP_DATA_DIR "$T/root/usr/bin/pushstep" --lockstep --duration 0.3 --quiet 2>&1)
+out=$(env -u PUSHSTEP_DATA_DIR "${RUN[@]}" "$T/root/usr/bin/pushstep" --lockstep --duration 0.3 --quiet 2>&1)
 if grep -q "share/pushstep/boards/sim.yaml" <<<"$out"; then ok deb_binary_finds_data
 else bad deb_binary_finds_data "$(tail -3 <<<"$out")"; fi
-out=$(env -u PUSHSTEP_DATA_DIR "$T/root/usr/bin/pushstep" doctor --board rpi5 2>&1); rc=$?
+out=$(env -u PUSHSTEP_DATA_DIR "${RUN[@]}" "$T/root/usr/bin/pushstep" doctor --board rpi5 2>&1); rc=$?
 if [ "$rc" -le 1 ] && grep -q "fine, .* to fix" <<<"$out"; then ok deb_binary_doctor
 else bad deb_binary_doctor "rc $rc: $(tail -3 <<<"$out")"; fi
 echo "[==========] $((pass + fail)) test(s) run."
