@@ -214,10 +214,10 @@ static void check_privileges(const ps_doctor_cfg_t *c, ps_doctor_report_t *r)
     } else {
         (void)snprintf(fix, sizeof(fix),
                        "run it as the shipped service (LimitRTPRIO=%u): `sudo systemctl start "
-                       "pushstep`; for a shell: `echo '@pushstep - rtprio %u' | sudo tee -a "
+                       "pushstep@%s`; for a shell: `echo '@pushstep - rtprio %u' | sudo tee -a "
                        "/etc/security/limits.d/pushstep.conf`, then log in again as a member of "
                        "group pushstep",
-                       prio, prio);
+                       prio, c->board->name, prio);
         add(r, missing, "rt priority", fix,
             "SCHED_FIFO %u not permitted: no CAP_SYS_NICE, RLIMIT_RTPRIO %" PRIu64, prio,
             has_rtprio_row ? rtprio : 0u);
@@ -229,7 +229,7 @@ static void check_privileges(const ps_doctor_cfg_t *c, ps_doctor_report_t *r)
     } else {
         add(r, missing, "memlock",
             "run it as the shipped service (LimitMEMLOCK=infinity): `sudo systemctl start "
-            "pushstep`; for a shell: `echo '@pushstep - memlock unlimited' | sudo tee -a "
+            "pushstep@BOARD`; for a shell: `echo '@pushstep - memlock unlimited' | sudo tee -a "
             "/etc/security/limits.d/pushstep.conf`, then log in again",
             "mlockall not permitted: no CAP_IPC_LOCK, RLIMIT_MEMLOCK %" PRIu64
             " bytes (the loop's memory would page)",
@@ -496,7 +496,7 @@ static void check_gpio(const ps_doctor_cfg_t *c, ps_doctor_report_t *r)
         } else if (li->is_used) {
             const bool is_ours = strncmp(li->consumer, "pushstep", 8) == 0;
             (void)snprintf(fix, sizeof(fix), "%s",
-                           is_ours ? "pushstep already runs: `systemctl status pushstep`"
+                           is_ours ? "pushstep already runs: `systemctl status 'pushstep@*'`"
                                    : "free it (the overlay or program holding it) or pick a free "
                                      "line in the board file");
             add(r, PS_DOCTOR_FAIL, what, fix, "%s [%s] line %u \"%s\" is in use by \"%s\"",

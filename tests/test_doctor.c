@@ -216,6 +216,7 @@ static void test_doctor_plain_target_every_fix_named(void **state)
            "sudo apt install linux-image-rt-$(dpkg --print-architecture)");
     expect(f, "rt priority", PS_DOCTOR_FAIL, "RLIMIT_RTPRIO 0",
            "echo '@pushstep - rtprio 80' | sudo tee -a /etc/security/limits.d/pushstep.conf");
+    expect(f, "rt priority", PS_DOCTOR_FAIL, NULL, "`sudo systemctl start pushstep@rpi5`");
     expect(f, "memlock", PS_DOCTOR_FAIL, "RLIMIT_MEMLOCK 8388608 bytes",
            "echo '@pushstep - memlock unlimited'");
     expect(f, "loop cpu", PS_DOCTOR_FAIL, "not in this process's cpuset (0-2)", "AllowedCPUs=");
