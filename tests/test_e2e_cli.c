@@ -788,6 +788,26 @@ static const sig_case_t SIG_CASES[] = {
  * stall may add OVERRUN beside it (seen here: "HOLD -> DAMPING
  * (REQ_STOP|OVERRUN)"), which is not what these tests are about. */
 
+/* Whether out passed through the state path case c expects; why not in why. */
+static bool took_expected_path(const sig_case_t *c, const cJSON *j, char *why, size_t len)
+{
+    const char *final = cJSON_GetStringValue(obj(j, "final_state"));
+    if (c->must != NULL && strstr(out, c->must) == NULL)
+        snprintf(why, len, "no \"%s\"", c->must);
+    else if (c->must_not != NULL && strstr(out, c->must_not) != NULL)
+        snprintf(why, len, "\"%s\" seen", c->must_not);
+    else if (final == NULL || strcmp(final, c->final) != 0)
+        snprintf(why, len, "final state %s, want %s", final ? final : "(none)", c->final);
+    else
+        return true;
+    return false;
+}
+
+/* Every run must exit with status 0 soon after the signal. The path through
+ * the states is judged only on runs the host left alone: a run with
+ * overruns (a loaded host took the loop's CPU: seen as OVERRUN holds and
+ * drive timeouts while other builds ran beside the suite) or a start-up
+ * fault did not test the state it meant to, and is tried again. */
 static void check_signal_in_every_state(int sig, const char *sig_name)
 {
     for (size_t i = 0; i < sizeof(SIG_CASES) / sizeof(SIG_CASES[0]); i++) {
@@ -798,35 +818,32 @@ static void check_signal_in_every_state(int sig, const char *sig_name)
             make_temp_file(path, sizeof(path));
             double exit_s = 0;
             bool is_startup_estop = false;
-            int rc = run_signalled(c, sig, path, &exit_s, &is_startup_estop);
-            print_message("      %s in %s, try %d: exit %d after %.2f s%s\n", sig_name, c->state,
-                          r + 1, rc, exit_s,
-                          is_startup_estop ? " (start-up fault: not this state, again)" : "");
-            if (is_startup_estop) {
-                if (rc != 0 || exit_s > SIG_EXIT_S)
-                    fail_msg("%s in start-up ESTOP: exit %d after %.1f s:\n%s", sig_name, rc,
-                             exit_s, out);
-                unlink(path);
-                if (++n_again > SIG_AGAIN_MAX)
-                    fail_msg("%s: %d start-up faults, %s not reached", sig_name, n_again,
-                             c->state);
-                r--;
-                continue;
-            }
+            const int rc = run_signalled(c, sig, path, &exit_s, &is_startup_estop);
             if (rc != 0)
                 fail_msg("%s in %s: exit %d, want 0:\n%s", sig_name, c->state, rc, out);
             if (exit_s > SIG_EXIT_S)
                 fail_msg("%s in %s: exited %.1f s after the signal:\n%s", sig_name, c->state,
                          exit_s, out);
-            if (c->must != NULL && strstr(out, c->must) == NULL)
-                fail_msg("%s in %s: no \"%s\" in:\n%s", sig_name, c->state, c->must, out);
-            if (c->must_not != NULL && strstr(out, c->must_not) != NULL)
-                fail_msg("%s in %s: \"%s\" in:\n%s", sig_name, c->state, c->must_not, out);
             cJSON *j = read_json(path);
-            assert_string_equal(cJSON_GetStringValue(obj(j, "final_state")), c->final);
             assert_true(num(j, "loop_s") < SIG_DURATION_S / 2);
+            const double overruns = num(j, "overruns");
+            char why[160] = "";
+            const bool is_path_ok = !is_startup_estop && took_expected_path(c, j, why, sizeof(why));
             cJSON_Delete(j);
             unlink(path);
+            const bool is_again = !is_path_ok && (is_startup_estop || overruns > 0);
+            print_message("      %s in %s, try %d: exit %d after %.2f s%s%s\n", sig_name, c->state,
+                          r + 1, rc, exit_s, is_again ? ", again: " : "",
+                          !is_again          ? ""
+                          : is_startup_estop ? "start-up fault"
+                                             : "host disturbed the run (overruns)");
+            if (!is_path_ok && !is_again)
+                fail_msg("%s in %s: %s in:\n%s", sig_name, c->state, why, out);
+            if (is_again && ++n_again > SIG_AGAIN_MAX)
+                fail_msg("%s: %d disturbed runs, %s not tested; last (%s):\n%s", sig_name, n_again,
+                         c->state, why, out);
+            if (is_again)
+                r--;
         }
     }
 }
