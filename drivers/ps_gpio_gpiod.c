@@ -373,6 +373,47 @@ static int request_failed(const ps_gpio_gpiod_t *g, const line_spec_t *s, struct
     return -e;
 }
 
+/* The chip by name, label, number or path, with what to check on failure. */
+static int open_chip(const ps_gpio_cfg_t *cfg, struct gpiod_chip **out, char *err, size_t err_len)
+{
+    errno = 0;
+    *out = gpiod_chip_open_lookup(cfg->chip);
+    if (*out != NULL)
+        return 0;
+    const int e = errno != 0 ? errno : ENOENT;
+    if (e == EACCES || e == EPERM)
+        ps_err_format(err, err_len,
+                      "gpio chip \"%s\": cannot open: %s; check the permissions of "
+                      "/dev/gpiochip* (group gpio, or root)",
+                      cfg->chip, strerror(e));
+    else
+        ps_err_format(err, err_len,
+                      "gpio chip \"%s\": cannot open: %s; check `gpiodetect` for this "
+                      "board's chips (gpio.chip takes a name, label, number or /dev path)",
+                      cfg->chip, strerror(e));
+    return -e;
+}
+
+/* The three roles, in the order of ps_gpio_gpiod_probe_t.lines. */
+/* The board's lines; the record button last, when there is one.
+ * @return how many (3 or 4) */
+static int line_specs(const ps_gpio_cfg_t *cfg, line_spec_t out[4])
+{
+    out[0] = (line_spec_t){"e-stop", CONSUMER_ESTOP, cfg->estop_name, cfg->estop_line};
+    out[1] = (line_spec_t){"heartbeat", CONSUMER_HEARTBEAT, cfg->enable_name, cfg->enable_line};
+    out[2] = (line_spec_t){"LED", CONSUMER_LED, cfg->led_name, cfg->led_line};
+    out[3] = (line_spec_t){"record button", CONSUMER_BUTTON, cfg->button_name, cfg->button_line};
+    return cfg->has_button ? 4 : 3;
+}
+
+static int check_spec(const ps_gpio_cfg_t *cfg, const line_spec_t *s, char *err, size_t err_len)
+{
+    if (memchr(s->name, '\0', PS_NAME_LEN) != NULL)
+        return 0;
+    ps_err_format(err, err_len, "gpio %s: %s line name not terminated", cfg->chip, s->role);
+    return -EINVAL;
+}
+
 static int bias_flags(ps_gpio_bias_t bias)
 {
     switch (bias) {
@@ -431,39 +472,17 @@ int ps_gpio_gpiod_open(ps_gpio_gpiod_t *g, const ps_gpio_cfg_t *cfg, char *err, 
         return -EINVAL;
     }
 
-    g->chip = gpiod_chip_open_lookup(cfg->chip);
-    if (g->chip == NULL) {
-        const int e = errno != 0 ? errno : ENOENT;
-        if (e == EACCES || e == EPERM)
-            ps_err_format(err, err_len,
-                          "gpio chip \"%s\": cannot open: %s; check the permissions of "
-                          "/dev/gpiochip* (group gpio, or root)",
-                          cfg->chip, strerror(e));
-        else
-            ps_err_format(err, err_len,
-                          "gpio chip \"%s\": cannot open: %s; check `gpiodetect` for this "
-                          "board's chips (gpio.chip takes a name, label, number or /dev path)",
-                          cfg->chip, strerror(e));
-        return -e;
-    }
+    int rc = open_chip(cfg, &g->chip, err, err_len);
+    if (rc < 0)
+        return rc;
 
-    const line_spec_t spec[4] = {
-        {"e-stop", CONSUMER_ESTOP, cfg->estop_name, cfg->estop_line},
-        {"heartbeat", CONSUMER_HEARTBEAT, cfg->enable_name, cfg->enable_line},
-        {"LED", CONSUMER_LED, cfg->led_name, cfg->led_line},
-        {"record button", CONSUMER_BUTTON, cfg->button_name, cfg->button_line},
-    };
+    line_spec_t spec[4];
+    const int n_lines = line_specs(cfg, spec);
     struct gpiod_line *lines[4] = {NULL, NULL, NULL, NULL};
-    const int n_lines = cfg->has_button ? 4 : 3;
-    int rc = 0;
     for (int i = 0; i < n_lines && rc == 0; i++) {
-        if (memchr(spec[i].name, '\0', PS_NAME_LEN) == NULL) {
-            ps_err_format(err, err_len, "gpio %s: %s line name not terminated", cfg->chip,
-                          spec[i].role);
-            rc = -EINVAL;
-            break;
-        }
-        rc = find_line(g, &spec[i], &lines[i], err, err_len);
+        rc = check_spec(cfg, &spec[i], err, err_len);
+        if (rc == 0)
+            rc = find_line(g, &spec[i], &lines[i], err, err_len);
         for (int k = 0; k < i && rc == 0; k++) {
             if (lines[k] == lines[i]) { /* libgpiod keeps one struct per offset */
                 char a[96], b[96];
@@ -535,4 +554,48 @@ int ps_gpio_gpiod_open(ps_gpio_gpiod_t *g, const ps_gpio_cfg_t *cfg, char *err, 
 fail:
     ps_gpio_gpiod_close(g);
     return rc;
+}
+
+/* ---- probe ----------------------------------------------------------------- */
+
+int ps_gpio_gpiod_probe(const ps_gpio_cfg_t *cfg, ps_gpio_gpiod_probe_t *out, char *err,
+                        size_t err_len)
+{
+    if (err != NULL && err_len > 0)
+        err[0] = '\0';
+    if (cfg == NULL || out == NULL)
+        return -EINVAL;
+    memset(out, 0, sizeof(*out));
+    if (cfg->chip[0] == '\0' || memchr(cfg->chip, '\0', sizeof(cfg->chip)) == NULL) {
+        ps_err_format(err, err_len, "gpio: no chip given (gpio.chip)");
+        return -EINVAL;
+    }
+    ps_gpio_gpiod_t g; /* find_line's view of the chip; nothing is requested */
+    memset(&g, 0, sizeof(g));
+    g.estop_fd = -1;
+    int rc = open_chip(cfg, &g.chip, err, err_len);
+    if (rc < 0)
+        return rc;
+    (void)snprintf(out->chip_name, sizeof(out->chip_name), "%s", gpiod_chip_name(g.chip));
+    (void)snprintf(out->chip_label, sizeof(out->chip_label), "%s", gpiod_chip_label(g.chip));
+    out->n_lines = gpiod_chip_num_lines(g.chip);
+    line_spec_t spec[4];
+    (void)line_specs(cfg, spec); /* the probe looks at the three lines every board has */
+    for (int i = 0; i < 3; i++) {
+        ps_gpio_gpiod_line_info_t *li = &out->lines[i];
+        (void)snprintf(li->role, sizeof(li->role), "%s", spec[i].role);
+        struct gpiod_line *line = NULL;
+        if (check_spec(cfg, &spec[i], li->why, sizeof(li->why)) < 0 ||
+            find_line(&g, &spec[i], &line, li->why, sizeof(li->why)) < 0)
+            continue;
+        li->is_found = true;
+        li->offset = gpiod_line_offset(line);
+        const char *name = gpiod_line_name(line);
+        const char *consumer = gpiod_line_consumer(line);
+        (void)snprintf(li->name, sizeof(li->name), "%s", name != NULL ? name : "");
+        li->is_used = gpiod_line_is_used(line);
+        (void)snprintf(li->consumer, sizeof(li->consumer), "%s", consumer != NULL ? consumer : "");
+    }
+    gpiod_chip_close(g.chip);
+    return 0;
 }

@@ -171,4 +171,32 @@ ps_gpio_port_t ps_gpio_gpiod_port(ps_gpio_gpiod_t *g);
  *  twice and on a zeroed struct.  @rt INIT */
 void ps_gpio_gpiod_close(ps_gpio_gpiod_t *g);
 
+/** One role's line as the kernel reports it, for `pushstep doctor`. */
+typedef struct {
+    char role[16];          /**< "e-stop", "heartbeat", "LED" */
+    bool is_found;          /**< the name or offset exists on the chip */
+    uint32_t offset;        /**< is_found only */
+    char name[PS_NAME_LEN]; /**< the line's name, "" when it has none */
+    bool is_used;           /**< requested by someone, or taken by a kernel driver */
+    char consumer[32];      /**< who, when is_used ("" when the kernel names nobody) */
+    char why[256];          /**< !is_found: the message open would give */
+} ps_gpio_gpiod_line_info_t;
+
+typedef struct {
+    char chip_name[32];  /**< "gpiochip0" */
+    char chip_label[64]; /**< "pinctrl-bcm2711" */
+    uint32_t n_lines;
+    ps_gpio_gpiod_line_info_t lines[3]; /**< e-stop, heartbeat, LED */
+} ps_gpio_gpiod_probe_t;
+
+/** Look the board's chip and lines up without requesting anything (the
+ *  heartbeat is not driven): whether each exists, its offset and name, and
+ *  whether it is free or whose it is.
+ *  @post *out written on 0; err says why the chip did not open otherwise
+ *  @return 0 (lines not found are in out) | -ENOENT no such chip | -EACCES/
+ *          -EPERM | -EINVAL cfg | -errno of libgpiod
+ *  @rt INIT (allocates inside libgpiod, frees before return) */
+int ps_gpio_gpiod_probe(const ps_gpio_cfg_t *cfg, ps_gpio_gpiod_probe_t *out, char *err,
+                        size_t err_len);
+
 #endif /* PS_GPIO_GPIOD_H */

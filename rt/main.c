@@ -21,6 +21,7 @@
 
 #include "../drivers/ps_candump.h"
 #include "ps_app.h"
+#include "ps_doctor.h"
 #include "ps_emulate.h"
 #include "ps_monitor.h"
 #include "ps_err.h"
@@ -99,6 +100,7 @@ static const char USAGE[] =
     "       pushstep profile [options] [profile options]\n"
     "       pushstep monitor --board FILE [--log FILE] (see pushstep monitor -h)\n"
     "       pushstep emulate --board FILE --ifaces IF,... (see pushstep emulate -h)\n"
+    "       pushstep doctor [--board FILE] (see pushstep doctor -h)\n"
     "       pushstep log FILE.mcap [--csv OUT] [--plot OUT.png] (see pushstep log -h)\n"
     "Runs the balance controller's fixed-step loop against a board: real hardware\n"
     "or, for board `sim`, the MuJoCo plant with emulated CAN actuators, IMU and GPIO.\n"
@@ -164,7 +166,9 @@ static const char USAGE[] =
     "repeated overruns, refused frames) HOLDs the last safe pose until the operator\n"
     "stops or restarts, a fall, or control.hold_s; see docs/safety.md.\n"
     "Board, robot and scenario NAMEs are looked up in $PUSHSTEP_DATA_DIR, else next\n"
-    "to the binary's folder (build/.. = the repository), else the current folder.\n"
+    "to the binary's folder (build/.. = the repository), else in share/pushstep\n"
+    "beside it (installed: PREFIX/bin/.. -> PREFIX/share/pushstep), else the\n"
+    "current folder.\n"
     "Exit status: 0 ok, 1 runtime failure, 2 bad usage or configuration.\n";
 
 /* ---- options and paths ------------------------------------------------ */
@@ -376,7 +380,9 @@ static int parse_options(int argc, char **argv, options_t *o)
 
 /* Where boards/, robots/, scenarios/ and sim/models/ are: $PUSHSTEP_DATA_DIR,
  * else one level above the binary (build/pushstep -> repository root) when
- * boards/ is there, else the current directory. */
+ * boards/ is there, else share/pushstep beside the binary's folder (an
+ * installed PREFIX/bin/pushstep -> PREFIX/share/pushstep), else the current
+ * directory. */
 static void find_data_dir(char *out, size_t len)
 {
     const char *env = getenv("PUSHSTEP_DATA_DIR");
@@ -388,11 +394,15 @@ static void find_data_dir(char *out, size_t len)
     ssize_t n = readlink("/proc/self/exe", exe, sizeof(exe) - 1);
     if (n > 0) {
         exe[n] = '\0';
-        snprintf(out, len, "%s/..", dirname(exe));
-        char probe[PATH_MAX + 16];
-        snprintf(probe, sizeof(probe), "%s/boards", out);
-        if (access(probe, R_OK) == 0)
-            return;
+        static const char *const BESIDE[] = {"..", "../share/pushstep"};
+        const char *bin_dir = dirname(exe);
+        for (size_t i = 0; i < sizeof(BESIDE) / sizeof(BESIDE[0]); i++) {
+            snprintf(out, len, "%s/%s", bin_dir, BESIDE[i]);
+            char probe[PATH_MAX + 16];
+            snprintf(probe, sizeof(probe), "%s/boards", out);
+            if (access(probe, R_OK) == 0)
+                return;
+        }
     }
     snprintf(out, len, ".");
 }
@@ -784,6 +794,11 @@ static void print_plan(const ps_app_t *app)
                app->board.buses[b].ifname, p->n_sources[b], p->tick_bits_max[b],
                p->tick_capacity_bits[b], p->load_peak[b] * 100, p->load_avg[b] * 100,
                (double)app->board.bus_budget * 100);
+    for (uint32_t b = 0; b < p->n_buses; b++) {
+        char risk[200]; /* a controller that may drop what the plan has it receive */
+        if (ps_canbus_rx_risk(&app->board.buses[b], p, b, risk, sizeof(risk)) > 0)
+            printf("warning: bus %s\n", risk);
+    }
 }
 
 /* --replay: what the log fed, what the loop sent, and how the loop's
@@ -843,6 +858,10 @@ int main(int argc, char **argv)
         find_data_dir(g.data_dir, sizeof(g.data_dir));
         return argv[1][0] == 'e' ? ps_emulate_main(argc - 1, argv + 1, g.data_dir)
                                  : ps_monitor_main(argc - 1, argv + 1, g.data_dir);
+    }
+    if (argc > 1 && strcmp(argv[1], "doctor") == 0) {
+        find_data_dir(g.data_dir, sizeof(g.data_dir));
+        return ps_doctor_main(argc - 1, argv + 1, g.data_dir);
     }
     if (block_stop_signals(SIG_BLOCK) < 0 || install_signals() < 0) {
         fprintf(stderr, "pushstep: cannot install the SIGINT/SIGTERM handler\n");

@@ -100,6 +100,7 @@ int ps_app_plan_buses(const ps_board_cfg_t *b, const ps_robot_cfg_t *r, ps_canbu
                 .is_ext = is_ext,
                 .is_fd = p->is_fd,
                 .is_brs = p->is_fd,
+                .is_rx = k >= p->n_cmd, /* the drive's replies */
             };
         src[j].n_frames = p->n_cmd + p->n_reply;
     }
@@ -111,7 +112,7 @@ int ps_app_plan_buses(const ps_board_cfg_t *b, const ps_robot_cfg_t *r, ps_canbu
     uint8_t imu_lens[PS_IMU_MAX_FRAMES];
     imu->n_frames = ps_imu_frames(&r->imu, imu_ids, imu_lens); /* one sample's frames */
     for (uint32_t k = 0; k < imu->n_frames; k++)
-        imu->frames[k] = (ps_canbus_frame_shape_t){.len = imu_lens[k]};
+        imu->frames[k] = (ps_canbus_frame_shape_t){.len = imu_lens[k], .is_rx = true};
     const ps_canbus_cfg_t cfg = {
         .n_buses = b->n_buses,
         .buses = b->buses,

@@ -20,6 +20,7 @@ typedef struct {
     uint32_t bitrate;
     bool *is_fd;
     uint32_t *data_bitrate;
+    ps_canbus_ctrl_t controller; /* absent: 0, any */
 } bus_raw_t;
 
 /* The gpio mapping as written: each line by offset or by name, so the
@@ -48,6 +49,7 @@ typedef struct {
     uint32_t n_buses;
     gpio_raw_t gpio;
     ps_rt_cfg_t rt;
+    ps_board_camera_t *camera; /* optional: NULL when absent */
 } board_raw_t;
 
 static const cyaml_strval_t BOARD_KINDS[] = {
@@ -62,11 +64,19 @@ static const cyaml_strval_t GPIO_BIASES[] = {
     {"disabled", PS_GPIO_BIAS_DISABLED},
 };
 
+static const cyaml_strval_t CONTROLLERS[] = {
+    {"mcp2515", PS_CANBUS_CTRL_MCP2515}, {"mcp251xfd", PS_CANBUS_CTRL_MCP251XFD},
+    {"mttcan", PS_CANBUS_CTRL_MTTCAN},   {"m_can", PS_CANBUS_CTRL_M_CAN},
+    {"gs_usb", PS_CANBUS_CTRL_GS_USB},   {"virtual", PS_CANBUS_CTRL_VIRTUAL},
+};
+
 static const cyaml_schema_field_t BUS_FIELDS[] = {
     CYAML_FIELD_STRING("ifname", CYAML_FLAG_DEFAULT, bus_raw_t, ifname, 1),
     CYAML_FIELD_UINT("bitrate", CYAML_FLAG_DEFAULT, bus_raw_t, bitrate),
     CYAML_FIELD_BOOL_PTR("fd", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, bus_raw_t, is_fd),
     CYAML_FIELD_UINT_PTR("data_bitrate", CYAML_FLAG_OPTIONAL, bus_raw_t, data_bitrate),
+    CYAML_FIELD_ENUM("controller", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, bus_raw_t, controller,
+                     CONTROLLERS, CYAML_ARRAY_LEN(CONTROLLERS)),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_value_t BUS_SCHEMA = {
@@ -99,6 +109,10 @@ static const cyaml_schema_field_t RT_FIELDS[] = {
     CYAML_FIELD_INT("worker_cpu", CYAML_FLAG_DEFAULT, ps_rt_cfg_t, worker_cpu),
     CYAML_FIELD_END,
 };
+static const cyaml_schema_field_t CAMERA_FIELDS[] = {
+    CYAML_FIELD_STRING("sensor", CYAML_FLAG_DEFAULT, ps_board_camera_t, sensor, 1),
+    CYAML_FIELD_END,
+};
 static const cyaml_schema_field_t BOARD_FIELDS[] = {
     CYAML_FIELD_STRING("name", CYAML_FLAG_DEFAULT, board_raw_t, name, 1),
     CYAML_FIELD_ENUM("kind", CYAML_FLAG_STRICT, board_raw_t, kind, BOARD_KINDS,
@@ -108,6 +122,7 @@ static const cyaml_schema_field_t BOARD_FIELDS[] = {
                                &BUS_SCHEMA, 1, PS_MAX_BUSES),
     CYAML_FIELD_MAPPING("gpio", CYAML_FLAG_DEFAULT, board_raw_t, gpio, GPIO_FIELDS),
     CYAML_FIELD_MAPPING("rt", CYAML_FLAG_DEFAULT, board_raw_t, rt, RT_FIELDS),
+    CYAML_FIELD_MAPPING_PTR("camera", CYAML_FLAG_OPTIONAL, board_raw_t, camera, CAMERA_FIELDS),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_value_t BOARD_SCHEMA = {
@@ -149,6 +164,11 @@ static int check_board(ps_cfg_ctx_t *c, const ps_board_cfg_t *b)
         if (!bus->is_fd && bus->data_bitrate != bus->bitrate) {
             (void)snprintf(field, sizeof(field), "buses[%u].data_bitrate", i);
             return ps_cfg_fail_field(c, field, "a data bit rate needs a CAN FD bus (fd: true)");
+        }
+        const ps_canbus_ctrl_info_t *ci = ps_canbus_ctrl_info(bus->controller);
+        if (bus->is_fd && !ci->is_fd_capable) {
+            (void)snprintf(field, sizeof(field), "buses[%u].fd", i);
+            return ps_cfg_fail_field(c, field, "controller %s is classical CAN only", ci->name);
         }
         if (bus->is_fd && (bus->data_bitrate < bus->bitrate || bus->data_bitrate > 8000000u)) {
             (void)snprintf(field, sizeof(field), "buses[%u].data_bitrate", i);
@@ -261,10 +281,15 @@ int ps_config_load_board(const char *path, ps_board_cfg_t *out, char *err, size_
             b.buses[i].is_fd = r->is_fd != NULL && *r->is_fd;
             /* Without FD the data phase is the arbitration phase. */
             b.buses[i].data_bitrate = r->data_bitrate != NULL ? *r->data_bitrate : r->bitrate;
+            b.buses[i].controller = r->controller;
             if (r->data_bitrate != NULL && !b.buses[i].is_fd && dbr_without_fd < 0)
                 dbr_without_fd = (int)i;
         }
         b.rt = raw->rt;
+        if (raw->camera != NULL) {
+            b.has_camera = true;
+            b.camera = *raw->camera;
+        }
         rc = gpio_from_raw(&c, &raw->gpio, &b.gpio);
     }
     if (raw != NULL)

@@ -712,6 +712,52 @@ static void test_load_board_gpio_name_reused_rejected(void **state)
     assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)), 0);
 }
 
+/* buses[i].controller: loaded, checked against fd, unknown names refused;
+ * camera: optional. */
+static void test_load_board_controller_and_camera_loaded(void **state)
+{
+    fx_t *f = *state;
+    edit(f, BOARD_OK, "{ifname: can0, bitrate: 500000}",
+         "{ifname: can0, bitrate: 500000, controller: mcp2515}");
+    append(f, "camera: {sensor: imx708}\n");
+    assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)), 0);
+    assert_int_equal(f->board.buses[0].controller, PS_CANBUS_CTRL_MCP2515);
+    assert_int_equal(f->board.buses[1].controller, PS_CANBUS_CTRL_ANY); /* absent */
+    assert_true(f->board.has_camera);
+    assert_string_equal(f->board.camera.sensor, "imx708");
+    assert_int_equal(ps_config_load_board(BOARD_OK, &f->board, f->err, sizeof(f->err)), 0);
+    assert_false(f->board.has_camera);
+}
+
+static void test_load_board_fd_on_classical_controller_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, BOARD_OK, "{ifname: can0, bitrate: 500000}",
+         "{ifname: can0, bitrate: 500000, fd: true, controller: mcp2515}");
+    want(f, "%s:%d: buses[0].fd: controller mcp2515 is classical CAN only", f->path,
+         line_of(f, "fd: true"));
+    expect_board_error(f);
+    edit(f, BOARD_OK, "{ifname: can0, bitrate: 500000}",
+         "{ifname: can0, bitrate: 500000, fd: true, controller: mcp251xfd}");
+    assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)), 0);
+    assert_int_equal(f->board.buses[0].controller, PS_CANBUS_CTRL_MCP251XFD);
+}
+
+static void test_load_board_unknown_controller_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, BOARD_OK, "{ifname: can0, bitrate: 500000}",
+         "{ifname: can0, bitrate: 500000, controller: sja1000}");
+    want(f,
+         "%s:%d: buses[0].controller: unknown value \"sja1000\" (allowed: mcp2515, mcp251xfd, "
+         "mttcan, m_can, gs_usb, virtual)",
+         f->path, line_of(f, "controller"));
+    expect_board_error(f);
+    edit(f, BOARD_OK, "rt:", "camera: {}\nrt:");
+    want(f, "%s:%d: camera: missing field \"sensor\"", f->path, line_of(f, "camera"));
+    expect_board_error(f);
+}
+
 static void test_load_board_gpio_bias_unknown_rejected(void **state)
 {
     fx_t *f = *state;
@@ -1538,6 +1584,9 @@ int main(void)
         T(test_load_board_gpio_line_and_name_rejected),
         T(test_load_board_gpio_name_reused_rejected),
         T(test_load_board_gpio_bias_unknown_rejected),
+        T(test_load_board_controller_and_camera_loaded),
+        T(test_load_board_fd_on_classical_controller_rejected),
+        T(test_load_board_unknown_controller_rejected),
         T(test_load_robot_string_for_number_rejected),
         T(test_load_robot_missing_field_rejected),
         T(test_load_robot_duplicate_can_id_rejected),
