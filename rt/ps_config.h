@@ -42,6 +42,13 @@ typedef enum {
     PS_BOARD_LINUX,   /**< real SocketCAN buses and libgpiod lines */
 } ps_board_kind_t;
 
+/** The board's camera (optional `camera:`), for `pushstep doctor`: a V4L2
+ *  device or sub-device whose name (/sys/class/video4linux/STAR/name)
+ *  contains `sensor`, e.g. "imx708". */
+typedef struct {
+    char sensor[PS_NAME_LEN];
+} ps_board_camera_t;
+
 struct ps_board_cfg {
     char name[PS_NAME_LEN];
     ps_board_kind_t kind;
@@ -50,6 +57,8 @@ struct ps_board_cfg {
     float bus_budget; /**< max worst-case load per bus, 0..1, default 0.8 */
     ps_gpio_cfg_t gpio;
     ps_rt_cfg_t rt;
+    bool has_camera; /**< camera given */
+    ps_board_camera_t camera;
 };
 
 /* ---- robot file: robots/<name>.yaml ---------------------------------- */

@@ -20,6 +20,7 @@ typedef struct {
     uint32_t bitrate;
     bool *is_fd;
     uint32_t *data_bitrate;
+    ps_canbus_ctrl_t controller; /* absent: 0, any */
 } bus_raw_t;
 
 /* The gpio mapping as written: each line by offset or by name, so the
@@ -35,6 +36,9 @@ typedef struct {
     char led_name[PS_NAME_LEN];
     ps_gpio_bias_t estop_bias;
     uint32_t estop_debounce_us;
+    uint32_t *button_line; /* the record button: optional, line or name */
+    char button_name[PS_NAME_LEN];
+    bool is_button_active_low;
 } gpio_raw_t;
 
 typedef struct {
@@ -45,6 +49,7 @@ typedef struct {
     uint32_t n_buses;
     gpio_raw_t gpio;
     ps_rt_cfg_t rt;
+    ps_board_camera_t *camera; /* optional: NULL when absent */
 } board_raw_t;
 
 static const cyaml_strval_t BOARD_KINDS[] = {
@@ -59,11 +64,19 @@ static const cyaml_strval_t GPIO_BIASES[] = {
     {"disabled", PS_GPIO_BIAS_DISABLED},
 };
 
+static const cyaml_strval_t CONTROLLERS[] = {
+    {"mcp2515", PS_CANBUS_CTRL_MCP2515}, {"mcp251xfd", PS_CANBUS_CTRL_MCP251XFD},
+    {"mttcan", PS_CANBUS_CTRL_MTTCAN},   {"m_can", PS_CANBUS_CTRL_M_CAN},
+    {"gs_usb", PS_CANBUS_CTRL_GS_USB},   {"virtual", PS_CANBUS_CTRL_VIRTUAL},
+};
+
 static const cyaml_schema_field_t BUS_FIELDS[] = {
     CYAML_FIELD_STRING("ifname", CYAML_FLAG_DEFAULT, bus_raw_t, ifname, 1),
     CYAML_FIELD_UINT("bitrate", CYAML_FLAG_DEFAULT, bus_raw_t, bitrate),
     CYAML_FIELD_BOOL_PTR("fd", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, bus_raw_t, is_fd),
     CYAML_FIELD_UINT_PTR("data_bitrate", CYAML_FLAG_OPTIONAL, bus_raw_t, data_bitrate),
+    CYAML_FIELD_ENUM("controller", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, bus_raw_t, controller,
+                     CONTROLLERS, CYAML_ARRAY_LEN(CONTROLLERS)),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_value_t BUS_SCHEMA = {
@@ -83,6 +96,10 @@ static const cyaml_schema_field_t GPIO_FIELDS[] = {
     CYAML_FIELD_ENUM("estop_bias", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, gpio_raw_t, estop_bias,
                      GPIO_BIASES, CYAML_ARRAY_LEN(GPIO_BIASES)),
     CYAML_FIELD_UINT("estop_debounce_us", CYAML_FLAG_OPTIONAL, gpio_raw_t, estop_debounce_us),
+    CYAML_FIELD_UINT_PTR("record_button_line", CYAML_FLAG_OPTIONAL, gpio_raw_t, button_line),
+    CYAML_FIELD_STRING("record_button_name", CYAML_FLAG_OPTIONAL, gpio_raw_t, button_name, 1),
+    CYAML_FIELD_BOOL("record_button_active_low", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT,
+                     gpio_raw_t, is_button_active_low),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_field_t RT_FIELDS[] = {
@@ -90,6 +107,10 @@ static const cyaml_schema_field_t RT_FIELDS[] = {
     CYAML_FIELD_INT("loop_cpu", CYAML_FLAG_DEFAULT, ps_rt_cfg_t, loop_cpu),
     CYAML_FIELD_INT("plant_cpu", CYAML_FLAG_DEFAULT, ps_rt_cfg_t, plant_cpu),
     CYAML_FIELD_INT("worker_cpu", CYAML_FLAG_DEFAULT, ps_rt_cfg_t, worker_cpu),
+    CYAML_FIELD_END,
+};
+static const cyaml_schema_field_t CAMERA_FIELDS[] = {
+    CYAML_FIELD_STRING("sensor", CYAML_FLAG_DEFAULT, ps_board_camera_t, sensor, 1),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_field_t BOARD_FIELDS[] = {
@@ -101,6 +122,7 @@ static const cyaml_schema_field_t BOARD_FIELDS[] = {
                                &BUS_SCHEMA, 1, PS_MAX_BUSES),
     CYAML_FIELD_MAPPING("gpio", CYAML_FLAG_DEFAULT, board_raw_t, gpio, GPIO_FIELDS),
     CYAML_FIELD_MAPPING("rt", CYAML_FLAG_DEFAULT, board_raw_t, rt, RT_FIELDS),
+    CYAML_FIELD_MAPPING_PTR("camera", CYAML_FLAG_OPTIONAL, board_raw_t, camera, CAMERA_FIELDS),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_value_t BOARD_SCHEMA = {
@@ -119,6 +141,8 @@ static const ps_cfg_rule_t BOARD_RANGES[] = {
     PS_CFG_RULE_U32(0, 0, "gpio.estop_line", ps_board_cfg_t, gpio.estop_line, 0.0, MAX_GPIO_LINE),
     PS_CFG_RULE_U32(0, 0, "gpio.enable_line", ps_board_cfg_t, gpio.enable_line, 0.0, MAX_GPIO_LINE),
     PS_CFG_RULE_U32(0, 0, "gpio.led_line", ps_board_cfg_t, gpio.led_line, 0.0, MAX_GPIO_LINE),
+    PS_CFG_RULE_U32(0, 0, "gpio.record_button_line", ps_board_cfg_t, gpio.button_line, 0.0,
+                    MAX_GPIO_LINE),
     PS_CFG_RULE_U32(0, 0, "gpio.estop_debounce_us", ps_board_cfg_t, gpio.estop_debounce_us, 0.0,
                     PS_GPIO_DEBOUNCE_MAX_US),
     PS_CFG_RULE_U32(0, 0, "rt.priority", ps_board_cfg_t, rt.priority, 0.0, 98.0),
@@ -140,6 +164,11 @@ static int check_board(ps_cfg_ctx_t *c, const ps_board_cfg_t *b)
         if (!bus->is_fd && bus->data_bitrate != bus->bitrate) {
             (void)snprintf(field, sizeof(field), "buses[%u].data_bitrate", i);
             return ps_cfg_fail_field(c, field, "a data bit rate needs a CAN FD bus (fd: true)");
+        }
+        const ps_canbus_ctrl_info_t *ci = ps_canbus_ctrl_info(bus->controller);
+        if (bus->is_fd && !ci->is_fd_capable) {
+            (void)snprintf(field, sizeof(field), "buses[%u].fd", i);
+            return ps_cfg_fail_field(c, field, "controller %s is classical CAN only", ci->name);
         }
         if (bus->is_fd && (bus->data_bitrate < bus->bitrate || bus->data_bitrate > 8000000u)) {
             (void)snprintf(field, sizeof(field), "buses[%u].data_bitrate", i);
@@ -166,8 +195,11 @@ static int check_board(ps_cfg_ctx_t *c, const ps_board_cfg_t *b)
         {"gpio.estop_line", "gpio.estop_name", b->gpio.estop_line, b->gpio.estop_name},
         {"gpio.enable_line", "gpio.enable_name", b->gpio.enable_line, b->gpio.enable_name},
         {"gpio.led_line", "gpio.led_name", b->gpio.led_line, b->gpio.led_name},
+        {"gpio.record_button_line", "gpio.record_button_name", b->gpio.button_line,
+         b->gpio.button_name},
     };
-    for (size_t i = 1; i < sizeof(lines) / sizeof(lines[0]); i++) {
+    const size_t n_lines = sizeof(lines) / sizeof(lines[0]) - (b->gpio.has_button ? 0u : 1u);
+    for (size_t i = 1; i < n_lines; i++) {
         for (size_t k = 0; k < i; k++) {
             const bool is_named_i = lines[i].name[0] != '\0';
             const bool is_named_k = lines[k].name[0] != '\0';
@@ -213,6 +245,13 @@ static int gpio_from_raw(ps_cfg_ctx_t *c, const gpio_raw_t *r, ps_gpio_cfg_t *ou
         rc = gpio_line_from_raw(c, "enable", r->enable_line, r->enable_name, &out->enable_line);
     if (rc == 0)
         rc = gpio_line_from_raw(c, "led", r->led_line, r->led_name, &out->led_line);
+    /* the record button is optional: no line and no name, no button */
+    out->has_button = r->button_line != NULL || r->button_name[0] != '\0';
+    out->is_button_active_low = r->is_button_active_low;
+    memcpy(out->button_name, r->button_name, sizeof(out->button_name));
+    if (rc == 0 && out->has_button)
+        rc = gpio_line_from_raw(c, "record_button", r->button_line, r->button_name,
+                                &out->button_line);
     return rc;
 }
 
@@ -242,10 +281,15 @@ int ps_config_load_board(const char *path, ps_board_cfg_t *out, char *err, size_
             b.buses[i].is_fd = r->is_fd != NULL && *r->is_fd;
             /* Without FD the data phase is the arbitration phase. */
             b.buses[i].data_bitrate = r->data_bitrate != NULL ? *r->data_bitrate : r->bitrate;
+            b.buses[i].controller = r->controller;
             if (r->data_bitrate != NULL && !b.buses[i].is_fd && dbr_without_fd < 0)
                 dbr_without_fd = (int)i;
         }
         b.rt = raw->rt;
+        if (raw->camera != NULL) {
+            b.has_camera = true;
+            b.camera = *raw->camera;
+        }
         rc = gpio_from_raw(&c, &raw->gpio, &b.gpio);
     }
     if (raw != NULL)

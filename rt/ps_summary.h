@@ -15,6 +15,7 @@
 #include "ps_guard.h"
 #include "ps_logger.h"
 #include "ps_loop.h"
+#include "ps_recorder.h"
 
 #define PS_SUMMARY_MAX_PARTS 32u
 
@@ -64,6 +65,7 @@ typedef struct {
     double truth_plant_err_t_s;         /**< simulated time of it since start */
     bool has_crowd;                     /**< crowd below is valid */
     ps_summary_crowd_t crowd;
+    const ps_recorder_stats_t *recorder; /**< flight recorder's account; NULL: not recording */
 } ps_summary_t;
 
 /** @return 0 | -EIO (err says why)  @rt NON-RT */

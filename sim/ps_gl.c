@@ -73,7 +73,7 @@ int ps_gl_open_window(ps_gl_t *g, int w, int h, const char *title, char *err, si
     if ((x11 == NULL || x11[0] == '\0') && (wl == NULL || wl[0] == '\0')) {
         ps_err_format(err, err_len,
                       "the live viewer needs a display (DISPLAY and WAYLAND_DISPLAY are unset); "
-                      "--record DIR renders without one");
+                      "--render DIR renders without one");
         return -ENXIO;
     }
     glfw_error[0] = '\0';

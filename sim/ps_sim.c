@@ -86,6 +86,8 @@ struct ps_sim {
     double first_fall_t_s; /**< plant time of the first fall, -1: none yet */
     bool has_mutex;
     ps_sim_truth_t truth;
+    atomic_uint truth_seq;   /**< odd while truth_rt is being written */
+    ps_sim_truth_t truth_rt; /**< lock-free copy for ps_sim_read_truth_rt */
 };
 
 /* ---- one physics step ------------------------------------------------ */
@@ -137,6 +139,10 @@ static void run_scenario(ps_sim_t *s, int64_t rel_ns)
             a->is_motor_mode = false; /* a faulted drive gives no torque */
             break;
         }
+        case PS_EVENT_RECORD_BUTTON: /* a press shorter than a tick: latched until read */
+            ps_gpio_sim_set_button(&s->gpio, true);
+            ps_gpio_sim_set_button(&s->gpio, false);
+            break;
         case PS_EVENT_COUNT:
         default:
             break;
@@ -310,6 +316,15 @@ static void update_truth(ps_sim_t *s)
             (void)ps_ring_push(&s->crowd_ring, &cs); /* full: dropped and counted */
         }
     }
+    for (int b = 0; b < s->n_push_bodies; b++)
+        for (int k = 0; k < 3; k++)
+            t.push_force_n[k] += s->push_applied_n[b][k];
+    /* Sequence-counted copy for readers that may not lock (one writer). */
+    const unsigned seq = atomic_load_explicit(&s->truth_seq, memory_order_relaxed);
+    atomic_store_explicit(&s->truth_seq, seq + 1u, memory_order_relaxed);
+    atomic_thread_fence(memory_order_release);
+    s->truth_rt = t;
+    atomic_store_explicit(&s->truth_seq, seq + 2u, memory_order_release);
     /* Held only for the copy, so the plant thread is never delayed for long. */
     pthread_mutex_lock(&s->truth_mu);
     s->truth = t;
@@ -495,6 +510,7 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
         s->slow_ns = 0;
     s->min_com_active_m = INFINITY;
     atomic_init(&s->requests, 0u);
+    atomic_init(&s->truth_seq, 0u);
     atomic_init(&s->is_running, false);
     s->clock = (ps_clock_t){.now_ns = sim_now_ns, .sleep_until_ns = sim_sleep_until_ns, .ctx = s};
     (void)ps_ring_init(&s->crowd_ring, s->crowd_storage, PS_SIM_CROWD_RING_SLOTS,
@@ -643,6 +659,20 @@ void ps_sim_stop(ps_sim_t *s)
     atomic_store(&s->is_running, false);
     (void)pthread_join(s->thread, NULL); /* cannot fail for a joinable thread we own */
     s->has_thread = false;
+}
+
+bool ps_sim_read_truth_rt(ps_sim_t *s, ps_sim_truth_t *out)
+{
+    for (int attempt = 0; attempt < 4; attempt++) {
+        const unsigned s1 = atomic_load_explicit(&s->truth_seq, memory_order_acquire);
+        if (s1 & 1u)
+            continue;
+        memcpy(out, &s->truth_rt, sizeof(*out)); /* seqlock read: validated below */
+        atomic_thread_fence(memory_order_acquire);
+        if (atomic_load_explicit(&s->truth_seq, memory_order_relaxed) == s1)
+            return true;
+    }
+    return false;
 }
 
 void ps_sim_get_truth(ps_sim_t *s, ps_sim_truth_t *out)

@@ -102,7 +102,7 @@ static void test_cli_help_documents_every_option(void **state)
         "--lockstep",        "--summary FILE.json", "--require-rt",    "--trace",
         "pushstep profile",  "--stress cpu|mem|io", "--out DIR",       "--hist-us N",
         "pushstep monitor",  "pushstep emulate",    "--start-after S", "--candump FILE",
-        "--crowd-log FILE.csv", "--record DIR",     "--record-fps N",  "--view"};
+        "--crowd-log FILE.csv", "--render DIR",     "--render-fps N",  "--view"};
     for (size_t i = 0; i < sizeof(OPTIONS) / sizeof(OPTIONS[0]); i++)
         if (strstr(out, OPTIONS[i]) == NULL)
             fail_msg("--help does not mention %s", OPTIONS[i]);
@@ -343,23 +343,23 @@ static void test_cli_default_run_is_the_crowd(void **state)
     unlink(path);
 }
 
-/* --record DIR: a frame per 1/fps of simulated time, the density map and an
+/* --render DIR: a frame per 1/fps of simulated time, the density map and an
  * MP4 with one frame per PNG; --view refuses cleanly without a display. */
 static void test_cli_record_writes_frames_density_and_mp4(void **state)
 {
     (void)state;
-    char dir[] = "/tmp/ps_record_XXXXXX";
+    char dir[] = "/tmp/ps_render_cli_XXXXXX";
     assert_non_null(mkdtemp(dir));
     char args[256];
-    snprintf(args, sizeof(args), "--lockstep --quiet --duration 1 --record %s --record-fps 10",
+    snprintf(args, sizeof(args), "--lockstep --quiet --duration 1 --render %s --render-fps 10",
              dir);
     const int rc = run(args);
     if (rc != 0)
         fail_msg("exit %d:\n%s", rc, out);
     unsigned long long n_frames = 0, n_dropped = 1;
-    const char *line = strstr(out, "record: ");
+    const char *line = strstr(out, "render: ");
     assert_non_null(line);
-    assert_int_equal(sscanf(line, "record: %llu frames (%llu dropped)", &n_frames, &n_dropped), 2);
+    assert_int_equal(sscanf(line, "render: %llu frames (%llu dropped)", &n_frames, &n_dropped), 2);
     assert_true(n_frames >= 10); /* 1 s and the braking after it, at 10 per s */
     assert_int_equal(n_dropped, 0);
     char path[128], cmd[320];
@@ -899,6 +899,26 @@ static const sig_case_t SIG_CASES[] = {
  * stall may add OVERRUN beside it (seen here: "HOLD -> DAMPING
  * (REQ_STOP|OVERRUN)"), which is not what these tests are about. */
 
+/* Whether out passed through the state path case c expects; why not in why. */
+static bool took_expected_path(const sig_case_t *c, const cJSON *j, char *why, size_t len)
+{
+    const char *final = cJSON_GetStringValue(obj(j, "final_state"));
+    if (c->must != NULL && strstr(out, c->must) == NULL)
+        snprintf(why, len, "no \"%s\"", c->must);
+    else if (c->must_not != NULL && strstr(out, c->must_not) != NULL)
+        snprintf(why, len, "\"%s\" seen", c->must_not);
+    else if (final == NULL || strcmp(final, c->final) != 0)
+        snprintf(why, len, "final state %s, want %s", final ? final : "(none)", c->final);
+    else
+        return true;
+    return false;
+}
+
+/* Every run must exit with status 0 soon after the signal. The path through
+ * the states is judged only on runs the host left alone: a run with
+ * overruns (a loaded host took the loop's CPU: seen as OVERRUN holds and
+ * drive timeouts while other builds ran beside the suite) or a start-up
+ * fault did not test the state it meant to, and is tried again. */
 static void check_signal_in_every_state(int sig, const char *sig_name)
 {
     for (size_t i = 0; i < sizeof(SIG_CASES) / sizeof(SIG_CASES[0]); i++) {
@@ -909,35 +929,32 @@ static void check_signal_in_every_state(int sig, const char *sig_name)
             make_temp_file(path, sizeof(path));
             double exit_s = 0;
             bool is_startup_estop = false;
-            int rc = run_signalled(c, sig, path, &exit_s, &is_startup_estop);
-            print_message("      %s in %s, try %d: exit %d after %.2f s%s\n", sig_name, c->state,
-                          r + 1, rc, exit_s,
-                          is_startup_estop ? " (start-up fault: not this state, again)" : "");
-            if (is_startup_estop) {
-                if (rc != 0 || exit_s > SIG_EXIT_S)
-                    fail_msg("%s in start-up ESTOP: exit %d after %.1f s:\n%s", sig_name, rc,
-                             exit_s, out);
-                unlink(path);
-                if (++n_again > SIG_AGAIN_MAX)
-                    fail_msg("%s: %d start-up faults, %s not reached", sig_name, n_again,
-                             c->state);
-                r--;
-                continue;
-            }
+            const int rc = run_signalled(c, sig, path, &exit_s, &is_startup_estop);
             if (rc != 0)
                 fail_msg("%s in %s: exit %d, want 0:\n%s", sig_name, c->state, rc, out);
             if (exit_s > SIG_EXIT_S)
                 fail_msg("%s in %s: exited %.1f s after the signal:\n%s", sig_name, c->state,
                          exit_s, out);
-            if (c->must != NULL && strstr(out, c->must) == NULL)
-                fail_msg("%s in %s: no \"%s\" in:\n%s", sig_name, c->state, c->must, out);
-            if (c->must_not != NULL && strstr(out, c->must_not) != NULL)
-                fail_msg("%s in %s: \"%s\" in:\n%s", sig_name, c->state, c->must_not, out);
             cJSON *j = read_json(path);
-            assert_string_equal(cJSON_GetStringValue(obj(j, "final_state")), c->final);
             assert_true(num(j, "loop_s") < SIG_DURATION_S / 2);
+            const double overruns = num(j, "overruns");
+            char why[160] = "";
+            const bool is_path_ok = !is_startup_estop && took_expected_path(c, j, why, sizeof(why));
             cJSON_Delete(j);
             unlink(path);
+            const bool is_again = !is_path_ok && (is_startup_estop || overruns > 0);
+            print_message("      %s in %s, try %d: exit %d after %.2f s%s%s\n", sig_name, c->state,
+                          r + 1, rc, exit_s, is_again ? ", again: " : "",
+                          !is_again          ? ""
+                          : is_startup_estop ? "start-up fault"
+                                             : "host disturbed the run (overruns)");
+            if (!is_path_ok && !is_again)
+                fail_msg("%s in %s: %s in:\n%s", sig_name, c->state, why, out);
+            if (is_again && ++n_again > SIG_AGAIN_MAX)
+                fail_msg("%s: %d disturbed runs, %s not tested; last (%s):\n%s", sig_name, n_again,
+                         c->state, why, out);
+            if (is_again)
+                r--;
         }
     }
 }
