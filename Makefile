@@ -9,23 +9,39 @@ CXX     ?= c++
 
 # Debian 12 packages (README says why each is there). BUILD_PKGS build, test
 # and run the system; TOOL_PKGS are for working with targets (cyclictest,
-# can-utils, libgpiod, C++ for the camera side). `make deps` installs both.
+# can-utils). `make deps` installs both.
 BUILD_PKGS := gcc libc6-dev make pkg-config libmujoco-dev libcyaml-dev libyaml-dev \
               libcmocka-dev libcjson-dev libmnl-dev libgpiod-dev
-TOOL_PKGS  := g++ rt-tests can-utils
+# Camera perception: libcamera (C++: g++), AprilTag detection, PNG images in
+# and out, the simulated camera's offscreen rendering (EGL on Mesa's software
+# rasteriser), the annotated picture of `pushstep camera` (cairo).
+BUILD_PKGS += g++ libcamera-dev libapriltag-dev libpng-dev libcairo2-dev libegl-dev \
+              libegl-mesa0 libgl1-mesa-dri
+TOOL_PKGS  := rt-tests can-utils
 # What `make test` needs beyond building: can-utils' log2long reads the
-# candump-format lines the runtime writes (tests/test_candump.c).
-TEST_PKGS  := can-utils
+# candump-format lines the runtime writes (tests/test_candump.c); libcamera's
+# vimc IPA module and udevd for the VM's emulated camera (test_hw_camera).
+TEST_PKGS  := can-utils libcamera-ipa udev
 # Extra packages `make bench` needs: load generator, plots, the analysis script.
 BENCH_PKGS := stress-ng gnuplot-nox python3
 
 WARN    := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototypes
 CFLAGS  ?= -O2 -g
-CFLAGS  += -std=c11 -D_GNU_SOURCE -pthread $(WARN) -MMD -MP
-LDLIBS  := -lmujoco -lcyaml -lyaml -lcjson -lmnl -lgpiod -lm -pthread
+CFLAGS  += -std=c11 -D_GNU_SOURCE -pthread $(WARN) -MMD -MP $(IMAGE_CFLAGS)
+# Deferred (=): pkg-config runs when a rule needs it, after deps-build has
+# installed the packages on a fresh machine.
+IMAGE_CFLAGS = $(shell pkg-config --cflags libpng cairo)
+CAMERA_LIBS  = $(shell pkg-config --libs libcamera libpng cairo) -lapriltag -lapriltag-utils \
+               -lEGL -lstdc++
+LDLIBS  = -lmujoco -lcyaml -lyaml -lcjson -lmnl -lgpiod $(CAMERA_LIBS) -lm -pthread
+# C++ only for libcamera, in one file behind a C header (drivers/*.cpp).
+CXXFLAGS ?= -O2 -g
+CXXFLAGS += -std=c++17 -D_GNU_SOURCE -pthread -Wall -Wextra -Werror -Wshadow -MMD -MP \
+            $(shell pkg-config --cflags libcamera)
 SANFLAGS := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
 
 LIB_SRCS  := $(filter-out rt/main.c,$(wildcard rt/*.c drivers/*.c policy/*.c sim/*.c))
+LIB_CXX_SRCS := $(wildcard drivers/*.cpp)
 MAIN_SRC  := rt/main.c
 FAKE_SRCS := $(wildcard tests/fakes/*.c tests/contract/*.c)
 TEST_SRCS := $(wildcard tests/test_*.c)
@@ -36,11 +52,14 @@ SAN_TESTS   := $(filter-out $(NOSAN_TESTS),$(basename $(notdir $(TEST_SRCS))))
 
 OBJ      = $(patsubst %.c,$(BUILD)/obj/%.o,$(1))
 SANOBJ   = $(patsubst %.c,$(BUILD)/san/%.o,$(1))
-LIB_OBJS    := $(call OBJ,$(LIB_SRCS))
-LIB_SANOBJS := $(call SANOBJ,$(LIB_SRCS))
+LIB_OBJS    := $(call OBJ,$(LIB_SRCS)) $(patsubst %.cpp,$(BUILD)/obj/%.o,$(LIB_CXX_SRCS))
+LIB_SANOBJS := $(call SANOBJ,$(LIB_SRCS)) $(patsubst %.cpp,$(BUILD)/san/%.o,$(LIB_CXX_SRCS))
 FAKE_OBJS    := $(call OBJ,$(FAKE_SRCS))
 FAKE_SANOBJS := $(call SANOBJ,$(FAKE_SRCS))
 TEST_BINS := $(addprefix $(BUILD)/tests/,$(SAN_TESTS) $(NOSAN_TESTS))
+# The lock-free mailbox's test again under ThreadSanitizer (it checks the
+# atomics' memory orders, which ASan cannot).
+TSAN_BINS := $(BUILD)/tests/test_mailbox_tsan
 # Tests of the real drivers: they need vcan/vxcan and gpio-mockup, so they run
 # inside a Debian kernel booted under qemu (tools/qemu/, docs/testing-hw.md).
 HW_SRCS := $(wildcard tests/hw/test_hw_*.c)
@@ -88,6 +107,18 @@ $(BUILD)/san/%.o: %.c
 	@mkdir -p $(@D)
 	$(CC) $(CFLAGS) $(SANFLAGS) -c $< -o $@
 
+$(BUILD)/obj/%.o: %.cpp
+	@mkdir -p $(@D)
+	$(CXX) $(CXXFLAGS) -c $< -o $@
+
+$(BUILD)/san/%.o: %.cpp
+	@mkdir -p $(@D)
+	$(CXX) $(CXXFLAGS) $(SANFLAGS) -c $< -o $@
+
+$(BUILD)/tests/test_mailbox_tsan: tests/test_mailbox.c rt/ps_mailbox.c
+	@mkdir -p $(@D)
+	$(CC) $(CFLAGS) -fsanitize=thread -o $@ $^ -lcmocka
+
 $(BUILD)/pushstep: $(call OBJ,$(MAIN_SRC)) $(LIB_OBJS)
 	$(CC) $(CFLAGS) -o $@ $^ $(LDLIBS)
 
@@ -106,9 +137,9 @@ $(HW_BINS): $(BUILD)/tests/hw/%: $(BUILD)/obj/tests/hw/%.o $(LIB_OBJS) $(FAKE_OB
 run: deps-build $(BUILD)/pushstep
 	$(BUILD)/pushstep --board sim $(ARGS)
 
-test: deps-test $(BUILD)/pushstep $(TEST_BINS) $(HW_BINS)
+test: deps-test $(BUILD)/pushstep $(TEST_BINS) $(TSAN_BINS) $(HW_BINS)
 	@PUSHSTEP_BIN=$(BUILD)/pushstep QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh \
-	    tools/check-layers.sh $(TEST_BINS) tools/qemu/test-hw.sh
+	    tools/check-layers.sh $(TEST_BINS) $(TSAN_BINS) tools/qemu/test-hw.sh
 
 test-hw: deps-test $(BUILD)/pushstep $(HW_BINS)
 	@PUSHSTEP_BIN=$(BUILD)/pushstep QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh tools/qemu/test-hw.sh
