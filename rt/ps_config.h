@@ -33,6 +33,7 @@
 #include "../policy/ps_servo.h"
 #include "ps_limits.h"
 #include "ps_loop.h"
+#include "ps_perception.h"
 #include "ps_rtsetup.h"
 
 /* ---- board file: boards/<name>.yaml ---------------------------------- */
@@ -50,6 +51,9 @@ struct ps_board_cfg {
     float bus_budget; /**< max worst-case load per bus, 0..1, default 0.8 */
     ps_gpio_cfg_t gpio;
     ps_rt_cfg_t rt;
+    bool has_camera;             /**< the optional `camera:` section is there */
+    ps_perception_cfg_t camera;  /**< camera.dir as written (relative to the board file) */
+    uint32_t camera_line;        /**< first line of the `camera:` mapping, for messages; 0: none */
 };
 
 /* ---- robot file: robots/<name>.yaml ---------------------------------- */
