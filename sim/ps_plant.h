@@ -132,6 +132,16 @@ double ps_plant_total_mass_kg(const ps_plant_t *p);
  *  @rt RT-SAFE O(ngeom) */
 double ps_plant_foot_min_z_m(const ps_plant_t *p);
 
+/* ---- for a rendering camera (sim/ps_camera_sim) -------------------------- */
+
+struct mjModel_;
+
+/** @return the plant's MuJoCo model (read-only; valid until destroy)  @rt any */
+const struct mjModel_ *ps_plant_model(const ps_plant_t *p);
+
+/** @post out_qpos holds the model's nq position coordinates  @rt RT-SAFE O(nq) */
+void ps_plant_get_qpos(const ps_plant_t *p, double *out_qpos);
+
 /** Safe on NULL. */
 void ps_plant_destroy(ps_plant_t *p);
 

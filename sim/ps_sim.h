@@ -228,6 +228,27 @@ uint32_t ps_sim_take_requests(ps_sim_t *s);
  *  @return 0 | -EINVAL joint_idx out of range  @rt NON-RT */
 int ps_sim_get_actuator(ps_sim_t *s, unsigned joint_idx, ps_devices_actuator_t *out);
 
+/* ---- the scene, for a rendering camera (sim/ps_camera_sim) ---------------
+ * At create and at the end of every servo period the sim publishes the
+ * model's positions (qpos) with their simulated time into a latest-wins
+ * mailbox (rt/ps_mailbox.h): the plant never waits for the camera. */
+
+struct mjModel_;
+
+/** @return a copy of the plant's MuJoCo model, or NULL (no memory); the
+ *  caller frees it with mj_deleteModel  @rt INIT */
+struct mjModel_ *ps_sim_copy_model(ps_sim_t *s);
+
+/** @return the model's nq (positions per scene)  @rt any */
+uint32_t ps_sim_scene_nq(const ps_sim_t *s);
+
+/** The newest scene: qpos and its simulated time (the loop's clock; 0 before
+ *  ps_sim_start) and its number (0 at create, then one per servo period).
+ *  @return 0 | -EINVAL (nq is not the model's)
+ *  @rt RT-SAFE O(nq), wait-free; one reader thread (the camera's) */
+int ps_sim_read_scene(ps_sim_t *s, double *out_qpos, uint32_t nq, int64_t *out_t_ns,
+                      uint64_t *out_seq);
+
 /** @post all resources freed; s invalid. Safe on NULL.  @rt INIT */
 void ps_sim_destroy(ps_sim_t *s);
 
