@@ -472,7 +472,13 @@ static int wire(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t len)
 /* `pushstep camera`: the files, a plant at rest on board sim, the camera. */
 static int init_camera_only(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t len)
 {
-    int rc = load_configs(app, opts, err, len);
+    /* A real board's camera needs nothing of the robot; board sim's scene is
+     * the robot's model (and its plant), so there everything is loaded. */
+    ps_config_resolve(opts->data_dir ? opts->data_dir : ".", opts->board ? opts->board : "sim",
+                      "boards", "sim", app->board_path, sizeof(app->board_path));
+    int rc = ps_config_load_board(app->board_path, &app->board, err, len);
+    if (rc == 0 && app->board.kind == PS_BOARD_SIM)
+        rc = load_configs(app, opts, err, len);
     if (rc == 0 && !app->board.has_camera) {
         snprintf(err, len, "%s: the board has no camera: section (docs/config.md)",
                  app->board_path);
