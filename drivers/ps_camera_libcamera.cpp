@@ -8,6 +8,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <deque>
 #include <memory>
@@ -339,6 +340,9 @@ extern "C" int ps_camera_libcamera_create(const ps_camera_cfg_t *cfg, ps_camera_
     if (cfg == nullptr || out == nullptr || cfg->source != PS_CAMERA_SRC_LIBCAMERA ||
         !to_libcamera(cfg->format).isValid())
         return -EINVAL;
+    /* libcamera logs INFO and WARN lines to stderr from its own threads;
+     * unless the user asked for a level, only its errors. */
+    (void)setenv("LIBCAMERA_LOG_LEVELS", "*:ERROR", 0);
     ps_camera_libcamera *c = new (std::nothrow) ps_camera_libcamera();
     if (c == nullptr)
         return -ENOMEM;

@@ -37,7 +37,9 @@ extern "C" {
 
 typedef struct ps_camera_libcamera ps_camera_libcamera_t;
 
-/** @pre cfg->source is libcamera  @post *out owned by the caller
+/** Also sets LIBCAMERA_LOG_LEVELS to "*:ERROR" unless it is set: libcamera's
+ *  info and warning lines stay off the runtime's output.
+ *  @pre cfg->source is libcamera  @post *out owned by the caller
  *  @return 0 | -EINVAL | -ENOMEM  @rt INIT */
 int ps_camera_libcamera_create(const ps_camera_cfg_t *cfg, ps_camera_libcamera_t **out);
 
