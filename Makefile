@@ -80,8 +80,9 @@ help:
 	@echo "             (skipped with a message where qemu cannot be installed)"
 	@echo "make test-hw the real drivers (SocketCAN, libgpiod) in a Debian kernel"
 	@echo "             booted under qemu with vcan, vxcan and gpio-mockup"
-	@echo "make bench   latency beside cyclictest, tick share, bus load, allocations:"
-	@echo "             bench/results/*.json and summary.md (see docs/latency.md)"
+	@echo "make bench   latency beside cyclictest, tick share, bus load, allocations,"
+	@echo "             camera perception: bench/results/*.json, summary.md, camera.md"
+	@echo "             (see docs/latency.md, docs/perception.md)"
 	@echo "make bench-hw the real drivers' figures in the test VM (e-stop reaction,"
 	@echo "             loop reaction, frames per bus): bench/results/hw.json"
 	@echo "make format  clang-format every C source in place"
@@ -146,6 +147,7 @@ test-hw: deps-test $(BUILD)/pushstep $(HW_BINS)
 
 bench: deps-bench $(BUILD)/pushstep
 	@bash bench/run.sh
+	@BUILD=$(BUILD) bash bench/camera.sh
 	@QEMU_WORK=$(QEMU_WORK) bash bench/hw.sh
 
 bench-hw: deps-test $(BUILD)/pushstep
