@@ -35,6 +35,7 @@
 #include "../rt/ps_guard.h"
 #include "../rt/ps_rtsetup.h"
 #include "fakes/ps_camera_fake.h"
+#include "fakes/ps_cli.h"
 
 #define BOARD    "tests/data/boards/sim-camera.yaml"
 #define ROBOT    "tests/data/robots/ps1-tags.yaml"
@@ -43,52 +44,9 @@
 
 static char out[OUT_MAX];
 
-static const char *bin(void)
-{
-    const char *b = getenv("PUSHSTEP_BIN");
-    return b ? b : "build/pushstep";
-}
-
 static int run(const char *args)
 {
-    char cmd[1024];
-    snprintf(cmd, sizeof(cmd), "%s %s 2>&1", bin(), args);
-    FILE *p = popen(cmd, "r");
-    assert_non_null(p);
-    const size_t n = fread(out, 1, sizeof(out) - 1, p);
-    out[n] = '\0';
-    const int status = pclose(p);
-    assert_true(WIFEXITED(status));
-    return WEXITSTATUS(status);
-}
-
-static cJSON *read_json(const char *path)
-{
-    FILE *f = fopen(path, "r");
-    assert_non_null(f);
-    static char text[OUT_MAX];
-    const size_t n = fread(text, 1, sizeof(text) - 1, f);
-    text[n] = '\0';
-    fclose(f);
-    cJSON *j = cJSON_Parse(text);
-    assert_non_null(j);
-    return j;
-}
-
-static double num(const cJSON *o, const char *key)
-{
-    const cJSON *v = cJSON_GetObjectItemCaseSensitive(o, key);
-    if (!cJSON_IsNumber(v))
-        fail_msg("JSON key \"%s\" missing or not a number", key);
-    return v->valuedouble;
-}
-
-static const cJSON *obj(const cJSON *o, const char *key)
-{
-    const cJSON *v = cJSON_GetObjectItemCaseSensitive(o, key);
-    if (v == NULL)
-        fail_msg("JSON key \"%s\" missing", key);
-    return v;
+    return ps_cli_run(args, out, sizeof(out));
 }
 
 static void make_temp_dir(char *path, size_t len)
@@ -176,10 +134,8 @@ static void test_e2e_camera_lockstep_loop_takes_lists_no_alloc_no_lock(void **st
 static void test_e2e_camera_realtime_fresh_lists_summary_no_alloc(void **state)
 {
     (void)state;
-    char path[] = "/tmp/ps_e2e_cam_sum_XXXXXX";
-    const int fd = mkstemp(path);
-    assert_true(fd >= 0);
-    close(fd);
+    char path[32];
+    ps_cli_temp_file(path, sizeof(path));
     char args[512];
     snprintf(args, sizeof(args), "--board %s --robot %s --duration 3 --quiet --summary %s", BOARD,
              ROBOT, path);
@@ -204,13 +160,13 @@ static void test_e2e_camera_realtime_fresh_lists_summary_no_alloc(void **state)
     assert_true(frames > 0 && tags > 0);
     assert_true(lists > 0);
     assert_true(stale < ticks); /* some ticks had a list younger than max_age_s */
-    cJSON *j = read_json(path);
-    const cJSON *after = obj(j, "after_init");
-    assert_true(cJSON_IsTrue(obj(after, "allocations_counted")));
-    assert_int_equal((int)num(after, "mallocs"), 0);
-    assert_int_equal((int)num(after, "frees"), 0);
-    assert_int_equal((int)num(after, "page_faults"), 0);
-    assert_int_equal((int)num(after, "locks"), 0);
+    cJSON *j = ps_cli_read_json(path);
+    const cJSON *after = ps_cli_obj(j, "after_init");
+    assert_true(cJSON_IsTrue(ps_cli_obj(after, "allocations_counted")));
+    assert_int_equal((int)ps_cli_num(after, "mallocs"), 0);
+    assert_int_equal((int)ps_cli_num(after, "frees"), 0);
+    assert_int_equal((int)ps_cli_num(after, "page_faults"), 0);
+    assert_int_equal((int)ps_cli_num(after, "locks"), 0);
     cJSON_Delete(j);
     unlink(path);
 }
@@ -248,14 +204,14 @@ static void test_e2e_camera_tool_sim_png_json_all_tags(void **state)
     assert_int_equal(w, 640);
     assert_true(h > 480); /* the picture and a caption line */
     snprintf(path, sizeof(path), "%s/camera.json", dir);
-    cJSON *j = read_json(path);
-    const cJSON *st = obj(j, "stats");
-    assert_true(num(st, "frames") >= 1);
-    assert_true(num(obj(st, "latency_ms"), "p50") > 0);
-    const cJSON *t = obj(j, "truth");
-    assert_int_equal((int)num(t, "tags_detected"), 6);
-    assert_true(num(t, "max_error_mm") < 50.0);
-    assert_int_equal(cJSON_GetArraySize(obj(j, "last_frame_detections")), 6);
+    cJSON *j = ps_cli_read_json(path);
+    const cJSON *st = ps_cli_obj(j, "stats");
+    assert_true(ps_cli_num(st, "frames") >= 1);
+    assert_true(ps_cli_num(ps_cli_obj(st, "latency_ms"), "p50") > 0);
+    const cJSON *t = ps_cli_obj(j, "truth");
+    assert_int_equal((int)ps_cli_num(t, "tags_detected"), 6);
+    assert_true(ps_cli_num(t, "max_error_mm") < 50.0);
+    assert_int_equal(cJSON_GetArraySize(ps_cli_obj(j, "last_frame_detections")), 6);
     cJSON_Delete(j);
     remove_tree(dir);
 }
