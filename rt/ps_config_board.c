@@ -14,8 +14,8 @@
 
 #define DEFAULT_BUS_BUDGET 0.8f
 /* Detections below this decision margin are dropped unless the board says
- * otherwise: libapriltag's own demo uses none, but on noisy frames its
- * false positives have margins under 15 (docs/perception.md). */
+ * otherwise: a judgment, a tag that faint is too blurred or small to trust
+ * (docs/perception.md). */
 #define PS_BOARD_CAMERA_MIN_MARGIN 20.0f
 #define MAX_GPIO_LINE      1023u
 
