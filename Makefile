@@ -14,9 +14,9 @@ BUILD_PKGS := gcc libc6-dev make pkg-config libmujoco-dev libcyaml-dev libyaml-d
               libcmocka-dev libcjson-dev libmnl-dev libgpiod-dev
 # Camera perception: libcamera (C++: g++), AprilTag detection, PNG images in
 # and out, the simulated camera's offscreen rendering (EGL on Mesa's software
-# rasteriser), the annotated picture of `pushstep camera` (cairo).
-BUILD_PKGS += g++ libcamera-dev libapriltag-dev libpng-dev libcairo2-dev libegl-dev \
-              libegl-mesa0 libgl1-mesa-dri
+# rasteriser).
+BUILD_PKGS += g++ libcamera-dev libapriltag-dev libpng-dev libegl-dev libegl-mesa0 \
+              libgl1-mesa-dri
 TOOL_PKGS  := rt-tests can-utils
 # What `make test` needs beyond building: can-utils' log2long reads the
 # candump-format lines the runtime writes (tests/test_candump.c); libcamera's
@@ -30,18 +30,18 @@ CFLAGS  ?= -O2 -g
 CFLAGS  += -std=c11 -D_GNU_SOURCE -pthread $(WARN) -MMD -MP $(IMAGE_CFLAGS)
 # Deferred (=): pkg-config runs when a rule needs it, after deps-build has
 # installed the packages on a fresh machine.
-IMAGE_CFLAGS = $(shell pkg-config --cflags libpng cairo)
-CAMERA_LIBS  = $(shell pkg-config --libs libcamera libpng cairo) -lapriltag -lapriltag-utils \
-               -lEGL -lstdc++
+IMAGE_CFLAGS = $(shell pkg-config --cflags libpng)
+CAMERA_LIBS  = $(shell pkg-config --libs libpng) -lapriltag -lapriltag-utils -lEGL
 LDLIBS  = -lmujoco -lcyaml -lyaml -lcjson -lmnl -lgpiod $(CAMERA_LIBS) -lm -pthread
-# C++ only for libcamera, in one file behind a C header (drivers/*.cpp).
+# C++ only for libcamera, in one file behind a C header, built as a module the
+# runtime loads when a board has a libcamera camera (drivers/ps_camera_libcamera.h).
 CXXFLAGS ?= -O2 -g
 CXXFLAGS += -std=c++17 -D_GNU_SOURCE -pthread -Wall -Wextra -Werror -Wshadow -MMD -MP \
             $(shell pkg-config --cflags libcamera)
 SANFLAGS := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
 
 LIB_SRCS  := $(filter-out rt/main.c,$(wildcard rt/*.c drivers/*.c policy/*.c sim/*.c))
-LIB_CXX_SRCS := $(wildcard drivers/*.cpp)
+CAMERA_SO := $(BUILD)/libpushstep-libcamera.so
 MAIN_SRC  := rt/main.c
 FAKE_SRCS := $(wildcard tests/fakes/*.c tests/contract/*.c)
 TEST_SRCS := $(wildcard tests/test_*.c)
@@ -52,8 +52,8 @@ SAN_TESTS   := $(filter-out $(NOSAN_TESTS),$(basename $(notdir $(TEST_SRCS))))
 
 OBJ      = $(patsubst %.c,$(BUILD)/obj/%.o,$(1))
 SANOBJ   = $(patsubst %.c,$(BUILD)/san/%.o,$(1))
-LIB_OBJS    := $(call OBJ,$(LIB_SRCS)) $(patsubst %.cpp,$(BUILD)/obj/%.o,$(LIB_CXX_SRCS))
-LIB_SANOBJS := $(call SANOBJ,$(LIB_SRCS)) $(patsubst %.cpp,$(BUILD)/san/%.o,$(LIB_CXX_SRCS))
+LIB_OBJS    := $(call OBJ,$(LIB_SRCS))
+LIB_SANOBJS := $(call SANOBJ,$(LIB_SRCS))
 FAKE_OBJS    := $(call OBJ,$(FAKE_SRCS))
 FAKE_SANOBJS := $(call SANOBJ,$(FAKE_SRCS))
 TEST_BINS := $(addprefix $(BUILD)/tests/,$(SAN_TESTS) $(NOSAN_TESTS))
@@ -67,7 +67,7 @@ HW_BINS := $(patsubst tests/hw/%.c,$(BUILD)/tests/hw/%,$(HW_SRCS))
 QEMU_WORK ?= $(BUILD)/qemu
 
 .PHONY: all deps deps-build deps-test deps-bench run test test-hw clean format help bench bench-hw
-all: $(BUILD)/pushstep
+all: $(BUILD)/pushstep $(CAMERA_SO)
 
 help:
 	@echo "make deps    install missing Debian packages, build and target tools (as root;"
@@ -108,13 +108,16 @@ $(BUILD)/san/%.o: %.c
 	@mkdir -p $(@D)
 	$(CC) $(CFLAGS) $(SANFLAGS) -c $< -o $@
 
-$(BUILD)/obj/%.o: %.cpp
+$(BUILD)/pic/%.o: %.cpp
 	@mkdir -p $(@D)
-	$(CXX) $(CXXFLAGS) -c $< -o $@
+	$(CXX) $(CXXFLAGS) -fPIC -c $< -o $@
 
-$(BUILD)/san/%.o: %.cpp
+$(BUILD)/pic/%.o: %.c
 	@mkdir -p $(@D)
-	$(CXX) $(CXXFLAGS) $(SANFLAGS) -c $< -o $@
+	$(CC) $(CFLAGS) -fPIC -c $< -o $@
+
+$(CAMERA_SO): $(BUILD)/pic/drivers/ps_camera_libcamera.o $(BUILD)/pic/drivers/ps_camera.o
+	$(CXX) -shared -o $@ $^ $(shell pkg-config --libs libcamera) -pthread
 
 $(BUILD)/tests/test_mailbox_tsan: tests/test_mailbox.c rt/ps_mailbox.c
 	@mkdir -p $(@D)
@@ -135,17 +138,17 @@ $(HW_BINS): $(BUILD)/tests/hw/%: $(BUILD)/obj/tests/hw/%.o $(LIB_OBJS) $(FAKE_OB
 	@mkdir -p $(@D)
 	$(CC) $(CFLAGS) -o $@ $^ $(LDLIBS) -lcmocka
 
-run: deps-build $(BUILD)/pushstep
+run: deps-build $(BUILD)/pushstep $(CAMERA_SO)
 	$(BUILD)/pushstep --board sim $(ARGS)
 
-test: deps-test $(BUILD)/pushstep $(TEST_BINS) $(TSAN_BINS) $(HW_BINS)
+test: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(TEST_BINS) $(TSAN_BINS) $(HW_BINS)
 	@PUSHSTEP_BIN=$(BUILD)/pushstep QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh \
 	    tools/check-layers.sh $(TEST_BINS) $(TSAN_BINS) tools/qemu/test-hw.sh
 
-test-hw: deps-test $(BUILD)/pushstep $(HW_BINS)
+test-hw: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(HW_BINS)
 	@PUSHSTEP_BIN=$(BUILD)/pushstep QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh tools/qemu/test-hw.sh
 
-bench: deps-bench $(BUILD)/pushstep
+bench: deps-bench $(BUILD)/pushstep $(CAMERA_SO)
 	@bash bench/run.sh
 	@BUILD=$(BUILD) bash bench/camera.sh
 	@QEMU_WORK=$(QEMU_WORK) bash bench/hw.sh
@@ -159,4 +162,4 @@ format:
 clean:
 	rm -rf $(BUILD)
 
--include $(shell find $(BUILD)/obj $(BUILD)/san -name '*.d' -type f 2>/dev/null)
+-include $(shell find $(BUILD)/obj $(BUILD)/san $(BUILD)/pic -name '*.d' -type f 2>/dev/null)

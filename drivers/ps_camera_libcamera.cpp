@@ -1,6 +1,7 @@
 // ps_camera_libcamera: libcamera behind a C port (see the header). The only
-// C++ of the project; every entry point catches what libcamera or the
-// standard library may throw.
+// C++ of the project, built as a shared module that ps_camera_libcamera_dl.c
+// loads when a libcamera camera is used; every entry point catches what
+// libcamera or the standard library may throw.
 #include "ps_camera_libcamera.h"
 
 #include <atomic>
@@ -335,7 +336,8 @@ const ps_camera_ops_t LIBCAMERA_OPS = {port_start, port_next, port_release, port
 
 } // namespace
 
-extern "C" int ps_camera_libcamera_create(const ps_camera_cfg_t *cfg, ps_camera_libcamera_t **out)
+extern "C" int ps_camera_libcamera_impl_create(const ps_camera_cfg_t *cfg,
+                                               ps_camera_libcamera_t **out)
 {
     if (cfg == nullptr || out == nullptr || cfg->source != PS_CAMERA_SRC_LIBCAMERA ||
         !to_libcamera(cfg->format).isValid())
@@ -351,17 +353,17 @@ extern "C" int ps_camera_libcamera_create(const ps_camera_cfg_t *cfg, ps_camera_
     return 0;
 }
 
-extern "C" ps_camera_port_t ps_camera_libcamera_port(ps_camera_libcamera_t *c)
+extern "C" ps_camera_port_t ps_camera_libcamera_impl_port(ps_camera_libcamera_t *c)
 {
     return ps_camera_port_t{&LIBCAMERA_OPS, c};
 }
 
-extern "C" unsigned long ps_camera_libcamera_n_bad_frames(const ps_camera_libcamera_t *c)
+extern "C" unsigned long ps_camera_libcamera_impl_n_bad_frames(const ps_camera_libcamera_t *c)
 {
     return c->n_bad.load(std::memory_order_relaxed);
 }
 
-extern "C" void ps_camera_libcamera_destroy(ps_camera_libcamera_t *c)
+extern "C" void ps_camera_libcamera_impl_destroy(ps_camera_libcamera_t *c)
 {
     if (c == nullptr)
         return;

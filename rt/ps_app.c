@@ -387,11 +387,9 @@ static int open_camera(ps_app_t *app, const ps_clock_t *clock, bool keep_snapsho
                      app->board_path, app->board.camera_line);
             return -PS_ERR_CONFIG;
         }
-        rc = ps_camera_libcamera_create(&pc->camera, &app->camera_libcamera);
-        if (rc < 0) {
-            snprintf(err, len, "camera: %s", ps_strerror(rc));
+        rc = ps_camera_libcamera_create(&pc->camera, &app->camera_libcamera, err, len);
+        if (rc < 0)
             return rc;
-        }
         port = ps_camera_libcamera_port(app->camera_libcamera);
         break;
     case PS_CAMERA_SRC_SIM: {

@@ -1,10 +1,10 @@
 #include "ps_camview.h"
 
-#include <cairo.h>
 #include <cjson/cJSON.h>
 #include <errno.h>
 #include <getopt.h>
 #include <math.h>
+#include <png.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -12,10 +12,11 @@
 #include <sys/stat.h>
 #include <time.h>
 
+#include <apriltag/common/image_u8x3.h>
+
 #include "ps_app.h"
 #include "ps_err.h"
 
-#define CAPTION_PX 22
 #define POLL_NS    (50 * PS_NS_PER_MS)
 
 static volatile sig_atomic_t g_stop;
@@ -98,83 +99,114 @@ static int parse(int argc, char **argv, camview_opts_t *o)
 
 /* ---- the picture ---------------------------------------------------------- */
 
-int ps_camview_write_png(const char *path, const uint8_t *grey, uint32_t width, uint32_t height,
-                         const ps_tags_det_t *det, uint32_t n_det, const char *caption,
-                         char *err, size_t err_len)
+/* Labels are drawn with this 5 x 7 font (a column per bit, top row first):
+ * the characters a label needs, no more. A text library (cairo) would bring
+ * X11, fontconfig and freetype into every start of the runtime: some 18 ms
+ * more, measured, for a label in a picture. */
+static const struct {
+    char c;
+    uint8_t rows[7];
+} GLYPHS[] = {
+    {'0', {0x0e, 0x11, 0x13, 0x15, 0x19, 0x11, 0x0e}},
+    {'1', {0x04, 0x0c, 0x04, 0x04, 0x04, 0x04, 0x0e}},
+    {'2', {0x0e, 0x11, 0x01, 0x02, 0x04, 0x08, 0x1f}},
+    {'3', {0x1f, 0x02, 0x04, 0x02, 0x01, 0x11, 0x0e}},
+    {'4', {0x02, 0x06, 0x0a, 0x12, 0x1f, 0x02, 0x02}},
+    {'5', {0x1f, 0x10, 0x1e, 0x01, 0x01, 0x11, 0x0e}},
+    {'6', {0x06, 0x08, 0x10, 0x1e, 0x11, 0x11, 0x0e}},
+    {'7', {0x1f, 0x01, 0x02, 0x04, 0x08, 0x08, 0x08}},
+    {'8', {0x0e, 0x11, 0x11, 0x0e, 0x11, 0x11, 0x0e}},
+    {'9', {0x0e, 0x11, 0x11, 0x0f, 0x01, 0x02, 0x0c}},
+    {'.', {0x00, 0x00, 0x00, 0x00, 0x00, 0x0c, 0x0c}},
+    {'L', {0x10, 0x10, 0x10, 0x10, 0x10, 0x10, 0x1f}},
+    {'R', {0x1e, 0x11, 0x11, 0x1e, 0x14, 0x12, 0x11}},
+    {'m', {0x00, 0x00, 0x1a, 0x15, 0x15, 0x11, 0x11}},
+    {' ', {0, 0, 0, 0, 0, 0, 0}},
+};
+#define GLYPH_SCALE 2
+#define GLYPH_W     (6 * GLYPH_SCALE) /* 5 columns and a gap */
+#define GLYPH_H     (8 * GLYPH_SCALE)
+
+static void put_px(image_u8x3_t *im, int x, int y, const uint8_t rgb[3])
 {
-    cairo_surface_t *s =
-        cairo_image_surface_create(CAIRO_FORMAT_RGB24, (int)width, (int)height + CAPTION_PX);
-    if (cairo_surface_status(s) != CAIRO_STATUS_SUCCESS) {
-        ps_err_format(err, err_len, "%s: %s", path,
-                      cairo_status_to_string(cairo_surface_status(s)));
-        cairo_surface_destroy(s);
+    if (x >= 0 && y >= 0 && x < im->width && y < im->height)
+        memcpy(im->buf + (size_t)y * (size_t)im->stride + 3u * (size_t)x, rgb, 3);
+}
+
+/* text at (x, y) (top left) on a black box */
+static void draw_text(image_u8x3_t *im, int x, int y, const char *text, const uint8_t rgb[3])
+{
+    static const uint8_t BLACK[3] = {0, 0, 0};
+    const int w = (int)strlen(text) * GLYPH_W + GLYPH_SCALE;
+    for (int yy = y - GLYPH_SCALE; yy < y + GLYPH_H; yy++)
+        for (int xx = x - GLYPH_SCALE; xx < x + w; xx++)
+            put_px(im, xx, yy, BLACK);
+    for (const char *p = text; *p != '\0'; p++, x += GLYPH_W) {
+        const uint8_t *rows = NULL;
+        for (size_t g = 0; g < sizeof(GLYPHS) / sizeof(GLYPHS[0]); g++)
+            if (GLYPHS[g].c == *p)
+                rows = GLYPHS[g].rows;
+        for (int r = 0; rows != NULL && r < 7; r++)
+            for (int col = 0; col < 5; col++)
+                if (rows[r] & (0x10 >> col))
+                    for (int k = 0; k < GLYPH_SCALE * GLYPH_SCALE; k++)
+                        put_px(im, x + col * GLYPH_SCALE + k % GLYPH_SCALE,
+                               y + r * GLYPH_SCALE + k / GLYPH_SCALE, rgb);
+    }
+}
+
+int ps_camview_write_png(const char *path, const uint8_t *grey, uint32_t width, uint32_t height,
+                         const ps_tags_det_t *det, uint32_t n_det, char *err, size_t err_len)
+{
+    image_u8x3_t *im = image_u8x3_create(width, height);
+    if (im == NULL) {
+        ps_err_format(err, err_len, "%s: no memory for a %ux%u picture", path, width, height);
         return -ENOMEM;
     }
-    cairo_surface_flush(s);
-    uint8_t *px = cairo_image_surface_get_data(s);
-    const int stride = cairo_image_surface_get_stride(s);
-    for (uint32_t y = 0; y < height; y++) {
-        uint32_t *row = (uint32_t *)(void *)(px + (size_t)(y + CAPTION_PX) * (size_t)stride);
+    for (uint32_t y = 0; y < height; y++)
         for (uint32_t x = 0; x < width; x++)
-            row[x] = 0x010101u * grey[(size_t)y * width + x];
-    }
-    cairo_surface_mark_dirty(s);
-    cairo_t *cr = cairo_create(s);
-    cairo_set_source_rgb(cr, 0.1, 0.1, 0.1);
-    cairo_rectangle(cr, 0, 0, width, CAPTION_PX);
-    cairo_fill(cr);
-    cairo_select_font_face(cr, "monospace", CAIRO_FONT_SLANT_NORMAL, CAIRO_FONT_WEIGHT_NORMAL);
-    cairo_set_font_size(cr, 12);
-    cairo_set_source_rgb(cr, 1, 1, 1);
-    cairo_move_to(cr, 4, 15);
-    cairo_show_text(cr, caption);
-    cairo_translate(cr, 0, CAPTION_PX);
-    cairo_set_line_width(cr, 2);
+            memset(im->buf + (size_t)y * (size_t)im->stride + 3u * x, grey[(size_t)y * width + x],
+                   3);
+    static const uint8_t GREEN[3] = {30, 230, 50}, RED[3] = {255, 50, 50}, YELLOW[3] = {255, 255, 80};
     for (uint32_t i = 0; i < n_det; i++) {
         const ps_tags_det_t *d = &det[i];
-        cairo_set_source_rgb(cr, 0.1, 0.9, 0.2);
-        cairo_move_to(cr, d->corners_px[0][0], d->corners_px[0][1]);
-        for (int k = 1; k < 4; k++)
-            cairo_line_to(cr, d->corners_px[k][0], d->corners_px[k][1]);
-        cairo_close_path(cr);
-        cairo_stroke(cr);
-        cairo_set_source_rgb(cr, 1.0, 0.2, 0.2);
-        cairo_move_to(cr, d->centre_px[0] - 4, d->centre_px[1]);
-        cairo_line_to(cr, d->centre_px[0] + 4, d->centre_px[1]);
-        cairo_move_to(cr, d->centre_px[0], d->centre_px[1] - 4);
-        cairo_line_to(cr, d->centre_px[0], d->centre_px[1] + 4);
-        cairo_stroke(cr);
+        for (int k = 0; k < 4; k++)
+            image_u8x3_draw_line(im, d->corners_px[k][0], d->corners_px[k][1],
+                                 d->corners_px[(k + 1) % 4][0], d->corners_px[(k + 1) % 4][1],
+                                 (uint8_t *)(uintptr_t)GREEN, 2);
+        image_u8x3_draw_line(im, d->centre_px[0] - 4, d->centre_px[1], d->centre_px[0] + 4,
+                             d->centre_px[1], (uint8_t *)(uintptr_t)RED, 1);
+        image_u8x3_draw_line(im, d->centre_px[0], d->centre_px[1] - 4, d->centre_px[0],
+                             d->centre_px[1] + 4, (uint8_t *)(uintptr_t)RED, 1);
         const double dist = sqrt((double)d->pos_cam_m[0] * d->pos_cam_m[0] +
                                  (double)d->pos_cam_m[1] * d->pos_cam_m[1] +
                                  (double)d->pos_cam_m[2] * d->pos_cam_m[2]);
-        char label[64];
-        snprintf(label, sizeof(label), "id %d n%d %s %.2fm", d->id, d->id / 2,
-                 d->id % 2 ? "R" : "L", dist);
-        double top = d->corners_px[0][1], bottom = top, left = d->corners_px[0][0];
+        char label[32]; /* "<id><L|R> <distance>m": tag 7, right shoulder of neighbour 3 */
+        snprintf(label, sizeof(label), "%d%s %.2fm", d->id, d->id % 2 ? "R" : "L", dist);
+        float top = d->corners_px[0][1], bottom = top, left = d->corners_px[0][0];
         for (int k = 1; k < 4; k++) {
-            top = fmin(top, d->corners_px[k][1]);
-            bottom = fmax(bottom, d->corners_px[k][1]);
-            left = fmin(left, d->corners_px[k][0]);
+            top = fminf(top, d->corners_px[k][1]);
+            bottom = fmaxf(bottom, d->corners_px[k][1]);
+            left = fminf(left, d->corners_px[k][0]);
         }
-        cairo_text_extents_t te;
-        cairo_text_extents(cr, label, &te);
         /* left shoulders' labels above the tag, right shoulders' below: the
          * two tags of a person stand side by side */
-        const double tx = fmax(0, fmin(left, width - te.x_advance - 2));
-        const double ty = d->id % 2 == 0 ? fmax(te.height + 2, top - 4)
-                                         : fmin(height - 3.0, bottom + te.height + 4);
-        cairo_set_source_rgb(cr, 0, 0, 0);
-        cairo_rectangle(cr, tx - 1, ty - te.height - 2, te.x_advance + 2, te.height + 4);
-        cairo_fill(cr);
-        cairo_set_source_rgb(cr, 1, 1, 0.3);
-        cairo_move_to(cr, tx, ty);
-        cairo_show_text(cr, label);
+        const int tw = (int)strlen(label) * GLYPH_W;
+        const int tx = (int)fmaxf(2, fminf(left, (float)width - (float)tw - 2));
+        const int ty = d->id % 2 == 0 ? (int)fmaxf(2, top - GLYPH_H - 3)
+                                      : (int)fminf((float)height - GLYPH_H, bottom + 4);
+        draw_text(im, tx, ty, label, YELLOW);
     }
-    cairo_destroy(cr);
-    const cairo_status_t st = cairo_surface_write_to_png(s, path);
-    cairo_surface_destroy(s);
-    if (st != CAIRO_STATUS_SUCCESS) {
-        ps_err_format(err, err_len, "%s: %s", path, cairo_status_to_string(st));
+    png_image png;
+    memset(&png, 0, sizeof(png));
+    png.version = PNG_IMAGE_VERSION;
+    png.width = width;
+    png.height = height;
+    png.format = PNG_FORMAT_RGB;
+    const int is_ok = png_image_write_to_file(&png, path, 0, im->buf, im->stride, NULL);
+    image_u8x3_destroy(im);
+    if (!is_ok) {
+        ps_err_format(err, err_len, "%s: %s", path, png.message);
         return -EIO;
     }
     return 0;
@@ -314,19 +346,14 @@ static int report(ps_app_t *app, const camview_opts_t *o)
         }
         if (app->camera_sim != NULL)
             compare_truth(app, det, (uint32_t)n, seq, json);
-        char path[PATH_MAX], caption[160], err[PS_ERR_MSG_LEN];
+        char path[PATH_MAX], err[PS_ERR_MSG_LEN];
         snprintf(path, sizeof(path), "%s/camera.png", o->out_dir);
-        snprintf(caption, sizeof(caption),
-                 "frame %llu  %ux%u %s  %.1f frames/s  %d tags  exposure->mailbox p50 %.1f ms",
-                 (unsigned long long)seq, cc->width, cc->height,
-                 ps_camera_source_name(cc->source), fps, n,
-                 ms(ps_perf_quantile_ns(&st.latency, 0.5)));
-        rc = ps_camview_write_png(path, grey, cc->width, cc->height, det, (uint32_t)n, caption,
-                                  err, sizeof(err));
+        rc = ps_camview_write_png(path, grey, cc->width, cc->height, det, (uint32_t)n, err,
+                                  sizeof(err));
         if (rc < 0)
             fprintf(stderr, "pushstep camera: %s\n", err);
         else
-            printf("wrote %s (%d tags drawn)\n", path, n);
+            printf("wrote %s (frame %llu, %d tags drawn)\n", path, (unsigned long long)seq, n);
     } else {
         fprintf(stderr, "pushstep camera: no frame came from the camera\n");
         rc = -ENODATA;

@@ -6,7 +6,7 @@
  * loop, buses or GPIO. Then it prints frames and detections per second, the
  * latency from exposure to mailbox and the detection time (percentiles), and
  * writes camera.png (the last frame as the detector saw it, grey, each tag's
- * outline, id, neighbour and side, and its distance drawn on it; cairo) and
+ * outline, centre, id, side and distance drawn on it) and
  * camera.json (the same figures, and each detection). On the simulated camera
  * it also compares the last frame's detections with the plant's truth.
  *
@@ -21,12 +21,12 @@
 
 #include "../drivers/ps_tags.h"
 
-/** Draw the detections on a grey image and write it as an RGB PNG with a
- *  caption line at the top.  @return 0 | -EIO (cairo could not write; err
- *  says why) | -ENOMEM  @rt NON-RT */
+/** Draw the detections on a grey image (outline, centre, and "<id><L|R>
+ *  <distance>m") and write it as an RGB PNG (libapriltag-utils' line drawing,
+ *  libpng).  @return 0 | -EIO (libpng could not write; err says why) |
+ *  -ENOMEM  @rt NON-RT */
 int ps_camview_write_png(const char *path, const uint8_t *grey, uint32_t width, uint32_t height,
-                         const ps_tags_det_t *det, uint32_t n_det, const char *caption,
-                         char *err, size_t err_len);
+                         const ps_tags_det_t *det, uint32_t n_det, char *err, size_t err_len);
 
 /** Parse argv (argv[0] = "camera"), run, print.
  *  @return process exit status: 0 ok, 1 runtime failure, 2 usage/config  @rt INIT */

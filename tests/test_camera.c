@@ -23,6 +23,7 @@
 #include <apriltag/common/image_u8.h>
 
 #include "../drivers/ps_camera_files.h"
+#include "../drivers/ps_camera_libcamera.h"
 #include "../drivers/ps_tags.h"
 #include "../rt/ps_err.h"
 #include "fakes/ps_camera_fake.h"
@@ -282,12 +283,32 @@ static void test_ps_camera_files_errors_name_the_problem(void **state)
     port.ops->stop(port.ctx);
 }
 
+/* The libcamera module is loaded on first use; one that is not there is a
+ * clear error, not a crash (this process never loads it). */
+static void test_ps_camera_libcamera_module_missing_enoent_says_where(void **state)
+{
+    (void)state;
+    assert_int_equal(setenv("PUSHSTEP_LIBCAMERA_SO", "/nonexistent/libpushstep-libcamera.so", 1),
+                     0);
+    const ps_camera_cfg_t cfg = {.source = PS_CAMERA_SRC_LIBCAMERA, .width = W, .height = H,
+                                 .format = PS_PIX_R8, .fps = 10};
+    ps_camera_libcamera_t *c = NULL;
+    char err[PS_ERR_MSG_LEN] = "";
+    assert_int_equal(ps_camera_libcamera_create(&cfg, &c, err, sizeof(err)), -ENOENT);
+    assert_null(c);
+    assert_non_null(strstr(err, "/nonexistent/libpushstep-libcamera.so"));
+    assert_int_equal(ps_camera_libcamera_create(&cfg, &c, err, sizeof(err)), -ENOENT); /* again */
+    assert_int_equal(ps_camera_libcamera_create(NULL, &c, err, sizeof(err)), -EINVAL);
+    ps_camera_libcamera_destroy(NULL);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_ps_camera_format_names_round_trip),
         cmocka_unit_test(test_ps_camera_to_grey_each_format_luma),
         cmocka_unit_test(test_ps_camera_to_grey_short_buffers_einval),
+        cmocka_unit_test(test_ps_camera_libcamera_module_missing_enoent_says_where),
         cmocka_unit_test_setup_teardown(test_ps_camera_files_stored_tags_detected_in_name_order,
                                         setup_folder, teardown_folder),
         cmocka_unit_test_setup_teardown(test_ps_camera_files_looping_starts_over, setup_folder,

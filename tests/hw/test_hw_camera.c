@@ -58,7 +58,7 @@ static void test_hw_camera_vimc_frames_in_order_monotonic_buffers_reused(void **
     (void)state;
     const ps_camera_cfg_t cfg = vimc_cfg();
     ps_camera_libcamera_t *c = NULL;
-    assert_int_equal(ps_camera_libcamera_create(&cfg, &c), 0);
+    assert_int_equal(ps_camera_libcamera_create(&cfg, &c, NULL, 0), 0);
     ps_camera_port_t port = ps_camera_libcamera_port(c);
     char err[PS_ERR_MSG_LEN] = "";
     const int rc = port.ops->start(port.ctx, err, sizeof(err));
@@ -113,7 +113,7 @@ static void test_hw_camera_vimc_through_perception_into_mailbox(void **state)
         .max_age_s = 2.0f,
     };
     ps_camera_libcamera_t *c = NULL;
-    assert_int_equal(ps_camera_libcamera_create(&pc.camera, &c), 0);
+    assert_int_equal(ps_camera_libcamera_create(&pc.camera, &c, NULL, 0), 0);
     static ps_perception_t p;
     char err[PS_ERR_MSG_LEN] = "";
     assert_int_equal(ps_perception_init(&p, &pc, ps_camera_libcamera_port(c), false, err,
@@ -193,7 +193,7 @@ static void test_hw_camera_missing_camera_enodev_lists_cameras(void **state)
     ps_camera_cfg_t cfg = vimc_cfg();
     snprintf(cfg.id, sizeof(cfg.id), "imx999");
     ps_camera_libcamera_t *c = NULL;
-    assert_int_equal(ps_camera_libcamera_create(&cfg, &c), 0);
+    assert_int_equal(ps_camera_libcamera_create(&cfg, &c, NULL, 0), 0);
     ps_camera_port_t port = ps_camera_libcamera_port(c);
     char err[PS_ERR_MSG_LEN] = "";
     assert_int_equal(port.ops->start(port.ctx, err, sizeof(err)), -ENODEV);
@@ -209,7 +209,7 @@ static void test_hw_camera_format_not_offered_einval_says_offer(void **state)
     ps_camera_cfg_t cfg = vimc_cfg();
     cfg.format = PS_PIX_R8; /* vimc's capture gives BGR888 only */
     ps_camera_libcamera_t *c = NULL;
-    assert_int_equal(ps_camera_libcamera_create(&cfg, &c), 0);
+    assert_int_equal(ps_camera_libcamera_create(&cfg, &c, NULL, 0), 0);
     ps_camera_port_t port = ps_camera_libcamera_port(c);
     char err[PS_ERR_MSG_LEN] = "";
     assert_int_equal(port.ops->start(port.ctx, err, sizeof(err)), -EINVAL);
