@@ -2,6 +2,18 @@
 .DEFAULT_GOAL := all
 SHELL := /bin/bash
 
+# ARCH=aarch64 (or arm64): cross-build with Debian's aarch64 toolchain and the
+# arm64 -dev packages (multiarch) into build-aarch64/; `make test ARCH=aarch64`
+# runs the unit tests under qemu-user (tools/test-aarch64.sh). Any other ARCH,
+# or none: a native build.
+ARCH    ?=
+ifneq ($(filter aarch64 arm64,$(ARCH)),)
+IS_CROSS := 1
+BUILD   ?= build-aarch64
+CC      := aarch64-linux-gnu-gcc
+CXX     := aarch64-linux-gnu-g++
+DEB_ARCH := arm64
+endif
 BUILD   ?= build
 ARGS    ?=
 CC      ?= cc
@@ -11,7 +23,8 @@ CXX     ?= c++
 # and run the system; TOOL_PKGS are for working with targets (cyclictest,
 # can-utils). `make deps` installs both.
 BUILD_PKGS := gcc libc6-dev make pkg-config libmujoco-dev libcyaml-dev libyaml-dev \
-              libcmocka-dev libcjson-dev libmnl-dev libgpiod-dev
+              libcmocka-dev libcjson-dev libmnl-dev libgpiod-dev \
+              libzstd-dev liblz4-dev zlib1g-dev
 # Camera perception: libcamera (C++: g++), AprilTag detection, PNG images in
 # and out, the simulated camera's offscreen rendering (EGL on Mesa's software
 # rasteriser).
@@ -19,11 +32,28 @@ BUILD_PKGS += g++ libcamera-dev libapriltag-dev libpng-dev libegl-dev libegl-mes
               libgl1-mesa-dri
 TOOL_PKGS  := rt-tests can-utils
 # What `make test` needs beyond building: can-utils' log2long reads the
-# candump-format lines the runtime writes (tests/test_candump.c); libcamera's
-# vimc IPA module and udevd for the VM's emulated camera (test_hw_camera).
-TEST_PKGS  := can-utils libcamera-ipa udev
+# candump-format lines the runtime writes (tests/test_candump.c); systemd's
+# systemd-analyze reads the shipped unit (tools/test-install.sh); gnuplot
+# draws `pushstep log --plot` (tests/test_e2e_recorder.c); libcamera's vimc
+# IPA module and udevd for the VM's emulated camera (test_hw_camera); and the
+# aarch64 cross tools (AARCH64_PKGS below) for the aarch64 part of the suite.
+TEST_PKGS  := can-utils systemd gnuplot-nox libcamera-ipa udev
 # Extra packages `make bench` needs: load generator, plots, the analysis script.
 BENCH_PKGS := stress-ng gnuplot-nox python3
+# ARCH=aarch64: the cross compiler, qemu-user to run its tests, and the arm64
+# builds of the libraries the binaries link (multiarch; tools/deps.sh adds
+# the arm64 architecture to dpkg when a package names it).
+CROSS_LIBS := libc6-dev libmujoco-dev libcyaml-dev libyaml-dev libcmocka-dev libcjson-dev \
+              libmnl-dev libgpiod-dev libzstd-dev liblz4-dev zlib1g-dev \
+              libapriltag-dev libpng-dev libegl-dev libcamera-dev
+AARCH64_PKGS := gcc-aarch64-linux-gnu g++-aarch64-linux-gnu qemu-user \
+                $(addsuffix :arm64,$(CROSS_LIBS))
+ifdef IS_CROSS
+BUILD_PKGS := make pkg-config $(AARCH64_PKGS)
+TEST_PKGS  :=
+else
+TEST_PKGS  += $(AARCH64_PKGS)
+endif
 
 WARN    := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototypes
 CFLAGS  ?= -O2 -g
@@ -32,13 +62,18 @@ CFLAGS  += -std=c11 -D_GNU_SOURCE -pthread $(WARN) -MMD -MP $(IMAGE_CFLAGS)
 # installed the packages on a fresh machine.
 IMAGE_CFLAGS = $(shell pkg-config --cflags libpng)
 CAMERA_LIBS  = $(shell pkg-config --libs libpng) -lapriltag -lapriltag-utils -lEGL
-LDLIBS  = -lmujoco -lcyaml -lyaml -lcjson -lmnl -lgpiod $(CAMERA_LIBS) -lm -pthread
+LDLIBS  = -lmujoco -lcyaml -lyaml -lcjson -lmnl -lgpiod -lzstd -llz4 -lz $(CAMERA_LIBS) -lm -pthread
 # C++ only for libcamera, in one file behind a C header, built as a module the
 # runtime loads when a board has a libcamera camera (drivers/ps_camera_libcamera.h).
 CXXFLAGS ?= -O2 -g
 CXXFLAGS += -std=c++17 -D_GNU_SOURCE -pthread -Wall -Wextra -Werror -Wshadow -MMD -MP \
             $(shell pkg-config --cflags libcamera)
 SANFLAGS := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+SAN_DIR  := san
+ifdef IS_CROSS
+SANFLAGS := # ASan's shadow memory does not map under qemu-user: plain builds there
+SAN_DIR  := obj
+endif
 
 LIB_SRCS  := $(filter-out rt/main.c,$(wildcard rt/*.c drivers/*.c policy/*.c sim/*.c))
 CAMERA_SO := $(BUILD)/libpushstep-libcamera.so
@@ -51,7 +86,7 @@ NOSAN_TESTS := $(basename $(notdir $(wildcard tests/test_e2e*.c tests/test_guard
 SAN_TESTS   := $(filter-out $(NOSAN_TESTS),$(basename $(notdir $(TEST_SRCS))))
 
 OBJ      = $(patsubst %.c,$(BUILD)/obj/%.o,$(1))
-SANOBJ   = $(patsubst %.c,$(BUILD)/san/%.o,$(1))
+SANOBJ   = $(patsubst %.c,$(BUILD)/$(SAN_DIR)/%.o,$(1))
 LIB_OBJS    := $(call OBJ,$(LIB_SRCS))
 LIB_SANOBJS := $(call SANOBJ,$(LIB_SRCS))
 FAKE_OBJS    := $(call OBJ,$(FAKE_SRCS))
@@ -66,7 +101,8 @@ HW_SRCS := $(wildcard tests/hw/test_hw_*.c)
 HW_BINS := $(patsubst tests/hw/%.c,$(BUILD)/tests/hw/%,$(HW_SRCS))
 QEMU_WORK ?= $(BUILD)/qemu
 
-.PHONY: all deps deps-build deps-test deps-bench run test test-hw clean format help bench bench-hw
+.PHONY: all deps deps-build deps-test deps-npm deps-bench run test test-hw clean format help \
+        bench bench-hw install deb test-deb aarch64-test-bins
 all: $(BUILD)/pushstep $(CAMERA_SO)
 
 help:
@@ -85,6 +121,12 @@ help:
 	@echo "             (see docs/latency.md, docs/perception.md)"
 	@echo "make bench-hw the real drivers' figures in the test VM (e-stop reaction,"
 	@echo "             loop reaction, frames per bus): bench/results/hw.json"
+	@echo "make install PREFIX=/usr/local [DESTDIR=]: the binary, its data (boards, robots,"
+	@echo "             scenarios, models) in PREFIX/share/pushstep, the systemd unit"
+	@echo "             pushstep@.service and the udev rules (docs/deploy.md)"
+	@echo "make deb [ARCH=aarch64]: the Debian package (dpkg-buildpackage, packaging in"
+	@echo "             tools/debian/) in $(BUILD)/deb/; make test-deb also checks its"
+	@echo "             contents and runs the packaged binary"
 	@echo "make format  clang-format every C source in place"
 	@echo "make clean   remove $(BUILD)/"
 
@@ -97,6 +139,12 @@ deps-build:
 deps-test: deps-build
 	@bash tools/deps.sh $(TEST_PKGS)
 
+# The recorder tests read the MCAP files with Foxglove's own readers (npm
+# packages pinned in tests/mcap/package.json, installed into $(BUILD)/npm;
+# Debian's nodejs and npm when there is no node).
+deps-npm:
+	@bash tools/npm-deps.sh $(BUILD)/npm
+
 deps-bench: deps
 	@bash tools/deps.sh $(BENCH_PKGS)
 
@@ -104,9 +152,11 @@ $(BUILD)/obj/%.o: %.c
 	@mkdir -p $(@D)
 	$(CC) $(CFLAGS) -c $< -o $@
 
+ifndef IS_CROSS
 $(BUILD)/san/%.o: %.c
 	@mkdir -p $(@D)
 	$(CC) $(CFLAGS) $(SANFLAGS) -c $< -o $@
+endif
 
 $(BUILD)/pic/%.o: %.cpp
 	@mkdir -p $(@D)
@@ -117,16 +167,16 @@ $(BUILD)/pic/%.o: %.c
 	$(CC) $(CFLAGS) -fPIC -c $< -o $@
 
 $(CAMERA_SO): $(BUILD)/pic/drivers/ps_camera_libcamera.o $(BUILD)/pic/drivers/ps_camera.o
-	$(CXX) -shared -o $@ $^ $(shell pkg-config --libs libcamera) -pthread
+	$(CXX) $(LDFLAGS) -shared -o $@ $^ $(shell pkg-config --libs libcamera) -pthread
 
 $(BUILD)/tests/test_mailbox_tsan: tests/test_mailbox.c rt/ps_mailbox.c
 	@mkdir -p $(@D)
 	$(CC) $(CFLAGS) -fsanitize=thread -o $@ $^ -lcmocka
 
 $(BUILD)/pushstep: $(call OBJ,$(MAIN_SRC)) $(LIB_OBJS)
-	$(CC) $(CFLAGS) -o $@ $^ $(LDLIBS)
+	$(CC) $(CFLAGS) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 
-$(addprefix $(BUILD)/tests/,$(SAN_TESTS)): $(BUILD)/tests/%: $(BUILD)/san/tests/%.o $(LIB_SANOBJS) $(FAKE_SANOBJS)
+$(addprefix $(BUILD)/tests/,$(SAN_TESTS)): $(BUILD)/tests/%: $(BUILD)/$(SAN_DIR)/tests/%.o $(LIB_SANOBJS) $(FAKE_SANOBJS)
 	@mkdir -p $(@D)
 	$(CC) $(CFLAGS) $(SANFLAGS) -o $@ $^ $(LDLIBS) -lcmocka
 
@@ -141,9 +191,32 @@ $(HW_BINS): $(BUILD)/tests/hw/%: $(BUILD)/obj/tests/hw/%.o $(LIB_OBJS) $(FAKE_OB
 run: deps-build $(BUILD)/pushstep $(CAMERA_SO)
 	$(BUILD)/pushstep --board sim $(ARGS)
 
-test: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(TEST_BINS) $(TSAN_BINS) $(HW_BINS)
-	@PUSHSTEP_BIN=$(BUILD)/pushstep QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh \
-	    tools/check-layers.sh $(TEST_BINS) $(TSAN_BINS) tools/qemu/test-hw.sh
+ifdef IS_CROSS
+test: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(TEST_BINS)
+	@PUSHSTEP_BIN=$(BUILD)/pushstep bash tools/test-aarch64.sh $(TEST_BINS)
+
+aarch64-test-bins: $(BUILD)/pushstep $(CAMERA_SO) $(TEST_BINS)
+else
+# The native suite, then the quick part of the aarch64 one under qemu-user
+# (tools/test-aarch64.sh) when the cross tools are installed (deps-test
+# installs them where apt can), then the VM tests.
+test: deps-test deps-npm $(BUILD)/pushstep $(CAMERA_SO) $(TEST_BINS) $(TSAN_BINS) $(HW_BINS) \
+      aarch64-test-bins
+	@PUSHSTEP_BIN=$(BUILD)/pushstep PUSHSTEP_NPM=$(BUILD)/npm QEMU_WORK=$(QEMU_WORK) \
+	    HW_BINS="$(HW_BINS)" AARCH64_BUILD=$(AARCH64_BUILD) bash tools/run-tests.sh \
+	    tools/check-layers.sh $(TEST_BINS) $(TSAN_BINS) tools/test-install.sh tools/test-aarch64.sh \
+	    tools/qemu/test-hw.sh
+
+AARCH64_BUILD := build-aarch64
+aarch64-test-bins:
+	@if command -v aarch64-linux-gnu-gcc >/dev/null && command -v qemu-aarch64 >/dev/null && \
+	    [ -e /usr/lib/aarch64-linux-gnu/libmujoco.so ] && [ -e /usr/lib/aarch64-linux-gnu/libcmocka.so ] && \
+	    [ -e /usr/lib/aarch64-linux-gnu/libzstd.so ] && [ -e /usr/lib/aarch64-linux-gnu/liblz4.so ] && \
+	    [ -e /usr/lib/aarch64-linux-gnu/libapriltag.so ] && [ -e /usr/lib/aarch64-linux-gnu/libpng.so ] && \
+	    [ -e /usr/lib/aarch64-linux-gnu/libEGL.so ] && [ -e /usr/lib/aarch64-linux-gnu/libcamera.so ]; then \
+	    $(MAKE) --no-print-directory ARCH=aarch64 BUILD=$(AARCH64_BUILD) aarch64-test-bins; \
+	else echo "aarch64: cross tools or arm64 libraries missing: its tests are skipped"; fi
+endif
 
 test-hw: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(HW_BINS)
 	@PUSHSTEP_BIN=$(BUILD)/pushstep QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh tools/qemu/test-hw.sh
@@ -155,6 +228,43 @@ bench: deps-bench $(BUILD)/pushstep $(CAMERA_SO)
 
 bench-hw: deps-test $(BUILD)/pushstep
 	@QEMU_WORK=$(QEMU_WORK) bash bench/hw.sh
+
+# Installation (docs/deploy.md). The data the binary looks up by name go to
+# PREFIX/share/pushstep, where an installed PREFIX/bin/pushstep finds them.
+PREFIX   ?= /usr/local
+DESTDIR  ?=
+BINDIR   := $(PREFIX)/bin
+DATADIR  := $(PREFIX)/share/pushstep
+DOCDIR   := $(PREFIX)/share/doc/pushstep
+UNITDIR  ?= $(PREFIX)/lib/systemd/system
+UDEVDIR  ?= $(PREFIX)/lib/udev/rules.d
+DATA_DIRS := boards robots scenarios sim/models
+
+install: $(BUILD)/pushstep $(CAMERA_SO)
+	install -D -m 0755 $(BUILD)/pushstep $(DESTDIR)$(BINDIR)/pushstep
+	install -D -m 0644 $(CAMERA_SO) $(DESTDIR)$(PREFIX)/lib/pushstep/libpushstep-libcamera.so
+	for d in $(DATA_DIRS); do install -d $(DESTDIR)$(DATADIR)/$$d && \
+	    cp -R --no-preserve=mode,ownership $$d/. $(DESTDIR)$(DATADIR)/$$d/ || exit 1; done
+	install -D -m 0755 tools/plot-profile.sh $(DESTDIR)$(DATADIR)/tools/plot-profile.sh
+	install -d $(DESTDIR)$(UNITDIR) $(DESTDIR)$(UDEVDIR) $(DESTDIR)$(DOCDIR)
+	sed -e 's|@BINDIR@|$(BINDIR)|g' -e 's|@DOCDIR@|$(DOCDIR)|g' tools/systemd/pushstep@.service \
+	    > $(DESTDIR)$(UNITDIR)/pushstep@.service
+	install -m 0644 tools/udev/60-pushstep.rules $(DESTDIR)$(UDEVDIR)/60-pushstep.rules
+	install -m 0644 README.md docs/deploy.md docs/config.md $(DESTDIR)$(DOCDIR)/
+
+# The Debian package (tools/make-deb.sh). DEB_PKGS: what building it needs.
+DEB_PKGS := build-essential dpkg-dev debhelper fakeroot
+ifdef IS_CROSS
+DEB_PKGS += crossbuild-essential-arm64
+endif
+
+deb: deps-build
+	@bash tools/deps.sh $(DEB_PKGS)
+	@bash tools/make-deb.sh build $(DEB_ARCH)
+
+test-deb: deb
+	@bash tools/deps.sh lintian
+	@PUSHSTEP_DEB_DIR=build/deb PUSHSTEP_DEB_ARCH=$(DEB_ARCH) bash tools/run-tests.sh tools/test-deb.sh
 
 format:
 	clang-format -i $$(git ls-files '*.c' '*.h')

@@ -8,6 +8,9 @@
 #   tick          read-to-write compute time, plain and policy ticks, per period
 #   bus           CAN bus load per bus, planned and observed, beside capacity
 #   alloc         mallocs / page faults on the loop thread after init
+#   recorder      the flight recorder's cost: tick time with and without
+#                 recording (alternated blocks), bytes/s, records lost
+#                 (bench/recorder.sh)
 #
 # Outputs bench/results/{latency,latency_stress_cpu,tick,bus,alloc}.json,
 # summary.md and *.png (ignored by git); raw block outputs stay in
@@ -276,6 +279,11 @@ with open(sys.argv[3], "a") as f:
     f.write("| loop time / wall time | %.2f s / %.2f s | | |\n\n" % (d["loop_s"], d["wall_s"]))
     f.write("    %s\n" % sys.argv[4])
 EOF
+
+# ---- flight recorder -------------------------------------------------------
+# Tick time with and without recording in this run, bytes per second,
+# records lost (bench/recorder.sh: recorder.json and its summary section).
+BUILD=$BUILD bash bench/recorder.sh
 
 if command -v gnuplot >/dev/null; then
     for sec in latency stress_cpu; do

@@ -266,6 +266,69 @@ static int check_inputs(const ps_canbus_cfg_t *c, const ps_canbus_source_t *src,
     return 0;
 }
 
+/* Facts per controller. MCP2515: two receive buffers (datasheet DS20001801,
+ * "two receive buffers with prioritized message storage"). MCP251xFD: RX
+ * FIFOs in its 2 KiB RAM. Tegra mttcan and TI MCAN: Bosch M_CAN cores whose
+ * message RAM holds RX FIFOs of tens of elements (TI's J721E device tree
+ * gives each MCAN 64-element RX FIFOs). gs_usb: the adapter's firmware
+ * queues frames for the USB transfer. */
+static const ps_canbus_ctrl_info_t CTRL_INFO[PS_CANBUS_CTRL_COUNT] = {
+    [PS_CANBUS_CTRL_ANY] = {"any", NULL, true, 0u},
+    [PS_CANBUS_CTRL_MCP2515] = {"mcp2515", "mcp251x", false, 2u},
+    [PS_CANBUS_CTRL_MCP251XFD] = {"mcp251xfd", "mcp251xfd", true, 0u},
+    [PS_CANBUS_CTRL_MTTCAN] = {"mttcan", "mttcan", true, 0u},
+    [PS_CANBUS_CTRL_M_CAN] = {"m_can", "m_can_platform", true, 0u},
+    [PS_CANBUS_CTRL_GS_USB] = {"gs_usb", "gs_usb", false, 0u},
+    [PS_CANBUS_CTRL_VIRTUAL] = {"virtual", NULL, true, 0u},
+};
+
+const ps_canbus_ctrl_info_t *ps_canbus_ctrl_info(ps_canbus_ctrl_t c)
+{
+    return (unsigned)c < (unsigned)PS_CANBUS_CTRL_COUNT ? &CTRL_INFO[c]
+                                                        : &CTRL_INFO[PS_CANBUS_CTRL_ANY];
+}
+
+int ps_canbus_rx_risk(const ps_canbus_bus_cfg_t *bus, const ps_canbus_plan_t *plan,
+                      uint32_t bus_idx, char *note, size_t note_len)
+{
+    if (bus == NULL || plan == NULL || bus_idx >= plan->n_buses || bus_idx >= PS_MAX_BUSES)
+        return 0;
+    const ps_canbus_ctrl_info_t *ci = ps_canbus_ctrl_info(bus->controller);
+    const uint32_t n = plan->rx_frames_max[bus_idx];
+    if (ci->rx_buffer_frames == 0u || n <= ci->rx_buffer_frames)
+        return 0;
+    ps_err_format(note, note_len,
+                  "%s (%s): up to %u frames arrive in one tick, the controller holds %u: the "
+                  "host must read each within %.0f us or lose the next",
+                  bus->ifname, ci->name, n, ci->rx_buffer_frames,
+                  (double)plan->rx_frame_ns_min[bus_idx] * 1e-3);
+    return 1;
+}
+
+/* The received frames of a source when it is due, and the shortest of them
+ * on the wire (no stuff bits), in ns; 0 frames: INT64_MAX. */
+static uint32_t source_rx(const ps_canbus_source_t *s, const ps_canbus_bus_cfg_t *bus,
+                          int64_t *out_ns_min)
+{
+    uint32_t n = 0u;
+    int64_t ns_min = INT64_MAX;
+    for (uint32_t f = 0; f < s->n_frames; f++) {
+        const ps_canbus_frame_shape_t *fs = &s->frames[f];
+        if (!fs->is_rx)
+            continue;
+        n++;
+        /* The shortest such frame: no stuff bits; an FD frame is timed at its
+         * worst case, an upper bound that only an FD bus uses. */
+        const int64_t ns =
+            fs->is_fd ? ps_canbus_frame_ns_max(fs, bus)
+                      : ps_canbus_bits_to_ns(ps_canbus_frame_bits_min(fs->len, fs->is_ext),
+                                             bus->bitrate);
+        ns_min = ns < ns_min ? ns : ns_min;
+    }
+    *out_ns_min = ns_min;
+    return n;
+}
+
 static uint32_t source_bits(const ps_canbus_source_t *s, const ps_canbus_bus_cfg_t *bus)
 {
     uint32_t bits = 0u;
@@ -325,6 +388,25 @@ int ps_canbus_plan(const ps_canbus_cfg_t *c, const ps_canbus_source_t *sources, 
         uint32_t peak = 0u;
         for (uint32_t t = 0; t < hyper; t++)
             peak = tick_bits[t] > peak ? tick_bits[t] : peak;
+
+        /* Received frames per tick over the hyperperiod, with the phases chosen. */
+        uint32_t rx_max = 0u;
+        int64_t rx_ns_min = INT64_MAX;
+        for (uint32_t t = 0; t < hyper; t++) {
+            uint32_t rx = 0u;
+            for (uint32_t k = 0; k < n; k++) {
+                const ps_canbus_source_t *s = &sources[src[k].idx];
+                int64_t ns = INT64_MAX;
+                const uint32_t r = source_rx(s, bc, &ns);
+                if (r > 0u && ps_canbus_is_due(t, s->rate_div, plan.phase[src[k].idx])) {
+                    rx += r;
+                    rx_ns_min = ns < rx_ns_min ? ns : rx_ns_min;
+                }
+            }
+            rx_max = rx > rx_max ? rx : rx_max;
+        }
+        plan.rx_frames_max[bus] = rx_max;
+        plan.rx_frame_ns_min[bus] = rx_max > 0u ? rx_ns_min : 0;
 
         plan.n_sources[bus] = n;
         plan.tick_bits_max[bus] = peak;

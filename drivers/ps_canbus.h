@@ -43,12 +43,37 @@
  *  Xsens IMU sample is five). */
 #define PS_CANBUS_MAX_SOURCE_FRAMES 5u
 
+/** The CAN controller behind a bus (board file, `buses[i].controller`):
+ *  what it can do and how much it buffers. */
+typedef enum {
+    PS_CANBUS_CTRL_ANY = 0,   /**< not stated: nothing checked against it */
+    PS_CANBUS_CTRL_MCP2515,   /**< Microchip MCP2515 on SPI: classical, 2 receive buffers */
+    PS_CANBUS_CTRL_MCP251XFD, /**< Microchip MCP2517FD/MCP2518FD on SPI: FD, RX FIFO in its RAM */
+    PS_CANBUS_CTRL_MTTCAN,    /**< NVIDIA Tegra's M_CAN (driver mttcan): FD */
+    PS_CANBUS_CTRL_M_CAN,     /**< Bosch M_CAN in a SoC (TI MCAN, driver m_can_platform): FD */
+    PS_CANBUS_CTRL_GS_USB,    /**< USB adapter with gs_usb firmware (candleLight): classical */
+    PS_CANBUS_CTRL_VIRTUAL,   /**< vcan / vxcan: no controller, no bit timing */
+    PS_CANBUS_CTRL_COUNT
+} ps_canbus_ctrl_t;
+
+/** What is known of a controller. */
+typedef struct {
+    const char *name;          /**< as written in the board file */
+    const char *driver;        /**< the kernel driver that binds it (sysfs
+                                    device/driver), NULL for virtual or any */
+    bool is_fd_capable;        /**< can run a CAN FD bus */
+    uint32_t rx_buffer_frames; /**< received frames it holds until the host reads
+                                    them; 0: a FIFO deep enough not to matter at
+                                    one tick's traffic (or unknown, for ANY) */
+} ps_canbus_ctrl_info_t;
+
 /** One bus of a board. */
 typedef struct {
-    char ifname[PS_NAME_LEN]; /**< "can0"; for sim a label */
-    uint32_t bitrate;         /**< nominal (arbitration) bit rate, bit/s */
-    bool is_fd;               /**< CAN FD controller and bus */
-    uint32_t data_bitrate;    /**< FD data-phase bit rate, bit/s (is_fd only; >= bitrate) */
+    char ifname[PS_NAME_LEN];    /**< "can0"; for sim a label */
+    uint32_t bitrate;            /**< nominal (arbitration) bit rate, bit/s */
+    bool is_fd;                  /**< CAN FD controller and bus */
+    uint32_t data_bitrate;       /**< FD data-phase bit rate, bit/s (is_fd only; >= bitrate) */
+    ps_canbus_ctrl_t controller; /**< what drives it; ANY when not stated */
 } ps_canbus_bus_cfg_t;
 
 /** The shape of one frame on the wire. */
@@ -57,6 +82,7 @@ typedef struct {
     bool is_ext; /**< 29-bit identifier */
     bool is_fd;  /**< FD frame */
     bool is_brs; /**< FD with bit rate switch */
+    bool is_rx;  /**< sent by a device, received by the host (a reply, an IMU frame) */
 } ps_canbus_frame_shape_t;
 
 /** Something that puts frames on a bus every rate_div ticks. */
@@ -111,6 +137,8 @@ typedef struct {
     double load_avg[PS_MAX_BUSES];             /**< worst-case bits per second / bitrate */
     uint32_t n_sources[PS_MAX_BUSES];
     uint32_t n_sources_total;
+    uint32_t rx_frames_max[PS_MAX_BUSES]; /**< most frames the host receives in one tick */
+    int64_t rx_frame_ns_min[PS_MAX_BUSES]; /**< the shortest of them on the wire (0: none) */
     uint8_t phase[PS_CANBUS_MAX_SOURCES]; /**< source k sends on ticks where
                                                (tick + phase) % rate_div == 0 */
 } ps_canbus_plan_t;
@@ -132,6 +160,22 @@ typedef struct {
  *  @rt INIT (pure, O(sources * 64 * 64)) */
 int ps_canbus_plan(const ps_canbus_cfg_t *cfg, const ps_canbus_source_t *sources, size_t n_sources,
                    ps_canbus_plan_t *out, char *err, size_t err_len);
+
+/** @return the facts of a controller; the ANY entry for a value out of range
+ *  @rt RT-SAFE, pure */
+const ps_canbus_ctrl_info_t *ps_canbus_ctrl_info(ps_canbus_ctrl_t c);
+
+/** Whether a bus's controller may lose received frames under this plan: the
+ *  busiest tick brings more frames (plan->rx_frames_max) than the controller
+ *  holds, so the host must read one within the shortest frame's time on the
+ *  wire (plan->rx_frame_ns_min) or lose the next. On success writes one line
+ *  naming the bus, the controller and both figures, e.g.
+ *  "can3 (mcp2515): up to 3 frames arrive in one tick, the controller holds
+ *  2: the host must read each within 111 us or lose the next"
+ *  @return 1 at risk (note written) | 0 not (a FIFO, or few enough frames)
+ *  @rt INIT, pure */
+int ps_canbus_rx_risk(const ps_canbus_bus_cfg_t *bus, const ps_canbus_plan_t *plan,
+                      uint32_t bus_idx, char *note, size_t note_len);
 
 /** @return true if a source with this divisor and phase sends on this tick  @rt RT-SAFE */
 static inline bool ps_canbus_is_due(uint64_t tick, uint32_t rate_div, uint32_t phase)

@@ -27,6 +27,12 @@
  * ticking (hung, crashed, killed) cuts power the same way. A steady level,
  * high or low, proves nothing and keeps no power on.
  *
+ * Record button (optional): a push button that asks the flight recorder
+ * for a dump (rt/ps_recorder.h). read_button has the e-stop's semantics
+ * (pressed now or at any time since the previous read) without debounce;
+ * a port without the button has read_button NULL, and ps_gpio_read_button
+ * then reads "not pressed".
+ *
  * Threads: loop thread only. Allocation: none.
  */
 #ifndef PS_GPIO_H
@@ -67,6 +73,10 @@ typedef struct {
     /** A change of the e-stop input counts once it has held this long
      *  (press and release alike); 0 = the first edge counts. */
     uint32_t estop_debounce_us;
+    bool has_button;                /**< a record button line (flight recorder trigger) */
+    uint32_t button_line;           /**< offset; unused when button_name is set */
+    char button_name[PS_NAME_LEN];  /**< "" = use button_line */
+    bool is_button_active_low;
 } ps_gpio_cfg_t;
 
 /** The watchdog relay drops the drives' power when the heartbeat has not
@@ -90,6 +100,9 @@ typedef struct {
     int (*set_led)(void *ctx, ps_gpio_led_t led);
     /** Release lines. Safe to call twice. @rt INIT */
     void (*close)(void *ctx);
+    /** The record button, as read_estop (no debounce). NULL: no button.
+     *  @return 0 | -errno  @rt RT-SAFE */
+    int (*read_button)(void *ctx, bool *out_pressed_since_last_read);
 } ps_gpio_ops_t;
 
 typedef struct {
@@ -100,6 +113,15 @@ typedef struct {
 static inline int ps_gpio_read_estop(const ps_gpio_port_t *p, bool *out_pressed_since_last_read)
 {
     return p->ops->read_estop(p->ctx, out_pressed_since_last_read);
+}
+/** @post *out false when the port has no record button  @return as read_button */
+static inline int ps_gpio_read_button(const ps_gpio_port_t *p, bool *out_pressed_since_last_read)
+{
+    if (p->ops->read_button == NULL) {
+        *out_pressed_since_last_read = false;
+        return 0;
+    }
+    return p->ops->read_button(p->ctx, out_pressed_since_last_read);
 }
 static inline int ps_gpio_set_heartbeat(const ps_gpio_port_t *p, bool level)
 {

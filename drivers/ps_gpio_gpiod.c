@@ -24,6 +24,7 @@
 #define CONSUMER_ESTOP     "pushstep-estop"
 #define CONSUMER_HEARTBEAT "pushstep-heartbeat"
 #define CONSUMER_LED       "pushstep-led"
+#define CONSUMER_BUTTON    "pushstep-record-button"
 /* The kernel's event FIFO holds 16; gpiod_line_event_read_fd_multiple reads
  * at most that many per call. */
 #define MAX_EVENT_READS 4u /* reads of EVENT_BATCH events per read_estop call at most */
@@ -179,6 +180,38 @@ static int read_estop(void *ctx, bool *out_pressed_since_last_read)
     return 0;
 }
 
+static int read_button(void *ctx, bool *out_pressed_since_last_read)
+{
+    ps_gpio_gpiod_t *g = ctx;
+    if (out_pressed_since_last_read == NULL)
+        return -EINVAL;
+    if (g->chip == NULL || g->button == NULL)
+        return -EBADF;
+    struct gpiod_line_event ev[EVENT_BATCH];
+    uint64_t n_edges = 0;
+    for (unsigned pass = 0; pass < MAX_EVENT_READS; pass++) {
+        const int n = gpiod_line_event_read_fd_multiple(g->button_fd, ev, EVENT_BATCH);
+        if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK))
+            break;
+        if (n < 0)
+            return -errno;
+        n_edges += (uint64_t)n;
+        if ((unsigned)n < EVENT_BATCH)
+            break;
+    }
+    g->n_button_events += n_edges;
+    const int level = gpiod_line_get_value(g->button);
+    if (level < 0)
+        return -errno;
+    /* Edge types are not trusted (as the e-stop's): a first edge after a
+     * released read is a press; two or more edges hold a press whatever the
+     * level read last was. */
+    *out_pressed_since_last_read =
+        level != 0 || (n_edges > 0 && !g->was_button_pressed) || n_edges >= 2;
+    g->was_button_pressed = level != 0;
+    return 0;
+}
+
 static int set_heartbeat(void *ctx, bool level)
 {
     ps_gpio_gpiod_t *g = ctx;
@@ -207,6 +240,14 @@ static const ps_gpio_ops_t OPS = {
     .close = close_op,
 };
 
+static const ps_gpio_ops_t OPS_BUTTON = {
+    .read_estop = read_estop,
+    .set_heartbeat = set_heartbeat,
+    .set_led = set_led,
+    .close = close_op,
+    .read_button = read_button,
+};
+
 void ps_gpio_gpiod_close(ps_gpio_gpiod_t *g)
 {
     if (g == NULL || g->chip == NULL)
@@ -224,12 +265,14 @@ void ps_gpio_gpiod_close(ps_gpio_gpiod_t *g)
     g->estop = NULL;
     g->heartbeat = NULL;
     g->led = NULL;
+    g->button = NULL;
     g->estop_fd = -1;
+    g->button_fd = -1;
 }
 
 ps_gpio_port_t ps_gpio_gpiod_port(ps_gpio_gpiod_t *g)
 {
-    const ps_gpio_port_t p = {.ops = &OPS, .ctx = g};
+    const ps_gpio_port_t p = {.ops = g->button != NULL ? &OPS_BUTTON : &OPS, .ctx = g};
     return p;
 }
 
@@ -330,6 +373,47 @@ static int request_failed(const ps_gpio_gpiod_t *g, const line_spec_t *s, struct
     return -e;
 }
 
+/* The chip by name, label, number or path, with what to check on failure. */
+static int open_chip(const ps_gpio_cfg_t *cfg, struct gpiod_chip **out, char *err, size_t err_len)
+{
+    errno = 0;
+    *out = gpiod_chip_open_lookup(cfg->chip);
+    if (*out != NULL)
+        return 0;
+    const int e = errno != 0 ? errno : ENOENT;
+    if (e == EACCES || e == EPERM)
+        ps_err_format(err, err_len,
+                      "gpio chip \"%s\": cannot open: %s; check the permissions of "
+                      "/dev/gpiochip* (group gpio, or root)",
+                      cfg->chip, strerror(e));
+    else
+        ps_err_format(err, err_len,
+                      "gpio chip \"%s\": cannot open: %s; check `gpiodetect` for this "
+                      "board's chips (gpio.chip takes a name, label, number or /dev path)",
+                      cfg->chip, strerror(e));
+    return -e;
+}
+
+/* The three roles, in the order of ps_gpio_gpiod_probe_t.lines. */
+/* The board's lines; the record button last, when there is one.
+ * @return how many (3 or 4) */
+static int line_specs(const ps_gpio_cfg_t *cfg, line_spec_t out[4])
+{
+    out[0] = (line_spec_t){"e-stop", CONSUMER_ESTOP, cfg->estop_name, cfg->estop_line};
+    out[1] = (line_spec_t){"heartbeat", CONSUMER_HEARTBEAT, cfg->enable_name, cfg->enable_line};
+    out[2] = (line_spec_t){"LED", CONSUMER_LED, cfg->led_name, cfg->led_line};
+    out[3] = (line_spec_t){"record button", CONSUMER_BUTTON, cfg->button_name, cfg->button_line};
+    return cfg->has_button ? 4 : 3;
+}
+
+static int check_spec(const ps_gpio_cfg_t *cfg, const line_spec_t *s, char *err, size_t err_len)
+{
+    if (memchr(s->name, '\0', PS_NAME_LEN) != NULL)
+        return 0;
+    ps_err_format(err, err_len, "gpio %s: %s line name not terminated", cfg->chip, s->role);
+    return -EINVAL;
+}
+
 static int bias_flags(ps_gpio_bias_t bias)
 {
     switch (bias) {
@@ -345,6 +429,27 @@ static int bias_flags(ps_gpio_bias_t bias)
     }
 }
 
+/* The record button: both-edge events, non-blocking, its level now. */
+static int open_button(ps_gpio_gpiod_t *g, const ps_gpio_cfg_t *cfg, const line_spec_t *spec,
+                       char *err, size_t err_len)
+{
+    g->button_offset = gpiod_line_offset(g->button);
+    const int flags = cfg->is_button_active_low ? GPIOD_LINE_REQUEST_FLAG_ACTIVE_LOW : 0;
+    if (gpiod_line_request_both_edges_events_flags(g->button, CONSUMER_BUTTON, flags) != 0)
+        return request_failed(g, spec, g->button, "both-edge events", errno, err, err_len);
+    g->button_fd = gpiod_line_event_get_fd(g->button);
+    const int fl = g->button_fd >= 0 ? fcntl(g->button_fd, F_GETFL) : -1;
+    const int level = gpiod_line_get_value(g->button);
+    if (fl < 0 || fcntl(g->button_fd, F_SETFL, fl | O_NONBLOCK) != 0 || level < 0) {
+        const int rc = -errno;
+        ps_err_format(err, err_len, "gpio %s: record button line %u: %s",
+                      gpiod_chip_name(g->chip), g->button_offset, strerror(errno));
+        return rc;
+    }
+    g->was_button_pressed = level != 0;
+    return 0;
+}
+
 int ps_gpio_gpiod_open(ps_gpio_gpiod_t *g, const ps_gpio_cfg_t *cfg, char *err, size_t err_len)
 {
     if (err != NULL && err_len > 0)
@@ -353,6 +458,7 @@ int ps_gpio_gpiod_open(ps_gpio_gpiod_t *g, const ps_gpio_cfg_t *cfg, char *err, 
         return -EINVAL;
     memset(g, 0, sizeof(*g));
     g->estop_fd = -1;
+    g->button_fd = -1;
     if (cfg->chip[0] == '\0' || memchr(cfg->chip, '\0', sizeof(cfg->chip)) == NULL) {
         ps_err_format(err, err_len, "gpio: no chip given (gpio.chip)");
         return -EINVAL;
@@ -366,37 +472,17 @@ int ps_gpio_gpiod_open(ps_gpio_gpiod_t *g, const ps_gpio_cfg_t *cfg, char *err, 
         return -EINVAL;
     }
 
-    g->chip = gpiod_chip_open_lookup(cfg->chip);
-    if (g->chip == NULL) {
-        const int e = errno != 0 ? errno : ENOENT;
-        if (e == EACCES || e == EPERM)
-            ps_err_format(err, err_len,
-                          "gpio chip \"%s\": cannot open: %s; check the permissions of "
-                          "/dev/gpiochip* (group gpio, or root)",
-                          cfg->chip, strerror(e));
-        else
-            ps_err_format(err, err_len,
-                          "gpio chip \"%s\": cannot open: %s; check `gpiodetect` for this "
-                          "board's chips (gpio.chip takes a name, label, number or /dev path)",
-                          cfg->chip, strerror(e));
-        return -e;
-    }
+    int rc = open_chip(cfg, &g->chip, err, err_len);
+    if (rc < 0)
+        return rc;
 
-    const line_spec_t spec[3] = {
-        {"e-stop", CONSUMER_ESTOP, cfg->estop_name, cfg->estop_line},
-        {"heartbeat", CONSUMER_HEARTBEAT, cfg->enable_name, cfg->enable_line},
-        {"LED", CONSUMER_LED, cfg->led_name, cfg->led_line},
-    };
-    struct gpiod_line *lines[3] = {NULL, NULL, NULL};
-    int rc = 0;
-    for (int i = 0; i < 3 && rc == 0; i++) {
-        if (memchr(spec[i].name, '\0', PS_NAME_LEN) == NULL) {
-            ps_err_format(err, err_len, "gpio %s: %s line name not terminated", cfg->chip,
-                          spec[i].role);
-            rc = -EINVAL;
-            break;
-        }
-        rc = find_line(g, &spec[i], &lines[i], err, err_len);
+    line_spec_t spec[4];
+    const int n_lines = line_specs(cfg, spec);
+    struct gpiod_line *lines[4] = {NULL, NULL, NULL, NULL};
+    for (int i = 0; i < n_lines && rc == 0; i++) {
+        rc = check_spec(cfg, &spec[i], err, err_len);
+        if (rc == 0)
+            rc = find_line(g, &spec[i], &lines[i], err, err_len);
         for (int k = 0; k < i && rc == 0; k++) {
             if (lines[k] == lines[i]) { /* libgpiod keeps one struct per offset */
                 char a[96], b[96];
@@ -416,6 +502,7 @@ int ps_gpio_gpiod_open(ps_gpio_gpiod_t *g, const ps_gpio_cfg_t *cfg, char *err, 
     g->estop_offset = gpiod_line_offset(g->estop);
     g->heartbeat_offset = gpiod_line_offset(g->heartbeat);
     g->led_offset = gpiod_line_offset(g->led);
+    g->button = lines[3];
 
     /* Outputs first, driven low: the relay sees no beat and the LED is off
      * from the moment the lines are ours. */
@@ -443,6 +530,11 @@ int ps_gpio_gpiod_open(ps_gpio_gpiod_t *g, const ps_gpio_cfg_t *cfg, char *err, 
         goto fail;
     }
     g->is_event_ts_monotonic = kernel_stamps_monotonic();
+    if (g->button != NULL) {
+        rc = open_button(g, cfg, &spec[3], err, err_len);
+        if (rc != 0)
+            goto fail;
+    }
 
     /* The level now, after the request, so no edge falls between the two.
      * Edges stamped up to this time are in the level; later ones are events. */
@@ -462,4 +554,48 @@ int ps_gpio_gpiod_open(ps_gpio_gpiod_t *g, const ps_gpio_cfg_t *cfg, char *err, 
 fail:
     ps_gpio_gpiod_close(g);
     return rc;
+}
+
+/* ---- probe ----------------------------------------------------------------- */
+
+int ps_gpio_gpiod_probe(const ps_gpio_cfg_t *cfg, ps_gpio_gpiod_probe_t *out, char *err,
+                        size_t err_len)
+{
+    if (err != NULL && err_len > 0)
+        err[0] = '\0';
+    if (cfg == NULL || out == NULL)
+        return -EINVAL;
+    memset(out, 0, sizeof(*out));
+    if (cfg->chip[0] == '\0' || memchr(cfg->chip, '\0', sizeof(cfg->chip)) == NULL) {
+        ps_err_format(err, err_len, "gpio: no chip given (gpio.chip)");
+        return -EINVAL;
+    }
+    ps_gpio_gpiod_t g; /* find_line's view of the chip; nothing is requested */
+    memset(&g, 0, sizeof(g));
+    g.estop_fd = -1;
+    int rc = open_chip(cfg, &g.chip, err, err_len);
+    if (rc < 0)
+        return rc;
+    (void)snprintf(out->chip_name, sizeof(out->chip_name), "%s", gpiod_chip_name(g.chip));
+    (void)snprintf(out->chip_label, sizeof(out->chip_label), "%s", gpiod_chip_label(g.chip));
+    out->n_lines = gpiod_chip_num_lines(g.chip);
+    line_spec_t spec[4];
+    (void)line_specs(cfg, spec); /* the probe looks at the three lines every board has */
+    for (int i = 0; i < 3; i++) {
+        ps_gpio_gpiod_line_info_t *li = &out->lines[i];
+        (void)snprintf(li->role, sizeof(li->role), "%s", spec[i].role);
+        struct gpiod_line *line = NULL;
+        if (check_spec(cfg, &spec[i], li->why, sizeof(li->why)) < 0 ||
+            find_line(&g, &spec[i], &line, li->why, sizeof(li->why)) < 0)
+            continue;
+        li->is_found = true;
+        li->offset = gpiod_line_offset(line);
+        const char *name = gpiod_line_name(line);
+        const char *consumer = gpiod_line_consumer(line);
+        (void)snprintf(li->name, sizeof(li->name), "%s", name != NULL ? name : "");
+        li->is_used = gpiod_line_is_used(line);
+        (void)snprintf(li->consumer, sizeof(li->consumer), "%s", consumer != NULL ? consumer : "");
+    }
+    gpiod_chip_close(g.chip);
+    return 0;
 }

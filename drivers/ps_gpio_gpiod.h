@@ -40,6 +40,13 @@
  * moves the stamps onto CLOCK_MONOTONIC by the clocks' difference at the
  * read. A stamp later than the read (a clock step) is taken as the read.
  *
+ * Record button (optional, cfg has_button): requested for both-edge events
+ * (active-low from cfg), fd non-blocking. read_button drains its events
+ * (bounded as the e-stop's) and reads its level: pressed now, or an edge
+ * since the last read that can only mean a press happened (the first edge
+ * after a read that said released, or two or more edges); no debounce: a
+ * bounce only repeats "pressed", and the recorder takes each press once.
+ *
  * Heartbeat and LED: requested as outputs, initially low/off;
  * set_heartbeat/set_led are one GPIOHANDLE_SET_LINE_VALUES ioctl each. close
  * drives both low before it releases the lines (the orderly exit path); a
@@ -123,7 +130,12 @@ typedef struct {
     struct gpiod_line *estop;
     struct gpiod_line *heartbeat;
     struct gpiod_line *led;
+    struct gpiod_line *button;  /**< the record button; NULL: none */
     int estop_fd;               /**< the e-stop's event fd, O_NONBLOCK; -1 when closed */
+    int button_fd;              /**< the button's event fd, O_NONBLOCK; -1: none */
+    bool was_button_pressed;    /**< the button's level at the last read_button */
+    uint32_t button_offset;     /**< read-only */
+    uint64_t n_button_events;   /**< read-only: button edge events read */
     bool is_event_ts_monotonic; /**< kernel >= 5.7: event stamps are CLOCK_MONOTONIC */
     ps_gpio_debounce_t debounce;
     uint32_t estop_offset;         /**< read-only: the lines as resolved at open */
@@ -151,11 +163,40 @@ typedef struct {
 int ps_gpio_gpiod_open(ps_gpio_gpiod_t *g, const ps_gpio_cfg_t *cfg, char *err, size_t err_len);
 
 /** @pre g open  @return the GPIO port over g (ops: read_estop, set_heartbeat,
- *  set_led, close)  @rt INIT */
+ *  set_led, close, and read_button when the board has the record button)
+ *  @rt INIT */
 ps_gpio_port_t ps_gpio_gpiod_port(ps_gpio_gpiod_t *g);
 
 /** Drive the heartbeat and LED low, release the lines, close the chip. Safe
  *  twice and on a zeroed struct.  @rt INIT */
 void ps_gpio_gpiod_close(ps_gpio_gpiod_t *g);
+
+/** One role's line as the kernel reports it, for `pushstep doctor`. */
+typedef struct {
+    char role[16];          /**< "e-stop", "heartbeat", "LED" */
+    bool is_found;          /**< the name or offset exists on the chip */
+    uint32_t offset;        /**< is_found only */
+    char name[PS_NAME_LEN]; /**< the line's name, "" when it has none */
+    bool is_used;           /**< requested by someone, or taken by a kernel driver */
+    char consumer[32];      /**< who, when is_used ("" when the kernel names nobody) */
+    char why[256];          /**< !is_found: the message open would give */
+} ps_gpio_gpiod_line_info_t;
+
+typedef struct {
+    char chip_name[32];  /**< "gpiochip0" */
+    char chip_label[64]; /**< "pinctrl-bcm2711" */
+    uint32_t n_lines;
+    ps_gpio_gpiod_line_info_t lines[3]; /**< e-stop, heartbeat, LED */
+} ps_gpio_gpiod_probe_t;
+
+/** Look the board's chip and lines up without requesting anything (the
+ *  heartbeat is not driven): whether each exists, its offset and name, and
+ *  whether it is free or whose it is.
+ *  @post *out written on 0; err says why the chip did not open otherwise
+ *  @return 0 (lines not found are in out) | -ENOENT no such chip | -EACCES/
+ *          -EPERM | -EINVAL cfg | -errno of libgpiod
+ *  @rt INIT (allocates inside libgpiod, frees before return) */
+int ps_gpio_gpiod_probe(const ps_gpio_cfg_t *cfg, ps_gpio_gpiod_probe_t *out, char *err,
+                        size_t err_len);
 
 #endif /* PS_GPIO_GPIOD_H */

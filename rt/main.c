@@ -21,6 +21,7 @@
 
 #include "../drivers/ps_candump.h"
 #include "ps_app.h"
+#include "ps_doctor.h"
 #include "ps_camview.h"
 #include "ps_emulate.h"
 #include "ps_monitor.h"
@@ -28,6 +29,8 @@
 #include "ps_guard.h"
 #include "ps_logger.h"
 #include "ps_profile.h"
+#include "ps_reclog.h"
+#include "ps_recorder.h"
 #include "ps_rtsetup.h"
 #include "ps_summary.h"
 
@@ -57,6 +60,11 @@ typedef struct {
     const char *candump_path; /**< --candump: every frame as a candump -L line */
     const char *replay_path;  /**< --replay: buses fed from this candump -L log */
     unsigned hist_us;         /**< wake-up histogram buckets (cyclictest -h N) */
+    const char *record_path;  /**< --record: every tick to this MCAP file */
+    const char *flight_dir;   /**< --flight: triggered dumps into this folder */
+    double flight_pre_s, flight_post_s;
+    double record_ring_s; /**< --record-ring; 0: the recorder's default */
+    ps_mcap_compression_t compression;
 } options_t;
 
 /* Everything the run owns; static because ps_app_t is large and must not
@@ -70,6 +78,8 @@ static struct {
     ps_ring_t frame_ring;
     ps_loop_frame_rec_t *frame_storage; /**< PS_CANDUMP_RING_SLOTS, --candump only */
     ps_logger_frames_t frames;
+    ps_recorder_t rec;
+    _Atomic bool is_recording; /**< the signal handler may trigger rec */
     pid_t stress_pid;
     int cpu_latency_fd;
     int64_t start_ns, end_ns;
@@ -91,6 +101,8 @@ static const char USAGE[] =
     "       pushstep profile [options] [profile options]\n"
     "       pushstep monitor --board FILE [--log FILE] (see pushstep monitor -h)\n"
     "       pushstep emulate --board FILE --ifaces IF,... (see pushstep emulate -h)\n"
+    "       pushstep doctor [--board FILE] (see pushstep doctor -h)\n"
+    "       pushstep log FILE.mcap [--csv OUT] [--plot OUT.png] (see pushstep log -h)\n"
     "       pushstep camera --board FILE (see pushstep camera -h)\n"
     "Runs the balance controller's fixed-step loop against a board: real hardware\n"
     "or, for board `sim`, the MuJoCo plant with emulated CAN actuators, IMU and GPIO.\n"
@@ -126,6 +138,18 @@ static const char USAGE[] =
     "                        not answer the commands (docs/can-protocols.md, 5)\n"
     "  --trace               write trace points to ftrace's trace_marker (tick start,\n"
     "                        end, overruns, state changes) for trace-cmd/KernelShark\n"
+    "  --record FILE.mcap    flight recorder, continuous: every tick (joints, IMU,\n"
+    "                        estimate, state, timing, buses, policy, sim truth,\n"
+    "                        events) to an MCAP file (Foxglove, PlotJuggler read it)\n"
+    "  --flight DIR          flight recorder, triggered: on e-stop, fall, watchdog,\n"
+    "                        overrun burst, the GPIO record button or SIGUSR1, the\n"
+    "                        seconds around it to DIR/flight-NNNN.mcap\n"
+    "  --flight-pre S        seconds kept before a trigger (default 5, 0..600)\n"
+    "  --flight-post S       seconds written after it (default 2, 0..600)\n"
+    "  --record-compression zstd|lz4|none  chunk compression (default zstd)\n"
+    "  --record-ring S       recorder ring in seconds of ticks, the most a slow disk\n"
+    "                        may lag before records are lost (default pre + post + 1,\n"
+    "                        at least 2; about 2.5 kB a tick)\n"
     "  -h, --help            this text\n"
     "\n"
     "pushstep profile runs the real loop (any board, sim included; default 30 s) and\n"
@@ -144,7 +168,9 @@ static const char USAGE[] =
     "repeated overruns, refused frames) HOLDs the last safe pose until the operator\n"
     "stops or restarts, a fall, or control.hold_s; see docs/safety.md.\n"
     "Board, robot and scenario NAMEs are looked up in $PUSHSTEP_DATA_DIR, else next\n"
-    "to the binary's folder (build/.. = the repository), else the current folder.\n"
+    "to the binary's folder (build/.. = the repository), else in share/pushstep\n"
+    "beside it (installed: PREFIX/bin/.. -> PREFIX/share/pushstep), else the\n"
+    "current folder.\n"
     "Exit status: 0 ok, 1 runtime failure, 2 bad usage or configuration.\n";
 
 /* ---- options and paths ------------------------------------------------ */
@@ -176,7 +202,13 @@ static int parse_options(int argc, char **argv, options_t *o)
         O_TRACE,
         O_HIST_US,
         O_CANDUMP,
-        O_REPLAY
+        O_REPLAY,
+        O_RECORD,
+        O_FLIGHT,
+        O_FLIGHT_PRE,
+        O_FLIGHT_POST,
+        O_RECORD_COMPRESSION,
+        O_RECORD_RING
     };
     static const struct option LONG[] = {
         {"board", required_argument, NULL, 'b'},
@@ -194,10 +226,22 @@ static int parse_options(int argc, char **argv, options_t *o)
         {"hist-us", required_argument, NULL, O_HIST_US},
         {"candump", required_argument, NULL, O_CANDUMP},
         {"replay", required_argument, NULL, O_REPLAY},
+        {"record", required_argument, NULL, O_RECORD},
+        {"flight", required_argument, NULL, O_FLIGHT},
+        {"flight-pre", required_argument, NULL, O_FLIGHT_PRE},
+        {"flight-post", required_argument, NULL, O_FLIGHT_POST},
+        {"record-compression", required_argument, NULL, O_RECORD_COMPRESSION},
+        {"record-ring", required_argument, NULL, O_RECORD_RING},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
-    *o = (options_t){.board = "sim", .start_after_s = -1.0, .out_dir = "profile", .hist_us = 1000};
+    *o = (options_t){.board = "sim",
+                     .start_after_s = -1.0,
+                     .out_dir = "profile",
+                     .hist_us = 1000,
+                     .flight_pre_s = 5.0,
+                     .flight_post_s = 2.0,
+                     .compression = PS_MCAP_COMPRESS_ZSTD};
     if (argc > 1 && strcmp(argv[1], "profile") == 0) {
         o->is_profile = true;
         argv[1] = argv[0]; /* getopt starts after the subcommand */
@@ -243,6 +287,39 @@ static int parse_options(int argc, char **argv, options_t *o)
             break;
         case O_REPLAY:
             o->replay_path = optarg;
+            break;
+        case O_RECORD:
+            o->record_path = optarg;
+            break;
+        case O_FLIGHT:
+            o->flight_dir = optarg;
+            break;
+        case O_FLIGHT_PRE:
+        case O_FLIGHT_POST: {
+            double *v = c == O_FLIGHT_PRE ? &o->flight_pre_s : &o->flight_post_s;
+            if (parse_seconds(optarg, c == O_FLIGHT_PRE ? "--flight-pre" : "--flight-post", v) <
+                    0 ||
+                *v > 600.0) {
+                fprintf(stderr, "pushstep: %s: at most 600 s\n",
+                        c == O_FLIGHT_PRE ? "--flight-pre" : "--flight-post");
+                return -EINVAL;
+            }
+            break;
+        }
+        case O_RECORD_RING:
+            if (parse_seconds(optarg, "--record-ring", &o->record_ring_s) < 0 ||
+                o->record_ring_s < 0.1 || o->record_ring_s > 600.0) {
+                fprintf(stderr, "pushstep: --record-ring: 0.1 to 600 s\n");
+                return -EINVAL;
+            }
+            break;
+        case O_RECORD_COMPRESSION:
+            if (ps_mcap_parse_compression(optarg, &o->compression) < 0) {
+                fprintf(stderr,
+                        "pushstep: --record-compression: \"%s\" is not one of zstd, lz4, none\n",
+                        optarg);
+                return -EINVAL;
+            }
             break;
         case O_OUT:
             o->out_dir = optarg;
@@ -305,7 +382,9 @@ static int parse_options(int argc, char **argv, options_t *o)
 
 /* Where boards/, robots/, scenarios/ and sim/models/ are: $PUSHSTEP_DATA_DIR,
  * else one level above the binary (build/pushstep -> repository root) when
- * boards/ is there, else the current directory. */
+ * boards/ is there, else share/pushstep beside the binary's folder (an
+ * installed PREFIX/bin/pushstep -> PREFIX/share/pushstep), else the current
+ * directory. */
 static void find_data_dir(char *out, size_t len)
 {
     const char *env = getenv("PUSHSTEP_DATA_DIR");
@@ -317,11 +396,15 @@ static void find_data_dir(char *out, size_t len)
     ssize_t n = readlink("/proc/self/exe", exe, sizeof(exe) - 1);
     if (n > 0) {
         exe[n] = '\0';
-        snprintf(out, len, "%s/..", dirname(exe));
-        char probe[PATH_MAX + 16];
-        snprintf(probe, sizeof(probe), "%s/boards", out);
-        if (access(probe, R_OK) == 0)
-            return;
+        static const char *const BESIDE[] = {"..", "../share/pushstep"};
+        const char *bin_dir = dirname(exe);
+        for (size_t i = 0; i < sizeof(BESIDE) / sizeof(BESIDE[0]); i++) {
+            snprintf(out, len, "%s/%s", bin_dir, BESIDE[i]);
+            char probe[PATH_MAX + 16];
+            snprintf(probe, sizeof(probe), "%s/boards", out);
+            if (access(probe, R_OK) == 0)
+                return;
+        }
     }
     snprintf(out, len, ".");
 }
@@ -389,6 +472,56 @@ static void on_signal(int sig)
 {
     (void)sig;
     ps_loop_request_stop(&g.app.loop);
+}
+
+/* SIGUSR1: a flight-recorder trigger (installed only when recording). */
+static void on_trigger_signal(int sig)
+{
+    (void)sig;
+    if (atomic_load(&g.is_recording))
+        ps_recorder_trigger(&g.rec, PS_REC_TRIG_SIGNAL);
+}
+
+/* --record / --flight, once the configuration is good: the ring (touched
+ * now), the files checked, the loop tapped. */
+static int setup_recorder(char *err, size_t len)
+{
+    ps_recorder_cfg_t rc_cfg = {
+        .path = g.opt.record_path,
+        .dir = g.opt.flight_dir,
+        .pre_s = g.opt.flight_pre_s,
+        .post_s = g.opt.flight_post_s,
+        .ring_s = g.opt.record_ring_s,
+        .compression = g.opt.compression,
+        .is_sync_chunks = true,
+        .cpu = g.app.board.rt.worker_cpu,
+    };
+    ps_app_recorder_cfg(&g.app, &rc_cfg);
+    int rc = ps_recorder_init(&g.rec, &rc_cfg, err, len);
+    if (rc < 0)
+        return rc;
+    ps_app_attach_recorder(&g.app, &g.rec);
+    atomic_store(&g.is_recording, true); /* SIGUSR1 triggers from now on */
+    return 0;
+}
+
+/* With --record or --flight, from the start of main: SIGUSR1 asks for a dump
+ * (ignored until the recorder is ready, instead of killing a process that
+ * is still loading its model), and a file size limit fails writes instead
+ * of the process (SIGXFSZ ignored). */
+static int install_recorder_signals(void)
+{
+    struct sigaction sa;
+    memset(&sa, 0, sizeof(sa));
+    sa.sa_handler = on_trigger_signal;
+    sigemptyset(&sa.sa_mask);
+    struct sigaction ign;
+    memset(&ign, 0, sizeof(ign));
+    ign.sa_handler = SIG_IGN;
+    sigemptyset(&ign.sa_mask);
+    if (sigaction(SIGUSR1, &sa, NULL) < 0 || sigaction(SIGXFSZ, &ign, NULL) < 0)
+        return -errno;
+    return 0;
 }
 
 /* SIGINT and SIGTERM are blocked from the start of main until the loop is
@@ -490,6 +623,21 @@ static int close_candump(void)
     return 0;
 }
 
+/* A recording asked for that could not be written (a file that failed):
+ * the run's outputs are incomplete. Records lost to a slow disk are only
+ * reported (the summary says how many). */
+static bool recorder_failed(void)
+{
+    const ps_recorder_stats_t *s = &g.rec.stats;
+    if (s->cont.err != 0)
+        fprintf(stderr, "pushstep: --record %s: %s; %llu records not written\n", s->cont.path,
+                strerror(-s->cont.err), (unsigned long long)s->cont.n_lost_io);
+    if (s->n_dumps_failed > 0)
+        fprintf(stderr, "pushstep: --flight %s: %u of %u dumps failed\n", g.opt.flight_dir,
+                s->n_dumps_failed, s->n_dumps);
+    return s->cont.err != 0 || s->n_dumps_failed > 0;
+}
+
 /* Wait for the loop thread to end. (The lowest CoM while the controller is in
  * charge is recorded by the plant on simulated time, ps_sim_truth_t.) */
 static void watch_truth(ps_summary_t *sum)
@@ -521,8 +669,13 @@ static int run_loop(ps_summary_t *sum)
                         g.app.board.rt.worker_cpu, g.frames.out != NULL ? &g.frames : NULL);
     if (rc < 0)
         return rc;
+    if (atomic_load(&g.is_recording) && (rc = ps_recorder_start(&g.rec)) < 0) {
+        ps_logger_stop(&g.logger);
+        return rc;
+    }
     rc = g.app.sim != NULL ? ps_sim_start(g.app.sim, g.start_ns) : 0; /* real boards: none */
     if (rc < 0) {
+        ps_recorder_stop(&g.rec);
         ps_logger_stop(&g.logger);
         return rc;
     }
@@ -555,6 +708,7 @@ static int run_loop(ps_summary_t *sum)
     }
     sum->wall_s = ps_ns_to_s(wall_ns() - wall0);
     ps_sim_stop(g.app.sim);
+    ps_recorder_stop(&g.rec); /* writes what the ring still holds, closes the files */
     ps_logger_stop(&g.logger);
     return rc;
 }
@@ -612,6 +766,7 @@ static void finish_summary(ps_summary_t *sum)
     sum->hist_us = g.opt.hist_us;
     sum->plan = &g.app.plan;
     sum->board = &g.app.board;
+    sum->recorder = atomic_load(&g.is_recording) ? &g.rec.stats : NULL;
     for (uint32_t b = 0; b < g.app.board.n_buses; b++)
         if (ps_can_get_state(&g.app.loop.cfg.buses[b], &sum->bus_states[b]) < 0)
             memset(&sum->bus_states[b], 0, sizeof(sum->bus_states[b]));
@@ -641,6 +796,11 @@ static void print_plan(const ps_app_t *app)
                app->board.buses[b].ifname, p->n_sources[b], p->tick_bits_max[b],
                p->tick_capacity_bits[b], p->load_peak[b] * 100, p->load_avg[b] * 100,
                (double)app->board.bus_budget * 100);
+    for (uint32_t b = 0; b < p->n_buses; b++) {
+        char risk[200]; /* a controller that may drop what the plan has it receive */
+        if (ps_canbus_rx_risk(&app->board.buses[b], p, b, risk, sizeof(risk)) > 0)
+            printf("warning: bus %s\n", risk);
+    }
 }
 
 /* --replay: what the log fed, what the loop sent, and how the loop's
@@ -715,6 +875,8 @@ int main(int argc, char **argv)
     /* Line-buffered even into a pipe: whoever reads the output (tee, a
      * supervisor, the tests) sees each transition when it happens. */
     (void)setvbuf(stdout, NULL, _IOLBF, 0); /* before any output: cannot fail */
+    if (argc > 1 && strcmp(argv[1], "log") == 0)
+        return ps_reclog_main(argc - 1, argv + 1);
     if (argc > 1 && strcmp(argv[1], "camera") == 0) {
         find_data_dir(g.data_dir, sizeof(g.data_dir));
         return ps_camview_main(argc - 1, argv + 1, g.data_dir);
@@ -724,12 +886,20 @@ int main(int argc, char **argv)
         return argv[1][0] == 'e' ? ps_emulate_main(argc - 1, argv + 1, g.data_dir)
                                  : ps_monitor_main(argc - 1, argv + 1, g.data_dir);
     }
+    if (argc > 1 && strcmp(argv[1], "doctor") == 0) {
+        find_data_dir(g.data_dir, sizeof(g.data_dir));
+        return ps_doctor_main(argc - 1, argv + 1, g.data_dir);
+    }
     if (block_stop_signals(SIG_BLOCK) < 0 || install_signals() < 0) {
         fprintf(stderr, "pushstep: cannot install the SIGINT/SIGTERM handler\n");
         return 1;
     }
     if (parse_options(argc, argv, &g.opt) < 0)
         return 2;
+    if ((g.opt.record_path != NULL || g.opt.flight_dir != NULL) && install_recorder_signals() < 0) {
+        fprintf(stderr, "pushstep: cannot install the SIGUSR1/SIGXFSZ handlers\n");
+        return 1;
+    }
     find_data_dir(g.data_dir, sizeof(g.data_dir));
     char err[PS_ERR_MSG_LEN];
     if (g.opt.candump_path != NULL && alloc_candump_ring(err, sizeof(err)) < 0) {
@@ -765,6 +935,14 @@ int main(int argc, char **argv)
         printf("note: %s\n", g.app.notes);
     if (g.opt.candump_path != NULL && open_candump_file(err, sizeof(err)) < 0) {
         fprintf(stderr, "pushstep: --candump: %s\n", err);
+        ps_app_deinit(&g.app);
+        ps_trace_close(&g.trace);
+        return 2;
+    }
+    if ((g.opt.record_path != NULL || g.opt.flight_dir != NULL) &&
+        setup_recorder(err, sizeof(err)) < 0) {
+        fprintf(stderr, "pushstep: %s\n", err);
+        ps_recorder_deinit(&g.rec);
         ps_app_deinit(&g.app);
         ps_trace_close(&g.trace);
         return 2;
@@ -830,6 +1008,9 @@ int main(int argc, char **argv)
     }
     if (close_candump() < 0 && rc == 0)
         rc = -EIO;
+    if (atomic_load(&g.is_recording) && recorder_failed() && rc == 0)
+        rc = -EIO;
+    ps_recorder_deinit(&g.rec);
     ps_trace_close(&g.trace);
     ps_app_deinit(&g.app);
     return rc < 0 ? 1 : 0;

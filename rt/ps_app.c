@@ -101,6 +101,7 @@ int ps_app_plan_buses(const ps_board_cfg_t *b, const ps_robot_cfg_t *r, ps_canbu
                 .is_ext = is_ext,
                 .is_fd = p->is_fd,
                 .is_brs = p->is_fd,
+                .is_rx = k >= p->n_cmd, /* the drive's replies */
             };
         src[j].n_frames = p->n_cmd + p->n_reply;
     }
@@ -112,7 +113,7 @@ int ps_app_plan_buses(const ps_board_cfg_t *b, const ps_robot_cfg_t *r, ps_canbu
     uint8_t imu_lens[PS_IMU_MAX_FRAMES];
     imu->n_frames = ps_imu_frames(&r->imu, imu_ids, imu_lens); /* one sample's frames */
     for (uint32_t k = 0; k < imu->n_frames; k++)
-        imu->frames[k] = (ps_canbus_frame_shape_t){.len = imu_lens[k]};
+        imu->frames[k] = (ps_canbus_frame_shape_t){.len = imu_lens[k], .is_rx = true};
     const ps_canbus_cfg_t cfg = {
         .n_buses = b->n_buses,
         .buses = b->buses,
@@ -355,7 +356,7 @@ static int wire_replay(ps_app_t *app, const char *path, ps_loop_cfg_t *lc, char 
 static int open_camera(ps_app_t *app, const ps_clock_t *clock, bool keep_snapshot, char *err,
                        size_t len)
 {
-    const ps_perception_cfg_t *pc = &app->board.camera;
+    const ps_perception_cfg_t *pc = &app->board.perception;
     ps_camera_port_t port = {0};
     int rc = 0;
     switch (pc->camera.source) {
@@ -452,7 +453,7 @@ static int wire(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t len)
     lc.op = (ps_operator_t){.take = take_operator_requests, .ctx = app};
     /* Camera perception beside the loop (not with --replay: a log has no
      * pictures). */
-    if (app->board.has_camera && opts->replay_path == NULL) {
+    if (app->board.has_perception && opts->replay_path == NULL) {
         rc = open_camera(app, lc.clock, false, err, len);
         if (rc < 0)
             return rc;
@@ -477,8 +478,9 @@ static int init_camera_only(ps_app_t *app, const ps_app_opts_t *opts, char *err,
     int rc = ps_config_load_board(app->board_path, &app->board, err, len);
     if (rc == 0 && app->board.kind == PS_BOARD_SIM)
         rc = load_configs(app, opts, err, len);
-    if (rc == 0 && !app->board.has_camera) {
-        snprintf(err, len, "%s: the board has no camera: section (docs/config.md)",
+    if (rc == 0 && !app->board.has_perception) {
+        snprintf(err, len,
+                 "%s: the board has no camera perception (camera.source; docs/config.md)",
                  app->board_path);
         rc = -PS_ERR_CONFIG;
     }
@@ -502,6 +504,8 @@ int ps_app_init(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t err_
     if (opts->is_camera_only)
         return init_camera_only(app, opts, err, err_len);
     int rc = load_configs(app, opts, err, err_len);
+    for (uint32_t b = 0; rc == 0 && b < app->board.n_buses; b++)
+        memcpy(app->bus_names[b], app->board.buses[b].ifname, PS_NAME_LEN);
     if (rc == 0)
         rc = ps_app_plan_buses(&app->board, &app->robot, &app->plan, err, err_len);
     if (rc == 0)
@@ -509,6 +513,50 @@ int ps_app_init(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t err_
     if (rc < 0 && rc != -PS_ERR_BUS_BUDGET)
         ps_app_deinit(app);
     return rc;
+}
+
+void ps_app_recorder_cfg(const ps_app_t *app, ps_recorder_cfg_t *out)
+{
+    out->servo_hz = app->robot.control.servo_hz;
+    out->board_name = app->board.name;
+    out->robot_name = app->robot.name;
+    out->scenario_path = app->scenario_path[0] ? app->scenario_path : NULL;
+    out->joint_name = (const char(*)[PS_NAME_LEN])app->robot.joint_name;
+    out->n_joints = app->robot.n_joints;
+    out->bus_name = (const char(*)[PS_NAME_LEN])app->bus_names;
+    out->n_buses = app->board.n_buses;
+    out->foot_length_m = app->robot.kin.foot_length_m;
+    out->foot_width_m = app->robot.kin.foot_width_m;
+    out->clock_name = app->is_lockstep || app->is_replay ? "simulated (lockstep or replay), ns"
+                                                         : "CLOCK_MONOTONIC, ns";
+}
+
+/* The plant's truth for the recorder, on the loop thread: no lock. */
+static bool read_sim_truth(void *ctx, ps_rec_truth_t *out)
+{
+    ps_app_t *app = ctx;
+    ps_sim_truth_t t;
+    if (app->sim == NULL || !ps_sim_read_truth_rt(app->sim, &t))
+        return false;
+    memset(out, 0, sizeof(*out));
+    out->t_s = (float)t.t_s;
+    for (int k = 0; k < 3; k++) {
+        out->com_m[k] = (float)t.com_m[k];
+        out->pelvis_m[k] = (float)t.pelvis_m[k];
+        out->push_force_n[k] = (float)t.push_force_n[k];
+    }
+    out->head_height_m = (float)t.head_height_m;
+    out->tau_abs_sum_nm = (float)t.tau_abs_sum_nm;
+    out->is_fallen = t.is_fallen;
+    out->is_drive_power_on = t.is_drive_power_on;
+    return true;
+}
+
+void ps_app_attach_recorder(ps_app_t *app, ps_recorder_t *rec)
+{
+    app->loop.cfg.tap = (ps_loop_tap_t){.on_tick = ps_recorder_on_tick, .ctx = rec};
+    if (app->sim != NULL)
+        ps_recorder_set_truth(rec, (ps_rec_truth_src_t){.read = read_sim_truth, .ctx = app});
 }
 
 void ps_app_deinit(ps_app_t *app)

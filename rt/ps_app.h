@@ -32,6 +32,7 @@
 #include "ps_config_sim.h"
 #include "ps_loop.h"
 #include "ps_perception.h"
+#include "ps_recorder.h"
 #include "ps_ring.h"
 
 #define PS_APP_RING_SLOTS   1024u
@@ -83,6 +84,7 @@ typedef struct {
     ps_camera_sim_t *camera_sim;
     ps_perception_t perception;
     bool has_perception;
+    char bus_names[PS_MAX_BUSES][PS_NAME_LEN]; /**< the board's interfaces, by bus */
     ps_stand_t stand;
     ps_ring_t ring;
     ps_loop_rec_t ring_storage[PS_APP_RING_SLOTS];
@@ -138,6 +140,16 @@ void ps_app_bus_filters(const ps_robot_cfg_t *r, uint32_t bus_idx, ps_can_socket
  *  in one tick (every joint's command frames plus a mode request each), at
  *  least 16.  @rt INIT */
 uint32_t ps_app_min_txqueuelen(const ps_robot_cfg_t *r, uint32_t bus_idx);
+
+/** The recorder's description of the run from the loaded configuration
+ *  (board, robot, scenario, joint and bus names, servo rate, foot size,
+ *  clock); the caller sets paths, windows and compression.  @rt INIT */
+void ps_app_recorder_cfg(const ps_app_t *app, ps_recorder_cfg_t *out);
+
+/** Tap the loop into the recorder (every tick) and, on the simulation, give
+ *  it the plant's ground truth (lock-free, ps_sim_read_truth_rt).
+ *  @pre both initialised, loop not running  @rt INIT */
+void ps_app_attach_recorder(ps_app_t *app, ps_recorder_t *rec);
 
 /** Stop camera perception, free the sim, close sockets and GPIO lines
  *  (heartbeat low). Safe twice and on a failed init.  @rt INIT */

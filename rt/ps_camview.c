@@ -298,7 +298,7 @@ static int write_text(const char *path, const char *text)
 
 static int report(ps_app_t *app, const camview_opts_t *o)
 {
-    const ps_camera_cfg_t *cc = &app->board.camera.camera;
+    const ps_camera_cfg_t *cc = &app->board.perception.camera;
     ps_perception_stats_t st;
     ps_perception_get_stats(&app->perception, &st);
     const double span_s = ps_ns_to_s(st.t_last_mono_ns - st.t_first_mono_ns);
@@ -398,7 +398,7 @@ int ps_camview_main(int argc, char **argv, const char *data_dir)
         fprintf(stderr, "pushstep camera: %s\n", err);
         return rc == -PS_ERR_CONFIG || rc == -ENOENT ? 2 : 1;
     }
-    const ps_camera_cfg_t *cc = &app.board.camera.camera;
+    const ps_camera_cfg_t *cc = &app.board.perception.camera;
     printf("camera: %s source on board %s (%s), %ux%u%s%s at %.1f frames/s; %.1f s\n",
            ps_camera_source_name(cc->source), app.board.name, app.board_path, cc->width,
            cc->height, cc->source == PS_CAMERA_SRC_LIBCAMERA ? " " : "",

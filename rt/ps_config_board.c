@@ -25,6 +25,7 @@ typedef struct {
     uint32_t bitrate;
     bool *is_fd;
     uint32_t *data_bitrate;
+    ps_canbus_ctrl_t controller; /* absent: 0, any */
 } bus_raw_t;
 
 /* The gpio mapping as written: each line by offset or by name, so the
@@ -40,6 +41,9 @@ typedef struct {
     char led_name[PS_NAME_LEN];
     ps_gpio_bias_t estop_bias;
     uint32_t estop_debounce_us;
+    uint32_t *button_line; /* the record button: optional, line or name */
+    char button_name[PS_NAME_LEN];
+    bool is_button_active_low;
 } gpio_raw_t;
 
 /* The optional `camera:` section as written (docs/config.md). */
@@ -51,16 +55,19 @@ typedef struct {
     float rpy_rad[3];
 } pose_raw_t;
 typedef struct {
-    ps_camera_source_t source;
-    char id[PS_PATH_LEN];  /* libcamera only; empty when absent */
-    char dir[PS_PATH_LEN]; /* files only; empty when absent */
-    uint32_t width, height;
-    ps_camera_format_t *format; /* libcamera only; NULL when absent */
-    float fps;
-    intrinsics_raw_t intrinsics;
-    pose_raw_t pose;
-    float tag_size_m;
-    float max_age_s;
+    char sensor[PS_NAME_LEN]; /* for pushstep doctor; empty when absent */
+    /* camera perception: source, then the rest (required with it, refused
+     * without it); NULL or empty when absent */
+    ps_camera_source_t *source;
+    char id[PS_PATH_LEN];  /* libcamera only */
+    char dir[PS_PATH_LEN]; /* files only */
+    uint32_t *width, *height;
+    ps_camera_format_t *format; /* libcamera only */
+    float *fps;
+    intrinsics_raw_t *intrinsics;
+    pose_raw_t *pose;
+    float *tag_size_m;
+    float *max_age_s;
     uint32_t *threads;
     float *decimate;
     float *min_margin;
@@ -87,6 +94,12 @@ static const cyaml_strval_t GPIO_BIASES[] = {
     {"pull-up", PS_GPIO_BIAS_PULL_UP},
     {"pull-down", PS_GPIO_BIAS_PULL_DOWN},
     {"disabled", PS_GPIO_BIAS_DISABLED},
+};
+
+static const cyaml_strval_t CONTROLLERS[] = {
+    {"mcp2515", PS_CANBUS_CTRL_MCP2515}, {"mcp251xfd", PS_CANBUS_CTRL_MCP251XFD},
+    {"mttcan", PS_CANBUS_CTRL_MTTCAN},   {"m_can", PS_CANBUS_CTRL_M_CAN},
+    {"gs_usb", PS_CANBUS_CTRL_GS_USB},   {"virtual", PS_CANBUS_CTRL_VIRTUAL},
 };
 
 static const cyaml_strval_t CAMERA_SOURCES[] = {
@@ -120,20 +133,21 @@ static const cyaml_schema_field_t POSE_FIELDS[] = {
     CYAML_FIELD_END,
 };
 static const cyaml_schema_field_t CAMERA_FIELDS[] = {
-    CYAML_FIELD_ENUM("source", CYAML_FLAG_STRICT, camera_raw_t, source, CAMERA_SOURCES,
-                     CYAML_ARRAY_LEN(CAMERA_SOURCES)),
+    CYAML_FIELD_STRING("sensor", CYAML_FLAG_OPTIONAL, camera_raw_t, sensor, 1),
+    CYAML_FIELD_ENUM_PTR("source", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, camera_raw_t, source,
+                         CAMERA_SOURCES, CYAML_ARRAY_LEN(CAMERA_SOURCES)),
     CYAML_FIELD_STRING("id", CYAML_FLAG_OPTIONAL, camera_raw_t, id, 1),
     CYAML_FIELD_STRING("dir", CYAML_FLAG_OPTIONAL, camera_raw_t, dir, 1),
-    CYAML_FIELD_UINT("width", CYAML_FLAG_DEFAULT, camera_raw_t, width),
-    CYAML_FIELD_UINT("height", CYAML_FLAG_DEFAULT, camera_raw_t, height),
+    CYAML_FIELD_UINT_PTR("width", CYAML_FLAG_OPTIONAL, camera_raw_t, width),
+    CYAML_FIELD_UINT_PTR("height", CYAML_FLAG_OPTIONAL, camera_raw_t, height),
     CYAML_FIELD_ENUM_PTR("format", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, camera_raw_t, format,
                          CAMERA_FORMATS, CYAML_ARRAY_LEN(CAMERA_FORMATS)),
-    CYAML_FIELD_FLOAT("fps", CYAML_FLAG_DEFAULT, camera_raw_t, fps),
-    CYAML_FIELD_MAPPING("intrinsics", CYAML_FLAG_DEFAULT, camera_raw_t, intrinsics,
-                        INTRINSICS_FIELDS),
-    CYAML_FIELD_MAPPING("pose", CYAML_FLAG_DEFAULT, camera_raw_t, pose, POSE_FIELDS),
-    CYAML_FIELD_FLOAT("tag_size_m", CYAML_FLAG_DEFAULT, camera_raw_t, tag_size_m),
-    CYAML_FIELD_FLOAT("max_age_s", CYAML_FLAG_DEFAULT, camera_raw_t, max_age_s),
+    CYAML_FIELD_FLOAT_PTR("fps", CYAML_FLAG_OPTIONAL, camera_raw_t, fps),
+    CYAML_FIELD_MAPPING_PTR("intrinsics", CYAML_FLAG_OPTIONAL, camera_raw_t, intrinsics,
+                            INTRINSICS_FIELDS),
+    CYAML_FIELD_MAPPING_PTR("pose", CYAML_FLAG_OPTIONAL, camera_raw_t, pose, POSE_FIELDS),
+    CYAML_FIELD_FLOAT_PTR("tag_size_m", CYAML_FLAG_OPTIONAL, camera_raw_t, tag_size_m),
+    CYAML_FIELD_FLOAT_PTR("max_age_s", CYAML_FLAG_OPTIONAL, camera_raw_t, max_age_s),
     CYAML_FIELD_UINT_PTR("threads", CYAML_FLAG_OPTIONAL, camera_raw_t, threads),
     CYAML_FIELD_FLOAT_PTR("decimate", CYAML_FLAG_OPTIONAL, camera_raw_t, decimate),
     CYAML_FIELD_FLOAT_PTR("min_margin", CYAML_FLAG_OPTIONAL, camera_raw_t, min_margin),
@@ -145,6 +159,8 @@ static const cyaml_schema_field_t BUS_FIELDS[] = {
     CYAML_FIELD_UINT("bitrate", CYAML_FLAG_DEFAULT, bus_raw_t, bitrate),
     CYAML_FIELD_BOOL_PTR("fd", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, bus_raw_t, is_fd),
     CYAML_FIELD_UINT_PTR("data_bitrate", CYAML_FLAG_OPTIONAL, bus_raw_t, data_bitrate),
+    CYAML_FIELD_ENUM("controller", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, bus_raw_t, controller,
+                     CONTROLLERS, CYAML_ARRAY_LEN(CONTROLLERS)),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_value_t BUS_SCHEMA = {
@@ -164,6 +180,10 @@ static const cyaml_schema_field_t GPIO_FIELDS[] = {
     CYAML_FIELD_ENUM("estop_bias", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, gpio_raw_t, estop_bias,
                      GPIO_BIASES, CYAML_ARRAY_LEN(GPIO_BIASES)),
     CYAML_FIELD_UINT("estop_debounce_us", CYAML_FLAG_OPTIONAL, gpio_raw_t, estop_debounce_us),
+    CYAML_FIELD_UINT_PTR("record_button_line", CYAML_FLAG_OPTIONAL, gpio_raw_t, button_line),
+    CYAML_FIELD_STRING("record_button_name", CYAML_FLAG_OPTIONAL, gpio_raw_t, button_name, 1),
+    CYAML_FIELD_BOOL("record_button_active_low", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT,
+                     gpio_raw_t, is_button_active_low),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_field_t RT_FIELDS[] = {
@@ -182,8 +202,7 @@ static const cyaml_schema_field_t BOARD_FIELDS[] = {
                                &BUS_SCHEMA, 1, PS_MAX_BUSES),
     CYAML_FIELD_MAPPING("gpio", CYAML_FLAG_DEFAULT, board_raw_t, gpio, GPIO_FIELDS),
     CYAML_FIELD_MAPPING("rt", CYAML_FLAG_DEFAULT, board_raw_t, rt, RT_FIELDS),
-    CYAML_FIELD_MAPPING_PTR("camera", CYAML_FLAG_POINTER | CYAML_FLAG_OPTIONAL, board_raw_t, camera,
-                            CAMERA_FIELDS),
+    CYAML_FIELD_MAPPING_PTR("camera", CYAML_FLAG_OPTIONAL, board_raw_t, camera, CAMERA_FIELDS),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_value_t BOARD_SCHEMA = {
@@ -202,47 +221,49 @@ static const ps_cfg_rule_t BOARD_RANGES[] = {
     PS_CFG_RULE_U32(0, 0, "gpio.estop_line", ps_board_cfg_t, gpio.estop_line, 0.0, MAX_GPIO_LINE),
     PS_CFG_RULE_U32(0, 0, "gpio.enable_line", ps_board_cfg_t, gpio.enable_line, 0.0, MAX_GPIO_LINE),
     PS_CFG_RULE_U32(0, 0, "gpio.led_line", ps_board_cfg_t, gpio.led_line, 0.0, MAX_GPIO_LINE),
+    PS_CFG_RULE_U32(0, 0, "gpio.record_button_line", ps_board_cfg_t, gpio.button_line, 0.0,
+                    MAX_GPIO_LINE),
     PS_CFG_RULE_U32(0, 0, "gpio.estop_debounce_us", ps_board_cfg_t, gpio.estop_debounce_us, 0.0,
                     PS_GPIO_DEBOUNCE_MAX_US),
     PS_CFG_RULE_U32(0, 0, "rt.priority", ps_board_cfg_t, rt.priority, 0.0, 98.0),
     PS_CFG_RULE_I32(0, 0, "rt.loop_cpu", ps_board_cfg_t, rt.loop_cpu, -1.0, 1023.0),
     PS_CFG_RULE_I32(0, 0, "rt.plant_cpu", ps_board_cfg_t, rt.plant_cpu, -1.0, 1023.0),
     PS_CFG_RULE_I32(0, 0, "rt.worker_cpu", ps_board_cfg_t, rt.worker_cpu, -1.0, 1023.0),
-    /* The camera's (keys "camera."): checked only when the board has a
-     * `camera:` section. */
-    PS_CFG_RULE_U32(0, 0, "camera.width", ps_board_cfg_t, camera.camera.width, 16.0,
+    /* Camera perception's (keys "camera."): checked only when the board's
+     * camera has a source. */
+    PS_CFG_RULE_U32(0, 0, "camera.width", ps_board_cfg_t, perception.camera.width, 16.0,
                     PS_CAMERA_MAX_WIDTH),
-    PS_CFG_RULE_U32(0, 0, "camera.height", ps_board_cfg_t, camera.camera.height, 16.0,
+    PS_CFG_RULE_U32(0, 0, "camera.height", ps_board_cfg_t, perception.camera.height, 16.0,
                     PS_CAMERA_MAX_HEIGHT),
-    PS_CFG_RULE_F32(0, PS_CFG_RANGE_OPEN_MIN, "camera.fps", ps_board_cfg_t, camera.camera.fps, 0.0,
+    PS_CFG_RULE_F32(0, PS_CFG_RANGE_OPEN_MIN, "camera.fps", ps_board_cfg_t, perception.camera.fps, 0.0,
                     240.0),
     PS_CFG_RULE_F32(0, PS_CFG_RANGE_OPEN_MIN, "camera.intrinsics.fx_px", ps_board_cfg_t,
-                    camera.tags.k.fx_px, 0.0, 100000.0),
+                    perception.tags.k.fx_px, 0.0, 100000.0),
     PS_CFG_RULE_F32(0, PS_CFG_RANGE_OPEN_MIN, "camera.intrinsics.fy_px", ps_board_cfg_t,
-                    camera.tags.k.fy_px, 0.0, 100000.0),
-    PS_CFG_RULE_F32(0, 0, "camera.intrinsics.cx_px", ps_board_cfg_t, camera.tags.k.cx_px, 0.0,
+                    perception.tags.k.fy_px, 0.0, 100000.0),
+    PS_CFG_RULE_F32(0, 0, "camera.intrinsics.cx_px", ps_board_cfg_t, perception.tags.k.cx_px, 0.0,
                     PS_CAMERA_MAX_WIDTH),
-    PS_CFG_RULE_F32(0, 0, "camera.intrinsics.cy_px", ps_board_cfg_t, camera.tags.k.cy_px, 0.0,
+    PS_CFG_RULE_F32(0, 0, "camera.intrinsics.cy_px", ps_board_cfg_t, perception.tags.k.cy_px, 0.0,
                     PS_CAMERA_MAX_HEIGHT),
-    PS_CFG_RULE_F32(0, 0, "camera.pose.xyz_m[0]", ps_board_cfg_t, camera.tags.cam_pos_m[0], -5.0,
+    PS_CFG_RULE_F32(0, 0, "camera.pose.xyz_m[0]", ps_board_cfg_t, perception.tags.cam_pos_m[0], -5.0,
                     5.0),
-    PS_CFG_RULE_F32(0, 0, "camera.pose.xyz_m[1]", ps_board_cfg_t, camera.tags.cam_pos_m[1], -5.0,
+    PS_CFG_RULE_F32(0, 0, "camera.pose.xyz_m[1]", ps_board_cfg_t, perception.tags.cam_pos_m[1], -5.0,
                     5.0),
-    PS_CFG_RULE_F32(0, 0, "camera.pose.xyz_m[2]", ps_board_cfg_t, camera.tags.cam_pos_m[2], -5.0,
+    PS_CFG_RULE_F32(0, 0, "camera.pose.xyz_m[2]", ps_board_cfg_t, perception.tags.cam_pos_m[2], -5.0,
                     5.0),
-    PS_CFG_RULE_F32(0, 0, "camera.pose.rpy_rad[0]", ps_board_cfg_t, camera.tags.cam_rpy_rad[0],
+    PS_CFG_RULE_F32(0, 0, "camera.pose.rpy_rad[0]", ps_board_cfg_t, perception.tags.cam_rpy_rad[0],
                     -M_PI, M_PI),
-    PS_CFG_RULE_F32(0, 0, "camera.pose.rpy_rad[1]", ps_board_cfg_t, camera.tags.cam_rpy_rad[1],
+    PS_CFG_RULE_F32(0, 0, "camera.pose.rpy_rad[1]", ps_board_cfg_t, perception.tags.cam_rpy_rad[1],
                     -M_PI_2, M_PI_2),
-    PS_CFG_RULE_F32(0, 0, "camera.pose.rpy_rad[2]", ps_board_cfg_t, camera.tags.cam_rpy_rad[2],
+    PS_CFG_RULE_F32(0, 0, "camera.pose.rpy_rad[2]", ps_board_cfg_t, perception.tags.cam_rpy_rad[2],
                     -M_PI, M_PI),
     PS_CFG_RULE_F32(0, PS_CFG_RANGE_OPEN_MIN, "camera.tag_size_m", ps_board_cfg_t,
-                    camera.tags.tag_size_m, 0.0, 2.0),
+                    perception.tags.tag_size_m, 0.0, 2.0),
     PS_CFG_RULE_F32(0, PS_CFG_RANGE_OPEN_MIN, "camera.max_age_s", ps_board_cfg_t,
-                    camera.max_age_s, 0.0, 10.0),
-    PS_CFG_RULE_U32(0, 0, "camera.threads", ps_board_cfg_t, camera.tags.n_threads, 1.0, 16.0),
-    PS_CFG_RULE_F32(0, 0, "camera.decimate", ps_board_cfg_t, camera.tags.decimate, 1.0, 8.0),
-    PS_CFG_RULE_F32(0, 0, "camera.min_margin", ps_board_cfg_t, camera.tags.min_margin, 0.0, 255.0),
+                    perception.max_age_s, 0.0, 10.0),
+    PS_CFG_RULE_U32(0, 0, "camera.threads", ps_board_cfg_t, perception.tags.n_threads, 1.0, 16.0),
+    PS_CFG_RULE_F32(0, 0, "camera.decimate", ps_board_cfg_t, perception.tags.decimate, 1.0, 8.0),
+    PS_CFG_RULE_F32(0, 0, "camera.min_margin", ps_board_cfg_t, perception.tags.min_margin, 0.0, 255.0),
 };
 
 /* Which optional camera fields were written (kept past the raw data's free). */
@@ -253,7 +274,7 @@ typedef struct {
 /* The camera section against itself and the board (after its ranges). */
 static int check_camera(ps_cfg_ctx_t *c, const ps_board_cfg_t *b, const camera_written_t *r)
 {
-    const ps_perception_cfg_t *cam = &b->camera;
+    const ps_perception_cfg_t *cam = &b->perception;
     const ps_camera_source_t src = cam->camera.source;
     const char *name = ps_camera_source_name(src);
     if (src == PS_CAMERA_SRC_LIBCAMERA && !r->has_format)
@@ -294,37 +315,78 @@ static int check_camera(ps_cfg_ctx_t *c, const ps_board_cfg_t *b, const camera_w
     return 0;
 }
 
+/* Camera perception's fields: every one needed with camera.source, none
+ * without it (a camera: with its sensor alone is for pushstep doctor). */
+static int camera_fields_present(ps_cfg_ctx_t *c, const camera_raw_t *r)
+{
+    const struct {
+        const char *key;
+        bool is_there;
+        bool is_required;
+    } f[] = {
+        {"width", r->width != NULL, true},
+        {"height", r->height != NULL, true},
+        {"fps", r->fps != NULL, true},
+        {"intrinsics", r->intrinsics != NULL, true},
+        {"pose", r->pose != NULL, true},
+        {"tag_size_m", r->tag_size_m != NULL, true},
+        {"max_age_s", r->max_age_s != NULL, true},
+        {"id", r->id[0] != '\0', false},
+        {"dir", r->dir[0] != '\0', false},
+        {"format", r->format != NULL, false},
+        {"threads", r->threads != NULL, false},
+        {"decimate", r->decimate != NULL, false},
+        {"min_margin", r->min_margin != NULL, false},
+    };
+    /* camera: {} names neither a sensor (for doctor) nor a source */
+    if (r->source == NULL && r->sensor[0] == '\0')
+        return ps_cfg_fail_field(c, "camera", "missing field \"sensor\"");
+    char field[PS_CFG_FIELD_PATH_LEN];
+    for (size_t i = 0; i < sizeof(f) / sizeof(f[0]); i++) {
+        if (r->source == NULL && f[i].is_there) {
+            (void)snprintf(field, sizeof(field), "camera.%s", f[i].key);
+            return ps_cfg_fail_field(c, field,
+                                     "camera perception's fields need camera.source (libcamera, "
+                                     "files or sim)");
+        }
+        if (r->source != NULL && f[i].is_required && !f[i].is_there)
+            return ps_cfg_fail_field(c, "camera", "missing field \"%s\"", f[i].key);
+    }
+    return 0;
+}
+
+/* @pre camera_fields_present passed and r->source != NULL */
 static void camera_from_raw(const camera_raw_t *r, ps_perception_cfg_t *out)
 {
     memset(out, 0, sizeof(*out));
     ps_camera_cfg_t *cc = &out->camera;
-    cc->source = r->source;
+    cc->source = *r->source;
     memcpy(cc->id, r->id, sizeof(cc->id));
     memcpy(cc->dir, r->dir, sizeof(cc->dir));
-    cc->width = r->width;
-    cc->height = r->height;
+    cc->width = *r->width;
+    cc->height = *r->height;
     cc->format = r->format != NULL ? *r->format : PS_PIX_R8;
-    cc->fps = r->fps;
+    cc->fps = *r->fps;
     ps_tags_cfg_t *t = &out->tags;
-    t->k = (ps_camera_intrinsics_t){r->intrinsics.fx_px, r->intrinsics.fy_px, r->intrinsics.cx_px,
-                                    r->intrinsics.cy_px};
-    memcpy(t->cam_pos_m, r->pose.xyz_m, sizeof(t->cam_pos_m));
-    memcpy(t->cam_rpy_rad, r->pose.rpy_rad, sizeof(t->cam_rpy_rad));
-    t->tag_size_m = r->tag_size_m;
+    t->k = (ps_camera_intrinsics_t){r->intrinsics->fx_px, r->intrinsics->fy_px,
+                                    r->intrinsics->cx_px, r->intrinsics->cy_px};
+    memcpy(t->cam_pos_m, r->pose->xyz_m, sizeof(t->cam_pos_m));
+    memcpy(t->cam_rpy_rad, r->pose->rpy_rad, sizeof(t->cam_rpy_rad));
+    t->tag_size_m = *r->tag_size_m;
     t->n_threads = r->threads != NULL ? *r->threads : 1u;
     t->decimate = r->decimate != NULL ? *r->decimate : 1.0f;
     t->min_margin = r->min_margin != NULL ? *r->min_margin : PS_BOARD_CAMERA_MIN_MARGIN;
-    out->max_age_s = r->max_age_s;
+    out->max_age_s = *r->max_age_s;
 }
 
 static int check_board(ps_cfg_ctx_t *c, const ps_board_cfg_t *b)
 {
-    /* The camera's rules only with a camera section: without one, the table
-     * less the rules whose key starts with "camera.". */
+    /* Camera perception's rules only with camera.source: without it, the
+     * table less the rules whose key starts with "camera.". */
     ps_cfg_rule_t rules[PS_CFG_COUNT(BOARD_RANGES)];
     size_t n = 0;
     for (size_t i = 0; i < PS_CFG_COUNT(BOARD_RANGES); i++)
-        if (b->has_camera || strncmp(BOARD_RANGES[i].key, "camera.", 7) != 0)
+        if (b->has_perception || strncmp(BOARD_RANGES[i].key, "camera.", 7) != 0)
             rules[n++] = BOARD_RANGES[i];
     const ps_cfg_rule_t *all = c->rules;
     const size_t n_all = c->n_rules;
@@ -343,6 +405,11 @@ static int check_board(ps_cfg_ctx_t *c, const ps_board_cfg_t *b)
         if (!bus->is_fd && bus->data_bitrate != bus->bitrate) {
             (void)snprintf(field, sizeof(field), "buses[%u].data_bitrate", i);
             return ps_cfg_fail_field(c, field, "a data bit rate needs a CAN FD bus (fd: true)");
+        }
+        const ps_canbus_ctrl_info_t *ci = ps_canbus_ctrl_info(bus->controller);
+        if (bus->is_fd && !ci->is_fd_capable) {
+            (void)snprintf(field, sizeof(field), "buses[%u].fd", i);
+            return ps_cfg_fail_field(c, field, "controller %s is classical CAN only", ci->name);
         }
         if (bus->is_fd && (bus->data_bitrate < bus->bitrate || bus->data_bitrate > 8000000u)) {
             (void)snprintf(field, sizeof(field), "buses[%u].data_bitrate", i);
@@ -369,8 +436,11 @@ static int check_board(ps_cfg_ctx_t *c, const ps_board_cfg_t *b)
         {"gpio.estop_line", "gpio.estop_name", b->gpio.estop_line, b->gpio.estop_name},
         {"gpio.enable_line", "gpio.enable_name", b->gpio.enable_line, b->gpio.enable_name},
         {"gpio.led_line", "gpio.led_name", b->gpio.led_line, b->gpio.led_name},
+        {"gpio.record_button_line", "gpio.record_button_name", b->gpio.button_line,
+         b->gpio.button_name},
     };
-    for (size_t i = 1; i < sizeof(lines) / sizeof(lines[0]); i++) {
+    const size_t n_lines = sizeof(lines) / sizeof(lines[0]) - (b->gpio.has_button ? 0u : 1u);
+    for (size_t i = 1; i < n_lines; i++) {
         for (size_t k = 0; k < i; k++) {
             const bool is_named_i = lines[i].name[0] != '\0';
             const bool is_named_k = lines[k].name[0] != '\0';
@@ -416,6 +486,13 @@ static int gpio_from_raw(ps_cfg_ctx_t *c, const gpio_raw_t *r, ps_gpio_cfg_t *ou
         rc = gpio_line_from_raw(c, "enable", r->enable_line, r->enable_name, &out->enable_line);
     if (rc == 0)
         rc = gpio_line_from_raw(c, "led", r->led_line, r->led_name, &out->led_line);
+    /* the record button is optional: no line and no name, no button */
+    out->has_button = r->button_line != NULL || r->button_name[0] != '\0';
+    out->is_button_active_low = r->is_button_active_low;
+    memcpy(out->button_name, r->button_name, sizeof(out->button_name));
+    if (rc == 0 && out->has_button)
+        rc = gpio_line_from_raw(c, "record_button", r->button_line, r->button_name,
+                                &out->button_line);
     return rc;
 }
 
@@ -445,15 +522,22 @@ int ps_config_load_board(const char *path, ps_board_cfg_t *out, char *err, size_
             b.buses[i].is_fd = r->is_fd != NULL && *r->is_fd;
             /* Without FD the data phase is the arbitration phase. */
             b.buses[i].data_bitrate = r->data_bitrate != NULL ? *r->data_bitrate : r->bitrate;
+            b.buses[i].controller = r->controller;
             if (r->data_bitrate != NULL && !b.buses[i].is_fd && dbr_without_fd < 0)
                 dbr_without_fd = (int)i;
         }
         b.rt = raw->rt;
         rc = gpio_from_raw(&c, &raw->gpio, &b.gpio);
         b.has_camera = raw->camera != NULL;
-        if (b.has_camera)
-            camera_from_raw(raw->camera, &b.camera);
-        b.camera_line = ps_cfg_line_of(&c, "camera");
+        if (b.has_camera) {
+            memcpy(b.camera.sensor, raw->camera->sensor, sizeof(b.camera.sensor));
+            b.camera_line = ps_cfg_line_of(&c, "camera");
+            if (rc == 0)
+                rc = camera_fields_present(&c, raw->camera);
+            b.has_perception = rc == 0 && raw->camera->source != NULL;
+            if (b.has_perception)
+                camera_from_raw(raw->camera, &b.perception);
+        }
     }
     camera_written_t cam_written = {false, false, false}; /* check_camera's, past the free */
     if (rc == 0 && raw->camera != NULL)
@@ -468,7 +552,7 @@ int ps_config_load_board(const char *path, ps_board_cfg_t *out, char *err, size_
     }
     if (rc == 0)
         rc = check_board(&c, &b);
-    if (rc == 0 && b.has_camera)
+    if (rc == 0 && b.has_perception)
         rc = check_camera(&c, &b, &cam_written);
     if (rc == 0)
         *out = b;

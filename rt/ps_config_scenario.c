@@ -31,6 +31,7 @@ static const cyaml_strval_t EVENT_KINDS[] = {
     {"harness_release", PS_EVENT_HARNESS_RELEASE},
     {"drop_replies", PS_EVENT_DROP_REPLIES},
     {"drive_fault", PS_EVENT_DRIVE_FAULT},
+    {"record_button", PS_EVENT_RECORD_BUTTON},
 };
 static_assert(sizeof(EVENT_KINDS) / sizeof(EVENT_KINDS[0]) == PS_EVENT_COUNT,
               "one YAML name per event kind");

@@ -19,6 +19,7 @@ static const char *const STAGE_NAMES[PS_STAGE_COUNT] = {
     [PS_STAGE_TICK_PLAIN] = "tick_plain",
     [PS_STAGE_TICK_POLICY] = "tick_policy",
     [PS_STAGE_REACTION] = "reaction",
+    [PS_STAGE_TAP] = "tap",
 };
 _Static_assert(sizeof(STAGE_NAMES) / sizeof(STAGE_NAMES[0]) == PS_STAGE_COUNT,
                "one name per stage");
@@ -80,7 +81,8 @@ int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg)
     if (cfg->gpio.ops == NULL || !is_schedule_valid(cfg->board, cfg->robot) ||
         !(c->ramp_s > 0.0f) || !(c->damping_s > 0.0f))
         return -EINVAL;
-    if (cfg->neighbours != NULL && (!cfg->board->has_camera || !(cfg->board->camera.max_age_s > 0)))
+    if (cfg->neighbours != NULL && (!cfg->board->has_perception ||
+                                     !(cfg->board->perception.max_age_s > 0)))
         return -EINVAL;
 
     memset(loop, 0, sizeof(*loop)); /* also touches every page of the struct */
@@ -91,7 +93,7 @@ int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg)
         loop->cfg.deadline_clock = cfg->clock;
     loop->period_ns = PS_NS_PER_S / c->servo_hz;
     loop->neighbours_max_age_ns =
-        cfg->neighbours != NULL ? ps_s_to_ns((double)cfg->board->camera.max_age_s) : 0;
+        cfg->neighbours != NULL ? ps_s_to_ns((double)cfg->board->perception.max_age_s) : 0;
     loop->policy_div = c->servo_hz / c->policy_hz;
     loop->state = PS_SM_STANDBY;
     atomic_init(&loop->published_state, (int)PS_SM_STANDBY);
@@ -223,6 +225,7 @@ static void read_bus(ps_loop_t *loop, uint32_t bus_idx)
         for (int i = 0; i < n; i++)
             take_frame(loop, bus_idx, &loop->rx_buf[i]);
         tap_frames(loop, bus_idx, loop->rx_buf, (size_t)n, false);
+        loop->last.n_rx[bus_idx] = (uint16_t)(loop->last.n_rx[bus_idx] + (uint32_t)n);
         if ((size_t)n < cap)
             return;
     }
@@ -240,6 +243,7 @@ static void read_bus_states(ps_loop_t *loop)
         }
         if (st.mode == PS_CAN_BUS_OFF)
             loop->bus_off_mask |= 1u << b;
+        loop->last.bus[b] = st;
     }
 }
 
@@ -258,6 +262,7 @@ static void read_neighbours(ps_loop_t *loop)
 static void stage_read(ps_loop_t *loop)
 {
     loop->newest_reply_rx_ns = 0;
+    memset(loop->last.n_rx, 0, sizeof(loop->last.n_rx));
     for (uint32_t b = 0; b < loop->cfg.board->n_buses; b++)
         read_bus(loop, b);
     read_bus_states(loop);
@@ -297,6 +302,8 @@ static void stage_policy(ps_loop_t *loop, uint64_t tick)
                                         &loop->targets);
     int64_t dt = ps_clock_now_ns(perf) - t0, dt_dl = ps_clock_now_ns(dl) - t0_dl;
     ps_perf_record(&loop->perf[PS_STAGE_POLICY], dt);
+    loop->last.is_policy_run = true;
+    loop->last.policy_dt_ns = dt;
     loop->counters.n_policy_runs++;
     loop->has_policy_late = dt_dl > ps_s_to_ns(loop->cfg.robot->control.policy_deadline_s);
     if (loop->has_policy_late)
@@ -489,6 +496,12 @@ static void stage_state_machine(ps_loop_t *loop)
         cond &= ~(uint32_t)PS_SM_C_FALL; /* a limp robot on the floor is not news */
     else if (cond & PS_SM_C_FALL)
         loop->counters.has_fallen = true;
+    loop->last.cond = cond;
+    loop->last.is_estop_input = is_estop_pressed;
+    bool is_button = false;
+    if (ps_gpio_read_button(&loop->cfg.gpio, &is_button) < 0)
+        loop->counters.n_gpio_errors++;
+    loop->last.is_button_pressed = is_button;
 
     ps_sm_state_t next = ps_sm_next(loop->state, cond);
     if (next == loop->state)
@@ -602,6 +615,8 @@ static void servo_joint(ps_loop_t *loop, uint32_t j, const ps_servo_mode_t *mode
         }
     }
     (void)queue_frames(loop, a->bus_idx, f, n, -1, false); /* room for every joint */
+    loop->last.cmd[j] = cmd;
+    loop->last.is_cmd_sent[j] = true;
 }
 
 /* The servo mode of each safety state (the servo layer knows no states). */
@@ -645,6 +660,7 @@ static void stage_servo(ps_loop_t *loop, uint64_t tick)
     for (uint32_t b = 0; b < loop->cfg.board->n_buses; b++)
         loop->n_tx[b] = 0;
     loop->has_cmd_fault = false; /* the state machine saw last tick's */
+    memset(loop->last.is_cmd_sent, 0, sizeof(loop->last.is_cmd_sent));
     for (uint32_t j = 0; j < r->n_joints; j++) {
         if (!ps_canbus_is_due(tick, r->act[j].rate_div, loop->cfg.plan->phase[j]))
             continue;
@@ -656,6 +672,7 @@ static void stage_servo(ps_loop_t *loop, uint64_t tick)
 static void stage_write(ps_loop_t *loop)
 {
     bool has_refused = false;
+    memset(loop->last.n_tx, 0, sizeof(loop->last.n_tx));
     for (uint32_t b = 0; b < loop->cfg.board->n_buses; b++) {
         if (loop->n_tx[b] == 0)
             continue;
@@ -665,6 +682,7 @@ static void stage_write(ps_loop_t *loop)
             n = 0;
         }
         tap_frames(loop, b, loop->tx_buf[b], (size_t)n, true);
+        loop->last.n_tx[b] = (uint16_t)n;
         loop->counters.n_tx_frames += (uint64_t)n;
         loop->counters.n_tx_refused += loop->n_tx[b] - (uint32_t)n;
         if ((uint32_t)n < loop->n_tx[b])
@@ -695,6 +713,8 @@ static void stage_write(ps_loop_t *loop)
     int hb_rc = loop->state == PS_SM_ESTOP
                     ? 0
                     : ps_gpio_set_heartbeat(&loop->cfg.gpio, (loop->counters.n_ticks & 1u) != 0);
+    loop->last.heartbeat = loop->state == PS_SM_ESTOP ? -1 : (int8_t)(loop->counters.n_ticks & 1u);
+    loop->last.led = (uint8_t)led;
     if (hb_rc < 0 || ps_gpio_set_led(&loop->cfg.gpio, led) < 0)
         loop->counters.n_gpio_errors++;
 }
@@ -706,6 +726,8 @@ void ps_loop_tick(ps_loop_t *loop, int64_t deadline_ns)
     const ps_clock_t *clk = loop->cfg.perf_clock;
     const uint64_t tick = loop->counters.n_ticks;
     loop->t_deadline_ns = deadline_ns;
+    loop->last.state_before = loop->state;
+    loop->last.is_policy_run = false;
 
     int64_t t0 = ps_clock_now_ns(clk);
     stage_read(loop);
@@ -737,11 +759,23 @@ void ps_loop_tick(ps_loop_t *loop, int64_t deadline_ns)
     ps_perf_record(&loop->perf[is_policy_tick ? PS_STAGE_TICK_POLICY : PS_STAGE_TICK_PLAIN],
                    t5 - t0);
     ps_trace_mark(loop->cfg.trace, "end", "n", (int64_t)tick, "work_ns", t5 - t0);
+    int64_t *st = loop->last.stage_ns;
+    st[PS_STAGE_READ] = t1 - t0;
+    st[PS_STAGE_ESTIMATE] = t2 - t1;
+    st[PS_STAGE_POLICY] = loop->last.is_policy_run ? t3 - t2b : -1;
+    st[PS_STAGE_SERVO] = (t4 - t3) + (t2b - t2);
+    st[PS_STAGE_WRITE] = t5 - t4;
+    st[PS_STAGE_TICK] = t5 - t0;
     loop->counters.n_ticks++;
     if (loop->cfg.status_every != 0 && tick % loop->cfg.status_every == 0) {
         ps_loop_rec_t rec;
         fill_record(loop, PS_REC_STATUS, &rec);
         push_record(loop, &rec);
+    }
+    if (loop->cfg.tap.on_tick != NULL) {
+        const int64_t t6 = ps_clock_now_ns(clk);
+        loop->cfg.tap.on_tick(loop->cfg.tap.ctx, loop);
+        ps_perf_record(&loop->perf[PS_STAGE_TAP], ps_clock_now_ns(clk) - t6);
     }
 }
 
@@ -795,6 +829,7 @@ int ps_loop_step(ps_loop_t *loop)
     if (wake < 0)
         return (int)wake;
     ps_perf_record(&loop->perf[PS_STAGE_WAKE], wake);
+    loop->last.stage_ns[PS_STAGE_WAKE] = wake;
     ps_perf_us_record(&loop->wake_us, wake, loop->counters.n_ticks);
     ps_trace_mark(loop->cfg.trace, "tick", "n", (int64_t)loop->counters.n_ticks, "wake_ns", wake);
     handle_stop_requests(loop);

@@ -102,8 +102,20 @@ typedef enum {
     PS_STAGE_REACTION,    /**< receive stamp of the newest reply taken to the end of the
                                write stage, on the loop's clock; ticks that took a reply
                                and sent frames */
+    PS_STAGE_TAP,         /**< the tap after the tick (the flight recorder's copy); only
+                               when a tap is set */
     PS_STAGE_COUNT
 } ps_stage_t;
+
+typedef struct ps_loop ps_loop_t;
+
+/** Called at the end of every tick with the loop's state (the flight
+ *  recorder copies its record here: rt/ps_recorder.h). */
+typedef struct {
+    /** @rt RT-SAFE, loop thread: must not allocate, lock or block */
+    void (*on_tick)(void *ctx, const ps_loop_t *loop);
+    void *ctx;
+} ps_loop_tap_t;
 
 /** Operator requests (PS_SM_C_REQ_* bits) from outside the loop. */
 typedef struct {
@@ -136,6 +148,7 @@ typedef struct {
     ps_mailbox_t *neighbours; /**< camera perception's neighbour lists (ps_neighbours_t),
                                    read each tick into meas.neighbours and aged against
                                    board->camera.max_age_s; NULL: no camera */
+    ps_loop_tap_t tap;     /**< .on_tick may be NULL: none */
 } ps_loop_cfg_t;
 
 /** One CAN frame as the loop read or sent it (cfg.frame_ring). frame.t_ns:
@@ -194,7 +207,25 @@ typedef struct {
     bool has_fallen;         /**< estimator reported a fall in RAMP or ACTIVE */
 } ps_loop_counters_t;
 
+/** What the last tick did, kept for the tap (read-only outside the loop). */
 typedef struct {
+    uint32_t cond;                         /**< conditions the state machine saw */
+    ps_sm_state_t state_before;            /**< state when the tick began */
+    bool is_policy_run;                    /**< the policy stepped this tick */
+    bool is_estop_input;                   /**< the e-stop input read pressed */
+    bool is_button_pressed;                /**< the record button read pressed */
+    int64_t stage_ns[PS_STAGE_COUNT];      /**< this tick's stage times; -1: not run */
+    ps_act_cmd_t cmd[PS_MAX_JOINTS];       /**< last command computed per joint */
+    bool is_cmd_sent[PS_MAX_JOINTS];       /**< a command was queued this tick */
+    ps_can_state_t bus[PS_MAX_BUSES];      /**< each bus's state as read this tick */
+    uint16_t n_rx[PS_MAX_BUSES];           /**< frames read this tick */
+    uint16_t n_tx[PS_MAX_BUSES];           /**< frames the bus took this tick */
+    int64_t policy_dt_ns;                  /**< the last policy step's compute time */
+    int8_t heartbeat;                      /**< level written this tick; -1: held still */
+    uint8_t led;                           /**< ps_gpio_led_t written this tick */
+} ps_loop_last_t;
+
+struct ps_loop {
     ps_loop_cfg_t cfg;
     ps_pacer_t pacer;
     int64_t period_ns;
@@ -243,7 +274,8 @@ typedef struct {
     int64_t newest_reply_rx_ns; /**< this tick's newest reply stamp; 0: none */
     ps_perf_us_hist_t wake_us;  /**< wake-up latency, cyclictest's 1-us layout */
     ps_loop_counters_t counters;
-} ps_loop_t;
+    ps_loop_last_t last; /**< this tick, for the tap */
+};
 
 /** @pre every pointer in cfg valid and outliving loop; estimator geometry in robot
  *  @post loop in STANDBY, histograms zeroed and touched (prefaulted)

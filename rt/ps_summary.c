@@ -123,6 +123,75 @@ static cJSON *rt_json(const ps_summary_t *s)
     return o;
 }
 
+static cJSON *rec_file_json(const ps_recorder_stats_t *r, const ps_rec_file_stats_t *f)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "path", f->path);
+    cJSON_AddNumberToObject(o, "records", (double)f->n_records);
+    cJSON_AddNumberToObject(o, "messages", (double)f->n_messages);
+    cJSON_AddNumberToObject(o, "bytes", (double)f->n_bytes);
+    cJSON_AddNumberToObject(o, "records_lost_ring", (double)f->n_lost_ring);
+    cJSON_AddNumberToObject(o, "records_lost_io", (double)f->n_lost_io);
+    if (f->err != 0)
+        cJSON_AddStringToObject(o, "error", strerror(-f->err));
+    else
+        cJSON_AddNullToObject(o, "error");
+    cJSON *ch = cJSON_AddObjectToObject(o, "channel_messages");
+    for (uint32_t c = 0; c < r->n_channels; c++)
+        if (f->channel_n_messages[c] > 0)
+            cJSON_AddNumberToObject(ch, r->channel_topic[c], (double)f->channel_n_messages[c]);
+    return o;
+}
+
+static void trigger_names(uint32_t bits, char *buf, size_t len)
+{
+    size_t used = 0;
+    buf[0] = '\0';
+    for (unsigned i = 0; i < PS_REC_TRIG_COUNT && used + 1 < len; i++)
+        if (bits & (1u << i)) {
+            int n = snprintf(buf + used, len - used, "%s%s", used ? "|" : "",
+                             ps_recorder_trigger_name((ps_rec_trigger_t)(1u << i)));
+            used += n > 0 && (size_t)n < len - used ? (size_t)n : 0u;
+        }
+}
+
+static cJSON *recorder_json(const ps_recorder_stats_t *r, bool has_cont)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddNumberToObject(o, "ring_slots", r->n_slots);
+    cJSON_AddNumberToObject(o, "records_pushed", (double)r->n_pushed);
+    cJSON_AddNumberToObject(o, "bytes_written", (double)r->bytes_total);
+    uint64_t lost = r->cont.n_lost_ring + r->cont.n_lost_io;
+    for (uint32_t i = 0; i < r->n_dumps && i < PS_REC_MAX_DUMP_STATS; i++)
+        lost += r->dump[i].n_lost_ring + r->dump[i].n_lost_io;
+    cJSON_AddNumberToObject(o, "records_lost", (double)lost);
+    cJSON *topics = cJSON_AddArrayToObject(o, "channels");
+    for (uint32_t c = 0; c < r->n_channels; c++)
+        cJSON_AddItemToArray(topics, cJSON_CreateString(r->channel_topic[c]));
+    cJSON_AddNumberToObject(o, "triggers", r->n_triggers);
+    cJSON *by = cJSON_AddObjectToObject(o, "triggers_by");
+    for (unsigned i = 0; i < PS_REC_TRIG_COUNT; i++)
+        cJSON_AddNumberToObject(by, ps_recorder_trigger_name((ps_rec_trigger_t)(1u << i)),
+                                r->n_triggers_by[i]);
+    if (has_cont)
+        cJSON_AddItemToObject(o, "continuous", rec_file_json(r, &r->cont));
+    else
+        cJSON_AddNullToObject(o, "continuous");
+    cJSON *fl = cJSON_AddObjectToObject(o, "flight");
+    cJSON_AddNumberToObject(fl, "dumps", r->n_dumps);
+    cJSON_AddNumberToObject(fl, "dumps_failed", r->n_dumps_failed);
+    cJSON *files = cJSON_AddArrayToObject(fl, "files");
+    for (uint32_t i = 0; i < r->n_dumps && i < PS_REC_MAX_DUMP_STATS; i++) {
+        cJSON *f = rec_file_json(r, &r->dump[i]);
+        char causes[80];
+        trigger_names(r->dump[i].triggers, causes, sizeof(causes));
+        cJSON_AddStringToObject(f, "trigger", causes);
+        cJSON_AddNumberToObject(f, "trigger_record", (double)r->dump[i].trigger_tick);
+        cJSON_AddItemToArray(files, f);
+    }
+    return o;
+}
+
 static cJSON *summary_json(const ps_summary_t *s)
 {
     const ps_loop_t *loop = s->loop;
@@ -164,6 +233,9 @@ static cJSON *summary_json(const ps_summary_t *s)
     cJSON_AddItemToObject(root, "buses", buses_json(s));
     cJSON_AddItemToObject(root, "counters", counters_json(&loop->counters));
     cJSON_AddBoolToObject(root, "fall_detected", loop->counters.has_fallen);
+    if (s->recorder != NULL)
+        cJSON_AddItemToObject(root, "recorder",
+                              recorder_json(s->recorder, s->recorder->cont.path[0] != '\0'));
     if (s->has_truth) {
         cJSON *sim = cJSON_AddObjectToObject(root, "sim_truth");
         cJSON_AddBoolToObject(sim, "fell_while_active", s->truth_fell_while_active);
@@ -217,6 +289,39 @@ static void print_stage(FILE *out, const char *name, const ps_perf_hist_t *h)
             ps_perf_mean_ns(h) * 1e-3, (double)ps_perf_quantile_ns(h, 0.5) * 1e-3,
             (double)ps_perf_quantile_ns(h, 0.99) * 1e-3,
             (double)ps_perf_quantile_ns(h, 0.999) * 1e-3, (double)h->max_ns * 1e-3);
+}
+
+static void print_rec_file(const char *what, const ps_rec_file_stats_t *f, FILE *out)
+{
+    fprintf(out, "  %s %s: %llu records, %llu messages, %.1f kB", what, f->path,
+            (unsigned long long)f->n_records, (unsigned long long)f->n_messages,
+            (double)f->n_bytes / 1000.0);
+    if (f->n_lost_ring > 0 || f->n_lost_io > 0 || f->err != 0)
+        fprintf(out, "; LOST %llu records (%llu overwritten before the writer read them, %llu "
+                     "not written%s%s)",
+                (unsigned long long)(f->n_lost_ring + f->n_lost_io),
+                (unsigned long long)f->n_lost_ring, (unsigned long long)f->n_lost_io,
+                f->err ? ": " : "", f->err ? strerror(-f->err) : "");
+    fprintf(out, "\n");
+}
+
+static void print_recorder(const ps_recorder_stats_t *r, FILE *out)
+{
+    fprintf(out, " recorder: %llu records into a ring of %u, %u triggers", 
+            (unsigned long long)r->n_pushed, r->n_slots, r->n_triggers);
+    for (unsigned i = 0; i < PS_REC_TRIG_COUNT; i++)
+        if (r->n_triggers_by[i] > 0)
+            fprintf(out, " %s=%u", ps_recorder_trigger_name((ps_rec_trigger_t)(1u << i)),
+                    r->n_triggers_by[i]);
+    fprintf(out, ", %u flight dumps (%u failed)\n", r->n_dumps, r->n_dumps_failed);
+    if (r->cont.path[0] != '\0')
+        print_rec_file("continuous", &r->cont, out);
+    for (uint32_t i = 0; i < r->n_dumps && i < PS_REC_MAX_DUMP_STATS; i++) {
+        char what[96], causes[80];
+        trigger_names(r->dump[i].triggers, causes, sizeof(causes));
+        snprintf(what, sizeof(what), "flight (%s)", causes);
+        print_rec_file(what, &r->dump[i], out);
+    }
 }
 
 void ps_summary_print(const ps_summary_t *s, FILE *out)
@@ -280,6 +385,8 @@ void ps_summary_print(const ps_summary_t *s, FILE *out)
                 "simulated time up to %.1f ms behind the wall clock (device timestamps follow "
                 "the wall clock; the run is not faithful)\n",
                 (unsigned long long)s->truth_plant_overruns, s->truth_plant_max_lag_ms);
+    if (s->recorder != NULL)
+        print_recorder(s->recorder, out);
     if (s->has_truth && s->truth_plant_err != 0)
         fprintf(out, " sim truth: PLANT ERROR at t=%.4f s, physics stopped: %s\n",
                 s->truth_plant_err_t_s,

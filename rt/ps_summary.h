@@ -15,6 +15,7 @@
 #include "ps_guard.h"
 #include "ps_logger.h"
 #include "ps_loop.h"
+#include "ps_recorder.h"
 
 typedef struct {
     const char *board_path, *robot_path, *scenario_path;
@@ -45,6 +46,7 @@ typedef struct {
     int truth_plant_err;                /**< 0, or the plant's first step error */
     const char *truth_plant_err_reason; /**< why, NULL: none */
     double truth_plant_err_t_s;         /**< simulated time of it since start */
+    const ps_recorder_stats_t *recorder; /**< flight recorder's account; NULL: not recording */
 } ps_summary_t;
 
 /** @return 0 | -EIO (err says why)  @rt NON-RT */

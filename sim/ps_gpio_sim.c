@@ -20,6 +20,18 @@ static int sim_read_estop(void *ctx, bool *out_pressed_since_last_read)
     return 0;
 }
 
+static int sim_read_button(void *ctx, bool *out_pressed_since_last_read)
+{
+    ps_gpio_sim_t *g = ctx;
+    if (out_pressed_since_last_read == NULL)
+        return -EINVAL;
+    const bool was_latched =
+        atomic_exchange_explicit(&g->is_button_latched, false, memory_order_relaxed);
+    const bool is_pressed = atomic_load_explicit(&g->is_button_pressed, memory_order_relaxed);
+    *out_pressed_since_last_read = is_pressed || was_latched;
+    return 0;
+}
+
 static int sim_set_heartbeat(void *ctx, bool level)
 {
     ps_gpio_sim_t *g = ctx;
@@ -48,12 +60,15 @@ static const ps_gpio_ops_t SIM_OPS = {
     .set_heartbeat = sim_set_heartbeat,
     .set_led = sim_set_led,
     .close = sim_close,
+    .read_button = sim_read_button,
 };
 
 void ps_gpio_sim_init(ps_gpio_sim_t *g)
 {
     atomic_init(&g->is_estop_pressed, false);
     atomic_init(&g->is_estop_latched, false);
+    atomic_init(&g->is_button_pressed, false);
+    atomic_init(&g->is_button_latched, false);
     atomic_init(&g->heartbeat, false);
     atomic_init(&g->led, (int)PS_GPIO_LED_OFF);
     atomic_init(&g->n_heartbeat_edges, 0);
@@ -74,6 +89,13 @@ void ps_gpio_sim_set_estop(ps_gpio_sim_t *g, bool is_pressed)
     atomic_store_explicit(&g->is_estop_pressed, is_pressed, memory_order_relaxed);
     if (is_pressed)
         atomic_store_explicit(&g->is_estop_latched, true, memory_order_relaxed);
+}
+
+void ps_gpio_sim_set_button(ps_gpio_sim_t *g, bool is_pressed)
+{
+    atomic_store_explicit(&g->is_button_pressed, is_pressed, memory_order_relaxed);
+    if (is_pressed)
+        atomic_store_explicit(&g->is_button_latched, true, memory_order_relaxed);
 }
 
 bool ps_gpio_sim_update_relay(ps_gpio_sim_t *g, int64_t now_ns)

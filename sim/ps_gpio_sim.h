@@ -33,6 +33,8 @@
 typedef struct {
     atomic_bool is_estop_pressed; /**< the level now */
     atomic_bool is_estop_latched; /**< pressed since the last read */
+    atomic_bool is_button_pressed; /**< record button: the level now */
+    atomic_bool is_button_latched; /**< record button: pressed since the last read */
     atomic_bool heartbeat;        /**< level last set by the loop */
     atomic_int led;
     atomic_uint_fast64_t n_heartbeat_edges; /**< heartbeat level changes seen */
@@ -51,14 +53,19 @@ void ps_gpio_sim_init(ps_gpio_sim_t *g);
 /** @return the loop-side port  @rt INIT */
 ps_gpio_port_t ps_gpio_sim_port(ps_gpio_sim_t *g);
 
-/* Port semantics: read_estop -EINVAL on out NULL (latch kept), else pressed
- * now or latched since the previous read, and clears the latch;
+/* Port semantics: read_estop (and read_button, the record button) -EINVAL
+ * on out NULL (latch kept), else pressed now or latched since the previous
+ * read, and clears the latch;
  * set_heartbeat counts an edge only when the level changes; set_led -EINVAL
  * on a value other than OFF/ON (line unchanged); close is a no-op. */
 
 /** Plant/scenario side: set the e-stop level; a press also latches until the
  *  loop's next read. @rt RT-SAFE, any thread */
 void ps_gpio_sim_set_estop(ps_gpio_sim_t *g, bool is_pressed);
+
+/** Plant/scenario side: the record button, as the e-stop (a press latches
+ *  until the loop's next read_button).  @rt RT-SAFE, any thread */
+void ps_gpio_sim_set_button(ps_gpio_sim_t *g, bool is_pressed);
 
 /** Evaluate the watchdog relay at time now_ns (non-decreasing between calls):
  *  a heartbeat edge since the previous call counts as made at now_ns.

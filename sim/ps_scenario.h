@@ -33,6 +33,7 @@ typedef enum {
     PS_EVENT_DRIVE_FAULT,     /**< `joint`'s drive latches an over-voltage fault and goes
                                    limp: its replies carry it where their fault field can,
                                    and its own fault report (RobStride type 21) does */
+    PS_EVENT_RECORD_BUTTON,   /**< a short press of the flight recorder's GPIO button */
     PS_EVENT_COUNT
 } ps_event_kind_t;
 

@@ -88,6 +88,8 @@ struct ps_sim {
     uint8_t *scene_slots; /**< PS_MAILBOX_SLOTS x (scene_hdr_t + nq doubles) */
     uint32_t scene_nq;
     uint64_t scene_seq;
+    atomic_uint truth_seq;   /**< odd while truth_rt is being written */
+    ps_sim_truth_t truth_rt; /**< lock-free copy for ps_sim_read_truth_rt */
 };
 
 /* A scene slot: this header, then nq doubles of qpos. */
@@ -158,6 +160,10 @@ static void run_scenario(ps_sim_t *s, int64_t rel_ns)
             a->is_motor_mode = false; /* a faulted drive gives no torque */
             break;
         }
+        case PS_EVENT_RECORD_BUTTON: /* a press shorter than a tick: latched until read */
+            ps_gpio_sim_set_button(&s->gpio, true);
+            ps_gpio_sim_set_button(&s->gpio, false);
+            break;
         case PS_EVENT_COUNT:
         default:
             break;
@@ -291,6 +297,15 @@ static void update_truth(ps_sim_t *s)
     t.tau_abs_sum_nm = s->tau_abs_sum_nm;
     t.plant_err_reason = s->plant_err_reason;
     t.plant_err_t_s = s->plant_err_t_s;
+    for (int b = 0; b < s->n_push_bodies; b++)
+        for (int k = 0; k < 3; k++)
+            t.push_force_n[k] += s->push_applied_n[b][k];
+    /* Sequence-counted copy for readers that may not lock (one writer). */
+    const unsigned seq = atomic_load_explicit(&s->truth_seq, memory_order_relaxed);
+    atomic_store_explicit(&s->truth_seq, seq + 1u, memory_order_relaxed);
+    atomic_thread_fence(memory_order_release);
+    s->truth_rt = t;
+    atomic_store_explicit(&s->truth_seq, seq + 2u, memory_order_release);
     /* Held only for the copy, so the plant thread is never delayed for long. */
     pthread_mutex_lock(&s->truth_mu);
     s->truth = t;
@@ -477,6 +492,7 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
         s->slow_ns = 0;
     s->min_com_active_m = INFINITY;
     atomic_init(&s->requests, 0u);
+    atomic_init(&s->truth_seq, 0u);
     atomic_init(&s->is_running, false);
     s->clock = (ps_clock_t){.now_ns = sim_now_ns, .sleep_until_ns = sim_sleep_until_ns, .ctx = s};
 
@@ -622,6 +638,20 @@ void ps_sim_stop(ps_sim_t *s)
     atomic_store(&s->is_running, false);
     (void)pthread_join(s->thread, NULL); /* cannot fail for a joinable thread we own */
     s->has_thread = false;
+}
+
+bool ps_sim_read_truth_rt(ps_sim_t *s, ps_sim_truth_t *out)
+{
+    for (int attempt = 0; attempt < 4; attempt++) {
+        const unsigned s1 = atomic_load_explicit(&s->truth_seq, memory_order_acquire);
+        if (s1 & 1u)
+            continue;
+        memcpy(out, &s->truth_rt, sizeof(*out)); /* seqlock read: validated below */
+        atomic_thread_fence(memory_order_acquire);
+        if (atomic_load_explicit(&s->truth_seq, memory_order_relaxed) == s1)
+            return true;
+    }
+    return false;
 }
 
 void ps_sim_get_truth(ps_sim_t *s, ps_sim_truth_t *out)

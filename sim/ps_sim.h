@@ -178,6 +178,7 @@ typedef struct {
                                          while hooks.is_controller_active said so,
                                          on simulated time (deterministic in
                                          lockstep); -1: never active */
+    double push_force_n[3];         /**< sum of the scenario's pushes acting now, world */
 } ps_sim_truth_t;
 
 /** Load the model, build devices and buses, apply the scenario's initial
@@ -217,6 +218,12 @@ void ps_sim_stop(ps_sim_t *s);
 
 /** @post *out = current truth (thread-safe snapshot)  @rt NON-RT */
 void ps_sim_get_truth(ps_sim_t *s, ps_sim_truth_t *out);
+
+/** The same snapshot without a lock, for the loop thread (the flight
+ *  recorder): a sequence-counted copy, retried a few times if the plant
+ *  thread is writing it.  @return true when *out is a consistent copy
+ *  @rt RT-SAFE O(sizeof truth), any thread */
+bool ps_sim_read_truth_rt(ps_sim_t *s, ps_sim_truth_t *out);
 
 /** Pending operator requests from the scenario (START, STOP, RESET) that fell
  *  due since the last call, as PS_SIM_REQ_* bits. @rt RT-SAFE, loop thread */

@@ -75,7 +75,7 @@ static int setup(void **state)
     };
     if (ps_sim_create(&sc, &f->sim, err, sizeof(err)) != 0)
         fail_msg("sim: %s", err);
-    const ps_perception_cfg_t *pc = &f->board.camera;
+    const ps_perception_cfg_t *pc = &f->board.perception;
     const ps_camera_sim_cfg_t cc = {
         .sim = f->sim,
         .camera = pc->camera,
@@ -113,7 +113,7 @@ static double check_frame(fixture_t *f, uint32_t *out_n_seen)
 {
     ps_camera_frame_t fr;
     assert_int_equal(f->port.ops->next(f->port.ctx, &fr, PS_NS_PER_S), 0);
-    const ps_camera_cfg_t *cc = &f->board.camera.camera;
+    const ps_camera_cfg_t *cc = &f->board.perception.camera;
     static uint8_t grey[640 * 480];
     assert_int_equal(fr.width, cc->width);
     assert_int_equal(ps_camera_to_grey(&fr, grey, sizeof(grey)), 0);

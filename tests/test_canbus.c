@@ -152,19 +152,20 @@ static int plan(fixture_t *f, ps_canbus_plan_t *out, char *err, size_t err_len)
     ps_canbus_source_t src[PS_CANBUS_MAX_SOURCES];
     memset(src, 0, sizeof src);
     const ps_canbus_frame_shape_t classic8 = {.len = 8};
+    const ps_canbus_frame_shape_t reply8 = {.len = 8, .is_rx = true};
     uint32_t n = 0;
     for (; n < f->robot.n_joints; n++) {
         snprintf(names[n], sizeof names[n], "joint %u (%s)", n, f->robot.joints[n].name);
         src[n] = (ps_canbus_source_t){.bus_idx = f->robot.joints[n].bus_idx,
                                       .rate_div = f->robot.joints[n].rate_div,
                                       .n_frames = 2,
-                                      .frames = {classic8, classic8},
+                                      .frames = {classic8, reply8},
                                       .name = names[n]};
     }
     src[n++] = (ps_canbus_source_t){.bus_idx = f->robot.imu.bus_idx,
                                     .rate_div = f->robot.imu.rate_div,
                                     .n_frames = 2,
-                                    .frames = {classic8, classic8},
+                                    .frames = {reply8, reply8},
                                     .name = "imu"};
     const ps_canbus_cfg_t cfg = {.n_buses = f->board.n_buses,
                                  .buses = f->board.buses,
@@ -231,6 +232,63 @@ static void test_plan_two_joints_div2_spread_peak_half(void **state)
     assert_int_equal(p.n_sources[0], 1);
     assert_int_equal(p.tick_bits_max[0], 270);
     assert_float_equal(p.load_avg[0], 0.27, 1e-12);
+}
+
+/* Received frames per tick, with the phases the planner chose: the IMU's two
+ * every tick and one of the two div-2 joints' replies. */
+static void test_plan_rx_frames_counted_per_tick(void **state)
+{
+    fixture_t *f = *state;
+    add_joint(f, "a", 0, 2);
+    add_joint(f, "b", 0, 2);
+    ps_canbus_plan_t p;
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), 0);
+    assert_int_equal(p.rx_frames_max[0], 3);
+    assert_int_equal(p.rx_frame_ns_min[0], 111000); /* 8 bytes, no stuff bits, 1 Mbit/s */
+    assert_int_equal(p.rx_frames_max[1], 0);        /* nothing on bus 1 */
+    assert_int_equal(p.rx_frame_ns_min[1], 0);
+    /* a third div-2 joint shares a tick with one of them: 4 on that tick */
+    f->board.bus_budget = 1.0f;
+    add_joint(f, "c", 0, 2);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), 0);
+    assert_int_equal(p.rx_frames_max[0], 4);
+}
+
+/* A controller that holds fewer frames than a tick brings is named with both
+ * figures; one with a FIFO, or a tick within its buffers, is not. */
+static void test_rx_risk_only_when_buffers_overflow(void **state)
+{
+    fixture_t *f = *state;
+    ps_canbus_plan_t p;
+    char note[200];
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), 0); /* the IMU alone: 2 frames */
+    f->board.buses[0].controller = PS_CANBUS_CTRL_MCP2515;
+    assert_int_equal(ps_canbus_rx_risk(&f->board.buses[0], &p, 0, note, sizeof note), 0);
+    add_joint(f, "a", 0, 2);
+    assert_int_equal(plan(f, &p, f->err, sizeof f->err), 0);
+    assert_int_equal(ps_canbus_rx_risk(&f->board.buses[0], &p, 0, note, sizeof note), 1);
+    assert_string_equal(note, "can0 (mcp2515): up to 3 frames arrive in one tick, the controller "
+                              "holds 2: the host must read each within 111 us or lose the next");
+    for (int c = PS_CANBUS_CTRL_ANY; c < PS_CANBUS_CTRL_COUNT; c++) {
+        f->board.buses[0].controller = (ps_canbus_ctrl_t)c;
+        const int want = c == PS_CANBUS_CTRL_MCP2515;
+        assert_int_equal(ps_canbus_rx_risk(&f->board.buses[0], &p, 0, note, sizeof note), want);
+    }
+    assert_int_equal(ps_canbus_rx_risk(&f->board.buses[0], &p, PS_MAX_BUSES, note, sizeof note), 0);
+}
+
+/* Every controller has a name; the SoC and SPI ones a kernel driver. */
+static void test_ctrl_info_table_complete(void **state)
+{
+    (void)state;
+    for (int c = 0; c < PS_CANBUS_CTRL_COUNT; c++)
+        assert_non_null(ps_canbus_ctrl_info((ps_canbus_ctrl_t)c)->name);
+    assert_string_equal(ps_canbus_ctrl_info(PS_CANBUS_CTRL_MCP2515)->driver, "mcp251x");
+    assert_false(ps_canbus_ctrl_info(PS_CANBUS_CTRL_MCP2515)->is_fd_capable);
+    assert_true(ps_canbus_ctrl_info(PS_CANBUS_CTRL_MTTCAN)->is_fd_capable);
+    assert_null(ps_canbus_ctrl_info(PS_CANBUS_CTRL_VIRTUAL)->driver);
+    assert_ptr_equal(ps_canbus_ctrl_info(PS_CANBUS_CTRL_COUNT),
+                     ps_canbus_ctrl_info(PS_CANBUS_CTRL_ANY));
 }
 
 static void test_plan_phases_follow_is_due_convention(void **state)
@@ -446,6 +504,9 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_plan_two_joints_div2_spread_peak_half, setup,
                                         teardown),
         cmocka_unit_test_setup_teardown(test_plan_phases_follow_is_due_convention, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_plan_rx_frames_counted_per_tick, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_rx_risk_only_when_buffers_overflow, setup, teardown),
+        cmocka_unit_test(test_ctrl_info_table_complete),
         cmocka_unit_test_setup_teardown(test_plan_mixed_divisors_greedy_optimal, setup, teardown),
         cmocka_unit_test_setup_teardown(test_plan_over_budget_refused_naming_bus, setup, teardown),
         cmocka_unit_test_setup_teardown(test_plan_slow_bus_over_budget_refused, setup, teardown),

@@ -621,6 +621,35 @@ static void test_load_board_gpio_names_loaded(void **state)
     assert_int_equal(f->board.gpio.estop_debounce_us, 0);
 }
 
+/* The flight recorder's button: optional, by line or name, a line of its own. */
+static void test_load_board_gpio_record_button(void **state)
+{
+    fx_t *f = *state;
+    assert_int_equal(ps_config_load_board(BOARD_OK, &f->board, f->err, sizeof(f->err)), 0);
+    assert_false(f->board.gpio.has_button); /* absent: none */
+    edit(f, BOARD_OK, "led_line: 6}", "led_line: 6, record_button_line: 7}");
+    assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)), 0);
+    assert_true(f->board.gpio.has_button);
+    assert_int_equal(f->board.gpio.button_line, 7);
+    assert_false(f->board.gpio.is_button_active_low);
+    edit(f, BOARD_OK, "led_line: 6}",
+         "led_line: 6, record_button_name: GPIO22, record_button_active_low: true}");
+    assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)), 0);
+    assert_true(f->board.gpio.has_button);
+    assert_string_equal(f->board.gpio.button_name, "GPIO22");
+    assert_true(f->board.gpio.is_button_active_low);
+    edit(f, BOARD_OK, "led_line: 6}", "led_line: 6, record_button_line: 6}");
+    want(f, "%s:%d: gpio.record_button_line: line 6 already used by gpio.led_line", f->path,
+         line_of(f, "record_button_line"));
+    expect_board_error(f);
+    edit(f, BOARD_OK, "led_line: 6}",
+         "led_line: 6, record_button_line: 7, record_button_name: GPIO22}");
+    want(f, "%s:%d: gpio.record_button_name: give gpio.record_button_line or "
+            "gpio.record_button_name, not both",
+         f->path, line_of(f, "record_button_name"));
+    expect_board_error(f);
+}
+
 static void test_load_board_gpio_debounce_out_of_range_rejected(void **state)
 {
     fx_t *f = *state;
@@ -681,6 +710,52 @@ static void test_load_board_gpio_name_reused_rejected(void **state)
     /* a name and an offset are not compared: the port checks them on the chip */
     edit(f, BOARD_OK, "estop_line: 4", "estop_name: GPIO5");
     assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)), 0);
+}
+
+/* buses[i].controller: loaded, checked against fd, unknown names refused;
+ * camera: optional. */
+static void test_load_board_controller_and_camera_loaded(void **state)
+{
+    fx_t *f = *state;
+    edit(f, BOARD_OK, "{ifname: can0, bitrate: 500000}",
+         "{ifname: can0, bitrate: 500000, controller: mcp2515}");
+    append(f, "camera: {sensor: imx708}\n");
+    assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)), 0);
+    assert_int_equal(f->board.buses[0].controller, PS_CANBUS_CTRL_MCP2515);
+    assert_int_equal(f->board.buses[1].controller, PS_CANBUS_CTRL_ANY); /* absent */
+    assert_true(f->board.has_camera);
+    assert_string_equal(f->board.camera.sensor, "imx708");
+    assert_int_equal(ps_config_load_board(BOARD_OK, &f->board, f->err, sizeof(f->err)), 0);
+    assert_false(f->board.has_camera);
+}
+
+static void test_load_board_fd_on_classical_controller_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, BOARD_OK, "{ifname: can0, bitrate: 500000}",
+         "{ifname: can0, bitrate: 500000, fd: true, controller: mcp2515}");
+    want(f, "%s:%d: buses[0].fd: controller mcp2515 is classical CAN only", f->path,
+         line_of(f, "fd: true"));
+    expect_board_error(f);
+    edit(f, BOARD_OK, "{ifname: can0, bitrate: 500000}",
+         "{ifname: can0, bitrate: 500000, fd: true, controller: mcp251xfd}");
+    assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)), 0);
+    assert_int_equal(f->board.buses[0].controller, PS_CANBUS_CTRL_MCP251XFD);
+}
+
+static void test_load_board_unknown_controller_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, BOARD_OK, "{ifname: can0, bitrate: 500000}",
+         "{ifname: can0, bitrate: 500000, controller: sja1000}");
+    want(f,
+         "%s:%d: buses[0].controller: unknown value \"sja1000\" (allowed: mcp2515, mcp251xfd, "
+         "mttcan, m_can, gs_usb, virtual)",
+         f->path, line_of(f, "controller"));
+    expect_board_error(f);
+    edit(f, BOARD_OK, "rt:", "camera: {}\nrt:");
+    want(f, "%s:%d: camera: missing field \"sensor\"", f->path, line_of(f, "camera"));
+    expect_board_error(f);
 }
 
 static void test_load_board_gpio_bias_unknown_rejected(void **state)
@@ -1047,7 +1122,7 @@ static void test_load_scenario_unknown_event_kind_rejected(void **state)
     edit(f, SCENARIO_OK, "kind: start}", "kind: begin}");
     want(f,
          "%s:%d: events[0].kind: unknown value \"begin\" (allowed: start, stop, estop_press, "
-         "estop_release, reset, harness_release, drop_replies, drive_fault)",
+         "estop_release, reset, harness_release, drop_replies, drive_fault, record_button)",
          f->path, line_of(f, "begin"));
     expect_scenario_error(f);
 }
@@ -1464,7 +1539,7 @@ static void test_event_name_every_kind_named(void **state)
     (void)state;
     static const char *const NAMES[PS_EVENT_COUNT] = {
         "start",           "stop",         "estop_press", "estop_release", "reset",
-        "harness_release", "drop_replies", "drive_fault"};
+        "harness_release", "drop_replies", "drive_fault", "record_button"};
     for (int k = 0; k < (int)PS_EVENT_COUNT; k++)
         assert_string_equal(ps_config_event_name((ps_event_kind_t)k), NAMES[k]);
     assert_string_equal(ps_config_event_name(PS_EVENT_COUNT), "unknown");
@@ -1504,10 +1579,14 @@ int main(void)
         T(test_load_board_gpio_line_reused_rejected),
         T(test_load_board_gpio_names_loaded),
         T(test_load_board_gpio_debounce_out_of_range_rejected),
+        T(test_load_board_gpio_record_button),
         T(test_load_board_gpio_name_too_long_rejected),
         T(test_load_board_gpio_line_and_name_rejected),
         T(test_load_board_gpio_name_reused_rejected),
         T(test_load_board_gpio_bias_unknown_rejected),
+        T(test_load_board_controller_and_camera_loaded),
+        T(test_load_board_fd_on_classical_controller_rejected),
+        T(test_load_board_unknown_controller_rejected),
         T(test_load_robot_string_for_number_rejected),
         T(test_load_robot_missing_field_rejected),
         T(test_load_robot_duplicate_can_id_rejected),

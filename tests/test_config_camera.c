@@ -106,8 +106,10 @@ static void test_load_board_camera_sim_values_and_defaults(void **state)
     assert_int_equal(load_with(f, "", ""), 0);
     const ps_board_cfg_t *b = &f->board;
     assert_true(b->has_camera);
+    assert_true(b->has_perception);
+    assert_string_equal(b->camera.sensor, ""); /* no sensor given: pushstep doctor takes any */
     assert_int_equal(b->camera_line, 8); /* the mapping's first line */
-    const ps_perception_cfg_t *c = &b->camera;
+    const ps_perception_cfg_t *c = &b->perception;
     assert_int_equal(c->camera.source, PS_CAMERA_SRC_SIM);
     assert_int_equal(c->camera.width, 640);
     assert_int_equal(c->camera.height, 480);
@@ -129,9 +131,9 @@ static void test_load_board_camera_sim_values_and_defaults(void **state)
     assert_int_equal(load_with(f, "  max_age_s: 0.2\n",
                                "  max_age_s: 0.2\n  threads: 2\n  decimate: 2\n  min_margin: 35\n"),
                      0);
-    assert_int_equal(f->board.camera.tags.n_threads, 2);
-    assert_float_equal(f->board.camera.tags.decimate, 2.0, 0);
-    assert_float_equal(f->board.camera.tags.min_margin, 35.0, 0);
+    assert_int_equal(f->board.perception.tags.n_threads, 2);
+    assert_float_equal(f->board.perception.tags.decimate, 2.0, 0);
+    assert_float_equal(f->board.perception.tags.min_margin, 35.0, 0);
 }
 
 static void test_load_board_camera_libcamera_and_files_loaded(void **state)
@@ -141,12 +143,12 @@ static void test_load_board_camera_libcamera_and_files_loaded(void **state)
     char text[4096];
     (void)snprintf(text, sizeof(text), "%s", "  source: libcamera\n  id: imx219\n  format: YUV420\n");
     assert_int_equal(load_with(f, "  source: sim\n", text), 0);
-    assert_int_equal(f->board.camera.camera.source, PS_CAMERA_SRC_LIBCAMERA);
-    assert_string_equal(f->board.camera.camera.id, "imx219");
-    assert_int_equal(f->board.camera.camera.format, PS_PIX_YUV420);
+    assert_int_equal(f->board.perception.camera.source, PS_CAMERA_SRC_LIBCAMERA);
+    assert_string_equal(f->board.perception.camera.id, "imx219");
+    assert_int_equal(f->board.perception.camera.format, PS_PIX_YUV420);
     assert_int_equal(load_with(f, "  source: sim\n", "  source: files\n  dir: pictures\n"), 0);
-    assert_int_equal(f->board.camera.camera.source, PS_CAMERA_SRC_FILES);
-    assert_string_equal(f->board.camera.camera.dir, "pictures");
+    assert_int_equal(f->board.perception.camera.source, PS_CAMERA_SRC_FILES);
+    assert_string_equal(f->board.perception.camera.dir, "pictures");
     /* files and libcamera take any intrinsics */
     assert_int_equal(load_with(f, "  source: sim\n  width: 640\n",
                                "  source: files\n  dir: p\n  width: 700\n"),
@@ -163,11 +165,11 @@ static void test_load_board_without_camera_none(void **state)
     assert_true(fputs(f->text, fp) >= 0);
     assert_int_equal(fclose(fp), 0);
     assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)), 0);
-    assert_false(f->board.has_camera);
+    assert_false(f->board.has_perception);
     assert_int_equal(f->board.camera_line, 0);
     assert_int_equal(ps_config_load_board("boards/sim.yaml", &f->board, f->err, sizeof(f->err)),
                      0);
-    assert_false(f->board.has_camera);
+    assert_false(f->board.has_perception);
 }
 
 static void test_load_board_camera_ranges_rejected(void **state)
@@ -218,6 +220,36 @@ static void test_load_board_camera_source_rules_rejected(void **state)
                  "intrinsics", "camera.intrinsics.cx_px: value 320 outside [0, width 300]");
 }
 
+/* A camera: with its sensor alone (the shipped boards): a camera for
+ * pushstep doctor, no perception; perception's fields need a source. */
+static void test_load_board_camera_sensor_only_no_perception(void **state)
+{
+    fx_t *f = *state;
+    const char *at = strstr(BOARD, "camera:\n");
+    char text[2048];
+    (void)snprintf(text, sizeof(text), "%.*scamera: {sensor: imx708}\n", (int)(at - BOARD), BOARD);
+    FILE *fp = fopen(f->path, "w");
+    assert_non_null(fp);
+    assert_true(fputs(text, fp) >= 0);
+    assert_int_equal(fclose(fp), 0);
+    assert_int_equal(ps_config_load_board(f->path, &f->board, f->err, sizeof(f->err)), 0);
+    assert_true(f->board.has_camera);
+    assert_string_equal(f->board.camera.sensor, "imx708");
+    assert_false(f->board.has_perception);
+    /* with the sensor and the perception fields, both */
+    assert_int_equal(load_with(f, "  source: sim\n", "  sensor: sim\n  source: sim\n"), 0);
+    assert_true(f->board.has_perception);
+    assert_string_equal(f->board.camera.sensor, "sim");
+    /* perception's fields without a source */
+    expect_error(f, "  source: sim\n", "", "width",
+                 "camera.width: camera perception's fields need camera.source (libcamera, files "
+                 "or sim)");
+    /* a source without a required field */
+    expect_error(f, "  fps: 15\n", "", "  source:", "camera: missing field \"fps\"");
+    expect_error(f, "  pose: {xyz_m: [0.1, 0, 0.54], rpy_rad: [0, 0.25, 0]}\n", "", "  source:",
+                 "camera: missing field \"pose\"");
+}
+
 static void test_load_board_camera_schema_rejected(void **state)
 {
     fx_t *f = *state;
@@ -244,6 +276,7 @@ int main(void)
         T(test_load_board_without_camera_none),
         T(test_load_board_camera_ranges_rejected),
         T(test_load_board_camera_source_rules_rejected),
+        T(test_load_board_camera_sensor_only_no_perception),
         T(test_load_board_camera_schema_rejected),
     };
 #undef T

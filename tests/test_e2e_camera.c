@@ -281,7 +281,7 @@ static void test_e2e_camera_tool_board_without_camera_exit_2(void **state)
 {
     (void)state;
     assert_int_equal(run("camera --board boards/sim.yaml --duration 1 --out /tmp"), 2);
-    assert_non_null(strstr(out, "boards/sim.yaml: the board has no camera: section"));
+    assert_non_null(strstr(out, "boards/sim.yaml: the board has no camera perception"));
     assert_int_equal(run("camera --duration 1"), 2); /* no board */
     assert_non_null(strstr(out, "usage: pushstep camera"));
     assert_int_equal(run("camera --board boards/sim.yaml --duration -1"), 2);

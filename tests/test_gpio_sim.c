@@ -166,6 +166,11 @@ static bool sim_is_led_on(void *ctx)
     return ps_gpio_sim_get_led(ctx) == PS_GPIO_LED_ON;
 }
 
+static void sim_set_button(void *ctx, bool is_pressed)
+{
+    ps_gpio_sim_set_button(ctx, is_pressed);
+}
+
 static void test_ps_gpio_sim_keeps_the_port_contract(void **state)
 {
     (void)state;
@@ -176,7 +181,8 @@ static void test_ps_gpio_sim_keeps_the_port_contract(void **state)
                                   .set_estop = sim_set_estop,
                                   .settle = sim_settle,
                                   .heartbeat_level = sim_heartbeat_level,
-                                  .is_led_on = sim_is_led_on};
+                                  .is_led_on = sim_is_led_on,
+                                  .set_button = sim_set_button};
     ps_gpio_contract_check(&c);
 }
 

@@ -48,6 +48,12 @@ typedef struct {
     ps_canbus_plan_t plan;
     fake_bus_t buses[PS_MAX_BUSES];
     bool is_estop_pressed, has_gpio_error;
+    bool is_button_latched;      /* the record button: a press since the last read */
+    uint64_t n_taps;             /* tap calls */
+    uint64_t tap_tick;           /* n_ticks the tap saw last */
+    uint32_t tap_n_cmd_sent;     /* joints with a command that tick */
+    bool tap_saw_button;         /* a tap saw last.is_button_pressed */
+    bool tap_stages_ok;          /* every tap saw read..tick stage times >= 0 */
     bool heartbeat;              /**< level of the heartbeat output */
     uint64_t n_hb_edges;         /**< its level changes */
     uint64_t n_hb_calls;         /**< set_heartbeat calls */
@@ -195,8 +201,17 @@ static int gpio_led(void *ctx, ps_gpio_led_t led)
     (void)led;
     return 0;
 }
-static const ps_gpio_ops_t FAKE_GPIO_OPS = {
-    .read_estop = gpio_read, .set_heartbeat = gpio_heartbeat, .set_led = gpio_led};
+static int gpio_read_button(void *ctx, bool *out)
+{
+    fixture_t *f = ctx;
+    *out = f->is_button_latched;
+    f->is_button_latched = false;
+    return 0;
+}
+static const ps_gpio_ops_t FAKE_GPIO_OPS = {.read_estop = gpio_read,
+                                            .set_heartbeat = gpio_heartbeat,
+                                            .set_led = gpio_led,
+                                            .read_button = gpio_read_button};
 
 /* A policy that holds the stance, or returns what the test scripts. */
 static int fake_policy_step(void *ctx, const ps_meas_t *m, const ps_estimate_t *e,
@@ -698,6 +713,42 @@ static void test_loop_estop_input_latches_estop_sends_exit(void **state)
     assert_int_equal(fx->loop.state, PS_SM_STANDBY);
 }
 
+/* The tap (the flight recorder's hook) runs once per tick, after it, and
+ * sees what the tick did. */
+static void tap(void *ctx, const ps_loop_t *loop)
+{
+    fixture_t *f = ctx;
+    f->n_taps++;
+    f->tap_tick = loop->counters.n_ticks;
+    f->tap_n_cmd_sent = 0;
+    for (uint32_t j = 0; j < loop->meas.n_joints; j++)
+        f->tap_n_cmd_sent += loop->last.is_cmd_sent[j];
+    f->tap_saw_button |= loop->last.is_button_pressed;
+    for (int st = PS_STAGE_READ; st <= PS_STAGE_TICK; st++)
+        if (st != PS_STAGE_POLICY && loop->last.stage_ns[st] < 0)
+            f->tap_stages_ok = false;
+}
+
+static void test_loop_tap_once_per_tick_sees_the_tick(void **state)
+{
+    (void)state;
+    fx->loop.cfg.tap = (ps_loop_tap_t){.on_tick = tap, .ctx = fx};
+    fx->tap_stages_ok = true;
+    go_active();
+    const uint64_t n0 = fx->n_taps;
+    steps(50);
+    assert_int_equal(fx->n_taps - n0, 50);
+    assert_int_equal(fx->tap_tick, fx->loop.counters.n_ticks);
+    assert_true(fx->tap_stages_ok);
+    assert_true(fx->tap_n_cmd_sent > 0); /* the joints due on the last tick */
+    assert_false(fx->tap_saw_button);
+    fx->is_button_latched = true;
+    steps(1);
+    assert_true(fx->tap_saw_button);
+    assert_true(fx->loop.perf[PS_STAGE_TAP].n >= 51);
+    assert_int_equal(fx->loop.counters.n_gpio_errors, 0);
+}
+
 static void test_loop_gpio_error_counts_as_estop(void **state)
 {
     (void)state;
@@ -1106,8 +1157,8 @@ static void test_loop_neighbours_taken_aged_then_stale(void **state)
     ps_loop_cfg_t lc = fx->loop.cfg;
     lc.neighbours = &mb;
     assert_int_equal(ps_loop_init(&loop2, &lc), -EINVAL); /* the board has no camera */
-    fx->board.has_camera = true;
-    fx->board.camera.max_age_s = 0.05f; /* 50 ticks */
+    fx->board.has_perception = true;
+    fx->board.perception.max_age_s = 0.05f; /* 50 ticks */
     assert_int_equal(ps_loop_init(&loop2, &lc), 0);
     assert_int_equal(ps_loop_start(&loop2, fx->clock.now_ns), 0);
     const unsigned div = loop2.policy_div;
@@ -1167,6 +1218,7 @@ int main(void)
         T(test_loop_policy_deadline_on_deadline_clock),
         T(test_loop_estop_input_latches_estop_sends_exit),
         T(test_loop_gpio_error_counts_as_estop),
+        T(test_loop_tap_once_per_tick_sees_the_tick),
         T(test_loop_drive_fault_estops),
         T(test_loop_bus_off_estops),
         T(test_loop_run_until_end_goes_through_damping_to_standby),

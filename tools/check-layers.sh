@@ -21,7 +21,7 @@ set -uo pipefail
 ROOT=${1:-$(cd "$(dirname "$0")/.." && pwd)}
 # The loader files that fill sim's own structs (the scenario, the robot file's
 # `sim:` section) belong to the composition root too.
-COMPOSITION_ROOT="rt/main.c rt/ps_app.c rt/ps_app.h rt/ps_emulate.c rt/ps_camview.c rt/ps_config_sim.h rt/ps_config_robot.c rt/ps_config_scenario.c"
+COMPOSITION_ROOT="rt/main.c rt/ps_app.c rt/ps_app.h rt/ps_emulate.c rt/ps_doctor.c rt/ps_camview.c rt/ps_config_sim.h rt/ps_config_robot.c rt/ps_config_scenario.c"
 BASE="rt/ps_err.h rt/ps_err.c rt/ps_clock.h rt/ps_clock.c rt/ps_ring.h rt/ps_ring.c rt/ps_limits.h
       rt/ps_mailbox.h rt/ps_mailbox.c rt/ps_neighbours.h"
 POLICY_DRIVERS="drivers/ps_actuator.h drivers/ps_can.h"

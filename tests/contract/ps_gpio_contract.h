@@ -8,7 +8,9 @@
  * line is released; pressed while it is held; a press and release between two
  * reads is reported once, by the next read, then released again; the
  * heartbeat and LED outputs show the level last set; setting the same
- * heartbeat level twice is no change at the far end.
+ * heartbeat level twice is no change at the far end. A port with the record
+ * button (set_button given) reads it as the e-stop: released, held, a press
+ * between two reads reported once; a port without it reads "not pressed".
  *
  * Threads: the test thread. Allocation: none.
  */
@@ -29,6 +31,9 @@ typedef struct {
     /** The far end's view of the heartbeat line and the LED line. */
     bool (*heartbeat_level)(void *ctx);
     bool (*is_led_on)(void *ctx);
+    /** Press or release the record button at the far end; NULL: the port
+     *  has none (read_button must then say not pressed). */
+    void (*set_button)(void *ctx, bool is_pressed);
 } ps_gpio_contract_t;
 
 /** Run every check; fails the calling cmocka test on the first violation. */

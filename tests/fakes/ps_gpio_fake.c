@@ -25,6 +25,17 @@ static int fake_read_estop(void *ctx, bool *out_pressed_since_last_read)
     return 0;
 }
 
+static int fake_read_button(void *ctx, bool *out_pressed_since_last_read)
+{
+    ps_gpio_fake_t *f = ctx;
+    f->n_button_reads++;
+    if (out_pressed_since_last_read == NULL)
+        return -EINVAL;
+    *out_pressed_since_last_read = f->is_button_pressed || f->is_button_latched;
+    f->is_button_latched = false;
+    return 0;
+}
+
 static int fake_set_heartbeat(void *ctx, bool level)
 {
     ps_gpio_fake_t *f = ctx;
@@ -61,6 +72,7 @@ static void fake_close(void *ctx)
 
 static const ps_gpio_ops_t FAKE_OPS = {
     .read_estop = fake_read_estop,
+    .read_button = fake_read_button,
     .set_heartbeat = fake_set_heartbeat,
     .set_led = fake_set_led,
     .close = fake_close,

@@ -28,6 +28,8 @@ typedef struct {
     /* script (test may modify) */
     bool is_estop_pressed; /**< the level */
     bool is_estop_latched; /**< pressed since the last read; a read clears it */
+    bool is_button_pressed; /**< the record button's level */
+    bool is_button_latched; /**< a button press since the last read_button */
     ps_gpio_fake_fault_t read_fault;
     ps_gpio_fake_fault_t heartbeat_fault;
     ps_gpio_fake_fault_t led_fault;
@@ -41,6 +43,7 @@ typedef struct {
     size_t n_led_calls;
     size_t n_heartbeat_edges; /**< level changes of the heartbeat output */
     size_t n_read_calls;      /**< every read_estop call, failed included */
+    size_t n_button_reads;    /**< every read_button call */
     size_t n_close_calls;
 } ps_gpio_fake_t;
 

@@ -706,18 +706,35 @@ static bool mock_is_led_on(void *ctx)
     return mock_get(2) == 1;
 }
 
+static void mock_set_button(void *ctx, bool is_pressed)
+{
+    (void)ctx;
+    mock_set(3, is_pressed ? 1 : 0); /* active high */
+}
+
+/* Without the record button (read_button says not pressed), then with it
+ * on line 3 (read as the e-stop is). */
 static void test_gpiod_keeps_the_port_contract(void **state)
 {
     (void)state;
-    const ps_gpio_cfg_t c = cfg_default(); /* debounce 0 */
+    ps_gpio_cfg_t c = cfg_default(); /* debounce 0 */
     open_ok(&g_a, &c);
-    const ps_gpio_contract_t k = {.port = ps_gpio_gpiod_port(&g_a),
-                                  .ctx = NULL,
-                                  .set_estop = mock_set_estop,
-                                  .settle = mock_settle,
-                                  .heartbeat_level = mock_heartbeat_level,
-                                  .is_led_on = mock_is_led_on};
+    ps_gpio_contract_t k = {.port = ps_gpio_gpiod_port(&g_a),
+                            .ctx = NULL,
+                            .set_estop = mock_set_estop,
+                            .settle = mock_settle,
+                            .heartbeat_level = mock_heartbeat_level,
+                            .is_led_on = mock_is_led_on};
     ps_gpio_contract_check(&k);
+    ps_gpio_gpiod_close(&g_a);
+    c.has_button = true;
+    c.button_line = 3;
+    open_ok(&g_a, &c);
+    assert_int_equal(g_a.button_offset, 3);
+    k.port = ps_gpio_gpiod_port(&g_a);
+    k.set_button = mock_set_button;
+    ps_gpio_contract_check(&k);
+    assert_true(g_a.n_button_events >= 4);
 }
 
 int main(void)
