@@ -21,20 +21,24 @@ CXX     ?= c++
 
 # Debian 12 packages (README says why each is there). BUILD_PKGS build, test
 # and run the system; TOOL_PKGS are for working with targets (cyclictest,
-# can-utils, libgpiod, C++ for the camera side). `make deps` installs both.
+# can-utils). `make deps` installs both.
 BUILD_PKGS := gcc libc6-dev make pkg-config libmujoco-dev libcyaml-dev libyaml-dev \
               libcmocka-dev libcjson-dev libmnl-dev libgpiod-dev \
               libzstd-dev liblz4-dev zlib1g-dev
-# The crowd's pictures (--render, --view, sim/ps_render.h): PNG, offscreen
-# OpenGL through EGL on Mesa's software rasteriser, a GLFW window, ffmpeg.
-BUILD_PKGS += libpng-dev libegl-dev libegl-mesa0 libgl1-mesa-dri libglfw3-dev ffmpeg
-TOOL_PKGS  := g++ rt-tests can-utils
+# Camera perception: libcamera (C++: g++), AprilTag detection; PNG images in
+# and out, offscreen OpenGL through EGL on Mesa's software rasteriser for the
+# simulated camera and the crowd's pictures (--render, sim/ps_render.h), a
+# GLFW window (--view), ffmpeg for the crowd's MP4.
+BUILD_PKGS += g++ libcamera-dev libapriltag-dev libpng-dev libegl-dev libegl-mesa0 \
+              libgl1-mesa-dri libglfw3-dev ffmpeg
+TOOL_PKGS  := rt-tests can-utils
 # What `make test` needs beyond building: can-utils' log2long reads the
 # candump-format lines the runtime writes (tests/test_candump.c); systemd's
 # systemd-analyze reads the shipped unit (tools/test-install.sh); gnuplot
-# draws `pushstep log --plot` (tests/test_e2e_recorder.c); and the aarch64
-# cross tools (AARCH64_PKGS below) for the aarch64 part of the suite.
-TEST_PKGS  := can-utils systemd gnuplot-nox
+# draws `pushstep log --plot` (tests/test_e2e_recorder.c); libcamera's vimc
+# IPA module and udevd for the VM's emulated camera (test_hw_camera); and the
+# aarch64 cross tools (AARCH64_PKGS below) for the aarch64 part of the suite.
+TEST_PKGS  := can-utils systemd gnuplot-nox libcamera-ipa udev
 # Extra packages `make bench` needs: load generator, plots, the analysis script.
 BENCH_PKGS := stress-ng gnuplot-nox python3
 # ARCH=aarch64: the cross compiler, qemu-user to run its tests, and the arm64
@@ -42,8 +46,9 @@ BENCH_PKGS := stress-ng gnuplot-nox python3
 # the arm64 architecture to dpkg when a package names it).
 CROSS_LIBS := libc6-dev libmujoco-dev libcyaml-dev libyaml-dev libcmocka-dev libcjson-dev \
               libmnl-dev libgpiod-dev libzstd-dev liblz4-dev zlib1g-dev \
-              libpng-dev libegl-dev libglfw3-dev
-AARCH64_PKGS := gcc-aarch64-linux-gnu qemu-user $(addsuffix :arm64,$(CROSS_LIBS))
+              libapriltag-dev libpng-dev libegl-dev libcamera-dev libglfw3-dev
+AARCH64_PKGS := gcc-aarch64-linux-gnu g++-aarch64-linux-gnu qemu-user \
+                $(addsuffix :arm64,$(CROSS_LIBS))
 ifdef IS_CROSS
 BUILD_PKGS := make pkg-config $(AARCH64_PKGS)
 TEST_PKGS  :=
@@ -53,9 +58,17 @@ endif
 
 WARN    := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototypes
 CFLAGS  ?= -O2 -g
-CFLAGS  += -std=c11 -D_GNU_SOURCE -pthread $(WARN) -MMD -MP
-LDLIBS  := -lmujoco -lcyaml -lyaml -lcjson -lmnl -lgpiod -lzstd -llz4 -lz -lm -pthread
-LDLIBS  += -lpng -lEGL -lglfw
+CFLAGS  += -std=c11 -D_GNU_SOURCE -pthread $(WARN) -MMD -MP $(IMAGE_CFLAGS)
+# Deferred (=): pkg-config runs when a rule needs it, after deps-build has
+# installed the packages on a fresh machine.
+IMAGE_CFLAGS = $(shell pkg-config --cflags libpng)
+CAMERA_LIBS  = $(shell pkg-config --libs libpng) -lapriltag -lapriltag-utils -lEGL -lglfw
+LDLIBS  = -lmujoco -lcyaml -lyaml -lcjson -lmnl -lgpiod -lzstd -llz4 -lz $(CAMERA_LIBS) -lm -pthread
+# C++ only for libcamera, in one file behind a C header, built as a module the
+# runtime loads when a board has a libcamera camera (drivers/ps_camera_libcamera.h).
+CXXFLAGS ?= -O2 -g
+CXXFLAGS += -std=c++17 -D_GNU_SOURCE -pthread -Wall -Wextra -Werror -Wshadow -MMD -MP \
+            $(shell pkg-config --cflags libcamera)
 SANFLAGS := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
 SAN_DIR  := san
 ifdef IS_CROSS
@@ -64,6 +77,7 @@ SAN_DIR  := obj
 endif
 
 LIB_SRCS  := $(filter-out rt/main.c,$(wildcard rt/*.c drivers/*.c policy/*.c sim/*.c))
+CAMERA_SO := $(BUILD)/libpushstep-libcamera.so
 MAIN_SRC  := rt/main.c
 FAKE_SRCS := $(wildcard tests/fakes/*.c tests/contract/*.c)
 TEST_SRCS := $(wildcard tests/test_*.c)
@@ -79,6 +93,9 @@ LIB_SANOBJS := $(call SANOBJ,$(LIB_SRCS))
 FAKE_OBJS    := $(call OBJ,$(FAKE_SRCS))
 FAKE_SANOBJS := $(call SANOBJ,$(FAKE_SRCS))
 TEST_BINS := $(addprefix $(BUILD)/tests/,$(SAN_TESTS) $(NOSAN_TESTS))
+# The lock-free mailbox's test again under ThreadSanitizer (it checks the
+# atomics' memory orders, which ASan cannot).
+TSAN_BINS := $(BUILD)/tests/test_mailbox_tsan
 # Tests of the real drivers: they need vcan/vxcan and gpio-mockup, so they run
 # inside a Debian kernel booted under qemu (tools/qemu/, docs/testing-hw.md).
 HW_SRCS := $(wildcard tests/hw/test_hw_*.c)
@@ -87,7 +104,7 @@ QEMU_WORK ?= $(BUILD)/qemu
 
 .PHONY: all deps deps-build deps-test deps-npm deps-bench run test test-hw clean format help \
         bench bench-hw install deb test-deb aarch64-test-bins
-all: $(BUILD)/pushstep
+all: $(BUILD)/pushstep $(CAMERA_SO)
 
 help:
 	@echo "make deps    install missing Debian packages, build and target tools (as root;"
@@ -101,7 +118,8 @@ help:
 	@echo "make test-hw the real drivers (SocketCAN, libgpiod) in a Debian kernel"
 	@echo "             booted under qemu with vcan, vxcan and gpio-mockup"
 	@echo "make bench   latency beside cyclictest, tick share, bus load, allocations,"
-	@echo "             the crowd's cost: bench/results/*.json, summary.md, crowd.md"
+	@echo "             the crowd's cost, camera perception: bench/results/*.json,"
+	@echo "             summary.md, crowd.md, camera.md (docs/latency.md, docs/perception.md)"
 	@echo "make bench-hw the real drivers' figures in the test VM (e-stop reaction,"
 	@echo "             loop reaction, frames per bus): bench/results/hw.json"
 	@echo "make install PREFIX=/usr/local [DESTDIR=]: the binary, its data (boards, robots,"
@@ -141,6 +159,21 @@ $(BUILD)/san/%.o: %.c
 	$(CC) $(CFLAGS) $(SANFLAGS) -c $< -o $@
 endif
 
+$(BUILD)/pic/%.o: %.cpp
+	@mkdir -p $(@D)
+	$(CXX) $(CXXFLAGS) -fPIC -c $< -o $@
+
+$(BUILD)/pic/%.o: %.c
+	@mkdir -p $(@D)
+	$(CC) $(CFLAGS) -fPIC -c $< -o $@
+
+$(CAMERA_SO): $(BUILD)/pic/drivers/ps_camera_libcamera.o $(BUILD)/pic/drivers/ps_camera.o
+	$(CXX) $(LDFLAGS) -shared -o $@ $^ $(shell pkg-config --libs libcamera) -pthread
+
+$(BUILD)/tests/test_mailbox_tsan: tests/test_mailbox.c rt/ps_mailbox.c
+	@mkdir -p $(@D)
+	$(CC) $(CFLAGS) -fsanitize=thread -o $@ $^ -lcmocka
+
 $(BUILD)/pushstep: $(call OBJ,$(MAIN_SRC)) $(LIB_OBJS)
 	$(CC) $(CFLAGS) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 
@@ -156,22 +189,23 @@ $(HW_BINS): $(BUILD)/tests/hw/%: $(BUILD)/obj/tests/hw/%.o $(LIB_OBJS) $(FAKE_OB
 	@mkdir -p $(@D)
 	$(CC) $(CFLAGS) -o $@ $^ $(LDLIBS) -lcmocka
 
-run: deps-build $(BUILD)/pushstep
+run: deps-build $(BUILD)/pushstep $(CAMERA_SO)
 	$(BUILD)/pushstep --board sim $(ARGS)
 
 ifdef IS_CROSS
-test: deps-test $(BUILD)/pushstep $(TEST_BINS)
+test: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(TEST_BINS)
 	@PUSHSTEP_BIN=$(BUILD)/pushstep bash tools/test-aarch64.sh $(TEST_BINS)
 
-aarch64-test-bins: $(BUILD)/pushstep $(TEST_BINS)
+aarch64-test-bins: $(BUILD)/pushstep $(CAMERA_SO) $(TEST_BINS)
 else
 # The native suite, then the quick part of the aarch64 one under qemu-user
 # (tools/test-aarch64.sh) when the cross tools are installed (deps-test
 # installs them where apt can), then the VM tests.
-test: deps-test deps-npm $(BUILD)/pushstep $(TEST_BINS) $(HW_BINS) aarch64-test-bins
+test: deps-test deps-npm $(BUILD)/pushstep $(CAMERA_SO) $(TEST_BINS) $(TSAN_BINS) $(HW_BINS) \
+      aarch64-test-bins
 	@PUSHSTEP_BIN=$(BUILD)/pushstep PUSHSTEP_NPM=$(BUILD)/npm QEMU_WORK=$(QEMU_WORK) \
 	    HW_BINS="$(HW_BINS)" AARCH64_BUILD=$(AARCH64_BUILD) bash tools/run-tests.sh \
-	    tools/check-layers.sh $(TEST_BINS) tools/test-install.sh tools/test-aarch64.sh \
+	    tools/check-layers.sh $(TEST_BINS) $(TSAN_BINS) tools/test-install.sh tools/test-aarch64.sh \
 	    tools/qemu/test-hw.sh
 
 AARCH64_BUILD := build-aarch64
@@ -179,17 +213,20 @@ aarch64-test-bins:
 	@if command -v aarch64-linux-gnu-gcc >/dev/null && command -v qemu-aarch64 >/dev/null && \
 	    [ -e /usr/lib/aarch64-linux-gnu/libmujoco.so ] && [ -e /usr/lib/aarch64-linux-gnu/libcmocka.so ] && \
 	    [ -e /usr/lib/aarch64-linux-gnu/libzstd.so ] && [ -e /usr/lib/aarch64-linux-gnu/liblz4.so ] && \
-	    [ -e /usr/lib/aarch64-linux-gnu/libpng.so ] && [ -e /usr/lib/aarch64-linux-gnu/libglfw.so ]; then \
+	    [ -e /usr/lib/aarch64-linux-gnu/libapriltag.so ] && [ -e /usr/lib/aarch64-linux-gnu/libpng.so ] && \
+	    [ -e /usr/lib/aarch64-linux-gnu/libEGL.so ] && [ -e /usr/lib/aarch64-linux-gnu/libcamera.so ] && \
+	    [ -e /usr/lib/aarch64-linux-gnu/libglfw.so ]; then \
 	    $(MAKE) --no-print-directory ARCH=aarch64 BUILD=$(AARCH64_BUILD) aarch64-test-bins; \
 	else echo "aarch64: cross tools or arm64 libraries missing: its tests are skipped"; fi
 endif
 
-test-hw: deps-test $(BUILD)/pushstep $(HW_BINS)
+test-hw: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(HW_BINS)
 	@PUSHSTEP_BIN=$(BUILD)/pushstep QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh tools/qemu/test-hw.sh
 
-bench: deps-bench $(BUILD)/pushstep $(BUILD)/crowd_bench
+bench: deps-bench $(BUILD)/pushstep $(CAMERA_SO) $(BUILD)/crowd_bench
 	@bash bench/run.sh
 	@BUILD=$(BUILD) bash bench/crowd.sh
+	@BUILD=$(BUILD) bash bench/camera.sh
 	@QEMU_WORK=$(QEMU_WORK) bash bench/hw.sh
 
 # The simulated crowd's cost (bench/crowd.sh): plant with N agents beside mj_step.
@@ -210,8 +247,9 @@ UNITDIR  ?= $(PREFIX)/lib/systemd/system
 UDEVDIR  ?= $(PREFIX)/lib/udev/rules.d
 DATA_DIRS := boards robots scenarios sim/models
 
-install: $(BUILD)/pushstep
+install: $(BUILD)/pushstep $(CAMERA_SO)
 	install -D -m 0755 $(BUILD)/pushstep $(DESTDIR)$(BINDIR)/pushstep
+	install -D -m 0644 $(CAMERA_SO) $(DESTDIR)$(PREFIX)/lib/pushstep/libpushstep-libcamera.so
 	for d in $(DATA_DIRS); do install -d $(DESTDIR)$(DATADIR)/$$d && \
 	    cp -R --no-preserve=mode,ownership $$d/. $(DESTDIR)$(DATADIR)/$$d/ || exit 1; done
 	install -D -m 0755 tools/plot-profile.sh $(DESTDIR)$(DATADIR)/tools/plot-profile.sh
@@ -241,4 +279,4 @@ format:
 clean:
 	rm -rf $(BUILD)
 
--include $(shell find $(BUILD)/obj $(BUILD)/san -name '*.d' -type f 2>/dev/null)
+-include $(shell find $(BUILD)/obj $(BUILD)/san $(BUILD)/pic -name '*.d' -type f 2>/dev/null)

@@ -10,6 +10,7 @@
 
 #include "../drivers/ps_actuator.h"
 #include "../rt/ps_limits.h"
+#include "../rt/ps_neighbours.h"
 
 /* One joint as its drive last reported it: ps_act_meas_t (joint units, fault
  * bits ps_act_fault_t, t_ns the tick the reply was taken, 0: never). */
@@ -24,6 +25,10 @@ typedef struct {
     uint32_t n_joints;
     ps_act_meas_t joints[PS_MAX_JOINTS];
     ps_imu_meas_t imu;
+    /** The neighbours' shoulders from camera perception (rt/ps_perception),
+     *  taken and aged by the loop each tick: is_valid false and no shoulders
+     *  when the board has no camera or the newest list is too old. */
+    ps_neighbours_t neighbours;
 } ps_meas_t;
 
 /** Estimated state. Ground frame: origin on the ground under the midpoint of

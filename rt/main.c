@@ -25,6 +25,7 @@
 #include "../sim/ps_render.h"
 #include "ps_app.h"
 #include "ps_doctor.h"
+#include "ps_camview.h"
 #include "ps_emulate.h"
 #include "ps_monitor.h"
 #include "ps_err.h"
@@ -112,6 +113,7 @@ static const char USAGE[] =
     "       pushstep emulate --board FILE --ifaces IF,... (see pushstep emulate -h)\n"
     "       pushstep doctor [--board FILE] (see pushstep doctor -h)\n"
     "       pushstep log FILE.mcap [--csv OUT] [--plot OUT.png] (see pushstep log -h)\n"
+    "       pushstep camera --board FILE (see pushstep camera -h)\n"
     "Runs the balance controller's fixed-step loop against a board: real hardware\n"
     "or, for board `sim`, the MuJoCo plant with emulated CAN actuators, IMU and GPIO.\n"
     "\n"
@@ -1045,6 +1047,27 @@ static void report_replay(void)
            (double)l[PS_CAN_REPLAY_TAU]);
 }
 
+/* Camera perception beside the loop: what the perception thread did and
+ * what the loop took from it. */
+static void report_camera(void)
+{
+    if (!g.app.has_perception)
+        return;
+    ps_perception_stats_t st;
+    ps_perception_get_stats(&g.app.perception, &st);
+    const double span_s = ps_ns_to_s(st.t_last_mono_ns - st.t_first_mono_ns);
+    const ps_loop_counters_t *c = &g.app.loop.counters;
+    printf("camera: %llu frames (%.1f/s), %llu tags, exposure to mailbox p50/p99/max "
+           "%.1f/%.1f/%.1f ms, %llu errors; the loop took %llu lists, %llu of %llu ticks without "
+           "a fresh one\n",
+           (unsigned long long)st.n_frames,
+           span_s > 0 ? (double)(st.n_published - 1u) / span_s : 0.0,
+           (unsigned long long)st.n_tags, ps_perf_quantile_ns(&st.latency, 0.5) * 1e-6,
+           ps_perf_quantile_ns(&st.latency, 0.99) * 1e-6, (double)st.latency.max_ns * 1e-6,
+           (unsigned long long)st.n_errors, (unsigned long long)c->n_neighbour_lists,
+           (unsigned long long)c->n_neighbour_stale, (unsigned long long)c->n_ticks);
+}
+
 /* Profile outputs; plots are a convenience: without them the run still counts. */
 static int finish_profile(const ps_summary_t *sum)
 {
@@ -1069,6 +1092,10 @@ int main(int argc, char **argv)
     (void)setvbuf(stdout, NULL, _IOLBF, 0); /* before any output: cannot fail */
     if (argc > 1 && strcmp(argv[1], "log") == 0)
         return ps_reclog_main(argc - 1, argv + 1);
+    if (argc > 1 && strcmp(argv[1], "camera") == 0) {
+        find_data_dir(g.data_dir, sizeof(g.data_dir));
+        return ps_camview_main(argc - 1, argv + 1, g.data_dir);
+    }
     if (argc > 1 && (strcmp(argv[1], "emulate") == 0 || strcmp(argv[1], "monitor") == 0)) {
         find_data_dir(g.data_dir, sizeof(g.data_dir));
         return argv[1][0] == 'e' ? ps_emulate_main(argc - 1, argv + 1, g.data_dir)
@@ -1177,6 +1204,7 @@ int main(int argc, char **argv)
         finish_summary(&sum);
         ps_summary_print(&sum, stdout);
         report_replay();
+        report_camera();
         if (g.opt.summary_path != NULL &&
             ps_summary_write_json(&sum, g.opt.summary_path, err, sizeof(err)) < 0) {
             fprintf(stderr, "pushstep: %s\n", err);

@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../sim/ps_plant.h"
 #include "ps_err.h"
 #include "ps_guard.h"
 #include "ps_rtsetup.h"
@@ -350,6 +351,79 @@ static int wire_replay(ps_app_t *app, const char *path, ps_loop_cfg_t *lc, char 
     return 0;
 }
 
+/* The board's camera: its source's port, the perception over it, started on
+ * the worker CPU. clock stamps the image folder's frames (the loop's). */
+static int open_camera(ps_app_t *app, const ps_clock_t *clock, bool keep_snapshot, char *err,
+                       size_t len)
+{
+    const ps_perception_cfg_t *pc = &app->board.perception;
+    ps_camera_port_t port = {0};
+    int rc = 0;
+    switch (pc->camera.source) {
+    case PS_CAMERA_SRC_FILES: {
+        /* camera.dir is relative to the board file, like a robot's model */
+        char board_dir[PATH_MAX];
+        snprintf(board_dir, sizeof(board_dir), "%s", app->board_path);
+        if (pc->camera.dir[0] == '/')
+            snprintf(app->camera_dir, sizeof(app->camera_dir), "%s", pc->camera.dir);
+        else
+            snprintf(app->camera_dir, sizeof(app->camera_dir), "%s/%s", dirname(board_dir),
+                     pc->camera.dir);
+        ps_camera_cfg_t cc = pc->camera;
+        if (strlen(app->camera_dir) >= sizeof(cc.dir)) {
+            snprintf(err, len, "%s: camera.dir: the folder's path is longer than %zu bytes",
+                     app->board_path, sizeof(cc.dir) - 1u);
+            return -PS_ERR_CONFIG;
+        }
+        memcpy(cc.dir, app->camera_dir, strlen(app->camera_dir) + 1u);
+        ps_camera_files_init(&app->camera_files, &cc, clock, true);
+        port = ps_camera_files_port(&app->camera_files);
+        break;
+    }
+    case PS_CAMERA_SRC_LIBCAMERA:
+        if (app->is_lockstep) {
+            snprintf(err, len,
+                     "%s:%u: camera: a libcamera camera runs in real time; --lockstep needs "
+                     "source sim or files",
+                     app->board_path, app->board.camera_line);
+            return -PS_ERR_CONFIG;
+        }
+        rc = ps_camera_libcamera_create(&pc->camera, &app->camera_libcamera, err, len);
+        if (rc < 0)
+            return rc;
+        port = ps_camera_libcamera_port(app->camera_libcamera);
+        break;
+    case PS_CAMERA_SRC_SIM: {
+        if (app->sim == NULL) {
+            snprintf(err, len, "%s:%u: camera: source sim needs the simulated plant",
+                     app->board_path, app->board.camera_line);
+            return -PS_ERR_CONFIG;
+        }
+        const ps_camera_sim_cfg_t sc = {
+            .sim = app->sim,
+            .camera = pc->camera,
+            .k = pc->tags.k,
+            .cam_pos_m = {pc->tags.cam_pos_m[0], pc->tags.cam_pos_m[1], pc->tags.cam_pos_m[2]},
+            .cam_rpy_rad = {pc->tags.cam_rpy_rad[0], pc->tags.cam_rpy_rad[1],
+                            pc->tags.cam_rpy_rad[2]},
+            .root_body = PS_PLANT_ROOT_BODY_NAME,
+        };
+        rc = ps_camera_sim_create(&sc, &app->camera_sim, err, len);
+        if (rc < 0)
+            return rc;
+        port = ps_camera_sim_port(app->camera_sim);
+        break;
+    }
+    case PS_CAMERA_SRC_COUNT:
+        return -EINVAL;
+    }
+    rc = ps_perception_init(&app->perception, pc, port, keep_snapshot, err, len);
+    if (rc < 0)
+        return rc;
+    app->has_perception = true;
+    return ps_perception_start(&app->perception, app->board.rt.worker_cpu, err, len);
+}
+
 static int wire(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t len)
 {
     ps_loop_cfg_t lc = {
@@ -377,6 +451,14 @@ static int wire(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t len)
     app->op.clock = lc.clock;
     atomic_init(&app->op.start_request_ns, 0);
     lc.op = (ps_operator_t){.take = take_operator_requests, .ctx = app};
+    /* Camera perception beside the loop (not with --replay: a log has no
+     * pictures). */
+    if (app->board.has_perception && opts->replay_path == NULL) {
+        rc = open_camera(app, lc.clock, false, err, len);
+        if (rc < 0)
+            return rc;
+        lc.neighbours = ps_perception_mailbox(&app->perception);
+    }
     rc = ps_ring_init(&app->ring, app->ring_storage, PS_APP_RING_SLOTS,
                       sizeof(app->ring_storage[0]));
     if (rc == 0)
@@ -386,10 +468,41 @@ static int wire(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t len)
     return rc;
 }
 
+/* `pushstep camera`: the files, a plant at rest on board sim, the camera. */
+static int init_camera_only(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t len)
+{
+    /* A real board's camera needs nothing of the robot; board sim's scene is
+     * the robot's model (and its plant), so there everything is loaded. */
+    ps_config_resolve(opts->data_dir ? opts->data_dir : ".", opts->board ? opts->board : "sim",
+                      "boards", "sim", app->board_path, sizeof(app->board_path));
+    int rc = ps_config_load_board(app->board_path, &app->board, err, len);
+    if (rc == 0 && app->board.kind == PS_BOARD_SIM)
+        rc = load_configs(app, opts, err, len);
+    if (rc == 0 && !app->board.has_perception) {
+        snprintf(err, len,
+                 "%s: the board has no camera perception (camera.source; docs/config.md)",
+                 app->board_path);
+        rc = -PS_ERR_CONFIG;
+    }
+    ps_loop_cfg_t unused = {0};
+    if (rc == 0 && app->board.kind == PS_BOARD_SIM) {
+        app->is_lockstep = true; /* a plant that only holds the scene: no thread */
+        rc = wire_sim(app, &unused, err, len);
+    }
+    if (rc == 0)
+        rc = open_camera(app, app->sim != NULL ? ps_sim_clock(app->sim) : ps_clock_monotonic(),
+                         true, err, len);
+    if (rc < 0)
+        ps_app_deinit(app);
+    return rc;
+}
+
 int ps_app_init(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t err_len)
 {
     memset(app, 0, sizeof(*app));
     app->is_lockstep = opts->is_lockstep;
+    if (opts->is_camera_only)
+        return init_camera_only(app, opts, err, err_len);
     int rc = load_configs(app, opts, err, err_len);
     for (uint32_t b = 0; rc == 0 && b < app->board.n_buses; b++)
         memcpy(app->bus_names[b], app->board.buses[b].ifname, PS_NAME_LEN);
@@ -448,6 +561,14 @@ void ps_app_attach_recorder(ps_app_t *app, ps_recorder_t *rec)
 
 void ps_app_deinit(ps_app_t *app)
 {
+    /* perception first: the simulated camera reads the sim */
+    if (app->has_perception)
+        ps_perception_deinit(&app->perception);
+    app->has_perception = false;
+    ps_camera_sim_destroy(app->camera_sim);
+    app->camera_sim = NULL;
+    ps_camera_libcamera_destroy(app->camera_libcamera);
+    app->camera_libcamera = NULL;
     ps_sim_destroy(app->sim);
     app->sim = NULL;
     for (uint32_t b = 0; b < app->n_sockets_open; b++)

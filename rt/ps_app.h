@@ -19,15 +19,19 @@
 #include <limits.h>
 #include <stdbool.h>
 
+#include "../drivers/ps_camera_files.h"
+#include "../drivers/ps_camera_libcamera.h"
 #include "../drivers/ps_can_replay.h"
 #include "../drivers/ps_can_socket.h"
 #include "../drivers/ps_canbus.h"
 #include "../drivers/ps_gpio_gpiod.h"
 #include "../policy/ps_stand.h"
+#include "../sim/ps_camera_sim.h"
 #include "../sim/ps_sim.h"
 #include "ps_config.h"
 #include "ps_config_sim.h"
 #include "ps_loop.h"
+#include "ps_perception.h"
 #include "ps_recorder.h"
 #include "ps_ring.h"
 
@@ -46,6 +50,10 @@ typedef struct {
     /** --replay: buses fed from this candump -L log, its clock, no GPIO, no
      *  plant (any board); NULL: off */
     const char *replay_path;
+    /** `pushstep camera`: load the files and open the board's camera only (on
+     *  board sim, with a plant that is not started: the scene at rest); no
+     *  buses, GPIO or loop. The perception keeps its snapshot. */
+    bool is_camera_only;
 } ps_app_opts_t;
 
 typedef struct {
@@ -69,6 +77,13 @@ typedef struct {
     uint8_t *replay_data;                  /**< --replay: the frames' payload bytes */
     bool is_replay;
     char notes[512]; /**< what start-up did not check (virtual CAN interfaces) */
+    /* camera perception, when the board has a camera: section */
+    char camera_dir[PATH_MAX]; /**< camera.dir resolved against the board file */
+    ps_camera_files_t camera_files;
+    ps_camera_libcamera_t *camera_libcamera;
+    ps_camera_sim_t *camera_sim;
+    ps_perception_t perception;
+    bool has_perception;
     char bus_names[PS_MAX_BUSES][PS_NAME_LEN]; /**< the board's interfaces, by bus */
     ps_stand_t stand;
     ps_ring_t ring;
@@ -82,7 +97,9 @@ typedef struct {
 } ps_app_t;
 
 /** Load, check, plan and wire. On a bus budget error the plan in app->plan is
- *  still filled so the caller can show it.
+ *  still filled so the caller can show it. With a camera: section on the
+ *  board, the camera is opened and the perception thread started here (on
+ *  the board's worker CPU), its mailbox wired into the loop.
  *  @post err holds one line naming the file/field/bus on failure
  *  @return 0 | -PS_ERR_CONFIG (also: a CAN interface not set up as the board
  *          says; err names the `ip link` fix) | -PS_ERR_BUS_BUDGET | -ENOENT
@@ -134,8 +151,8 @@ void ps_app_recorder_cfg(const ps_app_t *app, ps_recorder_cfg_t *out);
  *  @pre both initialised, loop not running  @rt INIT */
 void ps_app_attach_recorder(ps_app_t *app, ps_recorder_t *rec);
 
-/** Free the sim, close sockets and GPIO lines (heartbeat low). Safe twice and
- *  on a failed init.  @rt INIT */
+/** Stop camera perception, free the sim, close sockets and GPIO lines
+ *  (heartbeat low). Safe twice and on a failed init.  @rt INIT */
 void ps_app_deinit(ps_app_t *app);
 
 #endif /* PS_APP_H */

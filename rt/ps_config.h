@@ -33,6 +33,7 @@
 #include "../policy/ps_servo.h"
 #include "ps_limits.h"
 #include "ps_loop.h"
+#include "ps_perception.h"
 #include "ps_rtsetup.h"
 
 /* ---- board file: boards/<name>.yaml ---------------------------------- */
@@ -44,7 +45,8 @@ typedef enum {
 
 /** The board's camera (optional `camera:`), for `pushstep doctor`: a V4L2
  *  device or sub-device whose name (/sys/class/video4linux/STAR/name)
- *  contains `sensor`, e.g. "imx708". */
+ *  contains `sensor`, e.g. "imx708" (empty: any). Camera perception, when
+ *  the section also gives `source`, is ps_board_cfg_t.perception. */
 typedef struct {
     char sensor[PS_NAME_LEN];
 } ps_board_camera_t;
@@ -57,8 +59,11 @@ struct ps_board_cfg {
     float bus_budget; /**< max worst-case load per bus, 0..1, default 0.8 */
     ps_gpio_cfg_t gpio;
     ps_rt_cfg_t rt;
-    bool has_camera; /**< camera given */
+    bool has_camera; /**< camera given (the optional `camera:` section) */
     ps_board_camera_t camera;
+    bool has_perception;            /**< camera perception configured (`camera.source` given) */
+    ps_perception_cfg_t perception; /**< camera.dir as written (relative to the board file) */
+    uint32_t camera_line; /**< first line of the `camera:` mapping, for messages; 0: none */
 };
 
 /* ---- robot file: robots/<name>.yaml ---------------------------------- */

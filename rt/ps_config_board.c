@@ -2,6 +2,7 @@
  * ps_config_board: the board file (boards/<name>.yaml) and the checks of a
  * robot against a board. Shared machinery: ps_config_common.h.
  */
+#include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -12,6 +13,10 @@
 #include "ps_err.h"
 
 #define DEFAULT_BUS_BUDGET 0.8f
+/* Detections below this decision margin are dropped unless the board says
+ * otherwise: a judgment, a tag that faint is too blurred or small to trust
+ * (docs/perception.md). */
+#define PS_BOARD_CAMERA_MIN_MARGIN 20.0f
 #define MAX_GPIO_LINE      1023u
 
 /* One bus as written; fd and data_bitrate are optional (NULL when absent). */
@@ -41,6 +46,33 @@ typedef struct {
     bool is_button_active_low;
 } gpio_raw_t;
 
+/* The optional `camera:` section as written (docs/config.md). */
+typedef struct {
+    float fx_px, fy_px, cx_px, cy_px;
+} intrinsics_raw_t;
+typedef struct {
+    float xyz_m[3];
+    float rpy_rad[3];
+} pose_raw_t;
+typedef struct {
+    char sensor[PS_NAME_LEN]; /* for pushstep doctor; empty when absent */
+    /* camera perception: source, then the rest (required with it, refused
+     * without it); NULL or empty when absent */
+    ps_camera_source_t *source;
+    char id[PS_PATH_LEN];  /* libcamera only */
+    char dir[PS_PATH_LEN]; /* files only */
+    uint32_t *width, *height;
+    ps_camera_format_t *format; /* libcamera only */
+    float *fps;
+    intrinsics_raw_t *intrinsics;
+    pose_raw_t *pose;
+    float *tag_size_m;
+    float *max_age_s;
+    uint32_t *threads;
+    float *decimate;
+    float *min_margin;
+} camera_raw_t;
+
 typedef struct {
     char name[PS_NAME_LEN];
     ps_board_kind_t kind;
@@ -49,7 +81,7 @@ typedef struct {
     uint32_t n_buses;
     gpio_raw_t gpio;
     ps_rt_cfg_t rt;
-    ps_board_camera_t *camera; /* optional: NULL when absent */
+    camera_raw_t *camera; /* optional: NULL when absent */
 } board_raw_t;
 
 static const cyaml_strval_t BOARD_KINDS[] = {
@@ -68,6 +100,58 @@ static const cyaml_strval_t CONTROLLERS[] = {
     {"mcp2515", PS_CANBUS_CTRL_MCP2515}, {"mcp251xfd", PS_CANBUS_CTRL_MCP251XFD},
     {"mttcan", PS_CANBUS_CTRL_MTTCAN},   {"m_can", PS_CANBUS_CTRL_M_CAN},
     {"gs_usb", PS_CANBUS_CTRL_GS_USB},   {"virtual", PS_CANBUS_CTRL_VIRTUAL},
+};
+
+static const cyaml_strval_t CAMERA_SOURCES[] = {
+    {"libcamera", PS_CAMERA_SRC_LIBCAMERA},
+    {"files", PS_CAMERA_SRC_FILES},
+    {"sim", PS_CAMERA_SRC_SIM},
+};
+static_assert(sizeof(CAMERA_SOURCES) / sizeof(CAMERA_SOURCES[0]) == PS_CAMERA_SRC_COUNT,
+              "one YAML name per camera source");
+static const cyaml_strval_t CAMERA_FORMATS[] = {
+    {"R8", PS_PIX_R8},         {"YUV420", PS_PIX_YUV420}, {"NV12", PS_PIX_NV12},
+    {"RGB888", PS_PIX_RGB888}, {"BGR888", PS_PIX_BGR888}, {"XRGB8888", PS_PIX_XRGB8888},
+};
+static_assert(sizeof(CAMERA_FORMATS) / sizeof(CAMERA_FORMATS[0]) == PS_PIX_COUNT,
+              "one YAML name per pixel format");
+static const cyaml_schema_value_t CAMERA_FLOAT_SCHEMA = {
+    CYAML_VALUE_FLOAT(CYAML_FLAG_DEFAULT, float),
+};
+static const cyaml_schema_field_t INTRINSICS_FIELDS[] = {
+    CYAML_FIELD_FLOAT("fx_px", CYAML_FLAG_DEFAULT, intrinsics_raw_t, fx_px),
+    CYAML_FIELD_FLOAT("fy_px", CYAML_FLAG_DEFAULT, intrinsics_raw_t, fy_px),
+    CYAML_FIELD_FLOAT("cx_px", CYAML_FLAG_DEFAULT, intrinsics_raw_t, cx_px),
+    CYAML_FIELD_FLOAT("cy_px", CYAML_FLAG_DEFAULT, intrinsics_raw_t, cy_px),
+    CYAML_FIELD_END,
+};
+static const cyaml_schema_field_t POSE_FIELDS[] = {
+    CYAML_FIELD_SEQUENCE_FIXED("xyz_m", CYAML_FLAG_DEFAULT, pose_raw_t, xyz_m,
+                               &CAMERA_FLOAT_SCHEMA, 3),
+    CYAML_FIELD_SEQUENCE_FIXED("rpy_rad", CYAML_FLAG_DEFAULT, pose_raw_t, rpy_rad,
+                               &CAMERA_FLOAT_SCHEMA, 3),
+    CYAML_FIELD_END,
+};
+static const cyaml_schema_field_t CAMERA_FIELDS[] = {
+    CYAML_FIELD_STRING("sensor", CYAML_FLAG_OPTIONAL, camera_raw_t, sensor, 1),
+    CYAML_FIELD_ENUM_PTR("source", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, camera_raw_t, source,
+                         CAMERA_SOURCES, CYAML_ARRAY_LEN(CAMERA_SOURCES)),
+    CYAML_FIELD_STRING("id", CYAML_FLAG_OPTIONAL, camera_raw_t, id, 1),
+    CYAML_FIELD_STRING("dir", CYAML_FLAG_OPTIONAL, camera_raw_t, dir, 1),
+    CYAML_FIELD_UINT_PTR("width", CYAML_FLAG_OPTIONAL, camera_raw_t, width),
+    CYAML_FIELD_UINT_PTR("height", CYAML_FLAG_OPTIONAL, camera_raw_t, height),
+    CYAML_FIELD_ENUM_PTR("format", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, camera_raw_t, format,
+                         CAMERA_FORMATS, CYAML_ARRAY_LEN(CAMERA_FORMATS)),
+    CYAML_FIELD_FLOAT_PTR("fps", CYAML_FLAG_OPTIONAL, camera_raw_t, fps),
+    CYAML_FIELD_MAPPING_PTR("intrinsics", CYAML_FLAG_OPTIONAL, camera_raw_t, intrinsics,
+                            INTRINSICS_FIELDS),
+    CYAML_FIELD_MAPPING_PTR("pose", CYAML_FLAG_OPTIONAL, camera_raw_t, pose, POSE_FIELDS),
+    CYAML_FIELD_FLOAT_PTR("tag_size_m", CYAML_FLAG_OPTIONAL, camera_raw_t, tag_size_m),
+    CYAML_FIELD_FLOAT_PTR("max_age_s", CYAML_FLAG_OPTIONAL, camera_raw_t, max_age_s),
+    CYAML_FIELD_UINT_PTR("threads", CYAML_FLAG_OPTIONAL, camera_raw_t, threads),
+    CYAML_FIELD_FLOAT_PTR("decimate", CYAML_FLAG_OPTIONAL, camera_raw_t, decimate),
+    CYAML_FIELD_FLOAT_PTR("min_margin", CYAML_FLAG_OPTIONAL, camera_raw_t, min_margin),
+    CYAML_FIELD_END,
 };
 
 static const cyaml_schema_field_t BUS_FIELDS[] = {
@@ -109,10 +193,6 @@ static const cyaml_schema_field_t RT_FIELDS[] = {
     CYAML_FIELD_INT("worker_cpu", CYAML_FLAG_DEFAULT, ps_rt_cfg_t, worker_cpu),
     CYAML_FIELD_END,
 };
-static const cyaml_schema_field_t CAMERA_FIELDS[] = {
-    CYAML_FIELD_STRING("sensor", CYAML_FLAG_DEFAULT, ps_board_camera_t, sensor, 1),
-    CYAML_FIELD_END,
-};
 static const cyaml_schema_field_t BOARD_FIELDS[] = {
     CYAML_FIELD_STRING("name", CYAML_FLAG_DEFAULT, board_raw_t, name, 1),
     CYAML_FIELD_ENUM("kind", CYAML_FLAG_STRICT, board_raw_t, kind, BOARD_KINDS,
@@ -149,11 +229,172 @@ static const ps_cfg_rule_t BOARD_RANGES[] = {
     PS_CFG_RULE_I32(0, 0, "rt.loop_cpu", ps_board_cfg_t, rt.loop_cpu, -1.0, 1023.0),
     PS_CFG_RULE_I32(0, 0, "rt.plant_cpu", ps_board_cfg_t, rt.plant_cpu, -1.0, 1023.0),
     PS_CFG_RULE_I32(0, 0, "rt.worker_cpu", ps_board_cfg_t, rt.worker_cpu, -1.0, 1023.0),
+    /* Camera perception's (keys "camera."): checked only when the board's
+     * camera has a source. */
+    PS_CFG_RULE_U32(0, 0, "camera.width", ps_board_cfg_t, perception.camera.width, 16.0,
+                    PS_CAMERA_MAX_WIDTH),
+    PS_CFG_RULE_U32(0, 0, "camera.height", ps_board_cfg_t, perception.camera.height, 16.0,
+                    PS_CAMERA_MAX_HEIGHT),
+    PS_CFG_RULE_F32(0, PS_CFG_RANGE_OPEN_MIN, "camera.fps", ps_board_cfg_t, perception.camera.fps, 0.0,
+                    240.0),
+    PS_CFG_RULE_F32(0, PS_CFG_RANGE_OPEN_MIN, "camera.intrinsics.fx_px", ps_board_cfg_t,
+                    perception.tags.k.fx_px, 0.0, 100000.0),
+    PS_CFG_RULE_F32(0, PS_CFG_RANGE_OPEN_MIN, "camera.intrinsics.fy_px", ps_board_cfg_t,
+                    perception.tags.k.fy_px, 0.0, 100000.0),
+    PS_CFG_RULE_F32(0, 0, "camera.intrinsics.cx_px", ps_board_cfg_t, perception.tags.k.cx_px, 0.0,
+                    PS_CAMERA_MAX_WIDTH),
+    PS_CFG_RULE_F32(0, 0, "camera.intrinsics.cy_px", ps_board_cfg_t, perception.tags.k.cy_px, 0.0,
+                    PS_CAMERA_MAX_HEIGHT),
+    PS_CFG_RULE_F32(0, 0, "camera.pose.xyz_m[0]", ps_board_cfg_t, perception.tags.cam_pos_m[0], -5.0,
+                    5.0),
+    PS_CFG_RULE_F32(0, 0, "camera.pose.xyz_m[1]", ps_board_cfg_t, perception.tags.cam_pos_m[1], -5.0,
+                    5.0),
+    PS_CFG_RULE_F32(0, 0, "camera.pose.xyz_m[2]", ps_board_cfg_t, perception.tags.cam_pos_m[2], -5.0,
+                    5.0),
+    PS_CFG_RULE_F32(0, 0, "camera.pose.rpy_rad[0]", ps_board_cfg_t, perception.tags.cam_rpy_rad[0],
+                    -M_PI, M_PI),
+    PS_CFG_RULE_F32(0, 0, "camera.pose.rpy_rad[1]", ps_board_cfg_t, perception.tags.cam_rpy_rad[1],
+                    -M_PI_2, M_PI_2),
+    PS_CFG_RULE_F32(0, 0, "camera.pose.rpy_rad[2]", ps_board_cfg_t, perception.tags.cam_rpy_rad[2],
+                    -M_PI, M_PI),
+    PS_CFG_RULE_F32(0, PS_CFG_RANGE_OPEN_MIN, "camera.tag_size_m", ps_board_cfg_t,
+                    perception.tags.tag_size_m, 0.0, 2.0),
+    PS_CFG_RULE_F32(0, PS_CFG_RANGE_OPEN_MIN, "camera.max_age_s", ps_board_cfg_t,
+                    perception.max_age_s, 0.0, 10.0),
+    PS_CFG_RULE_U32(0, 0, "camera.threads", ps_board_cfg_t, perception.tags.n_threads, 1.0, 16.0),
+    PS_CFG_RULE_F32(0, 0, "camera.decimate", ps_board_cfg_t, perception.tags.decimate, 1.0, 8.0),
+    PS_CFG_RULE_F32(0, 0, "camera.min_margin", ps_board_cfg_t, perception.tags.min_margin, 0.0, 255.0),
 };
+
+/* Which optional camera fields were written (kept past the raw data's free). */
+typedef struct {
+    bool has_format, has_id, has_dir;
+} camera_written_t;
+
+/* The camera section against itself and the board (after its ranges). */
+static int check_camera(ps_cfg_ctx_t *c, const ps_board_cfg_t *b, const camera_written_t *r)
+{
+    const ps_perception_cfg_t *cam = &b->perception;
+    const ps_camera_source_t src = cam->camera.source;
+    const char *name = ps_camera_source_name(src);
+    if (src == PS_CAMERA_SRC_LIBCAMERA && !r->has_format)
+        return ps_cfg_fail_field(c, "camera", "missing field \"format\" (the libcamera stream's "
+                                              "pixel format, e.g. YUV420)");
+    if (src != PS_CAMERA_SRC_LIBCAMERA && r->has_format)
+        return ps_cfg_fail_field(c, "camera.format",
+                                 "only source libcamera takes a format (%s delivers its own)",
+                                 name);
+    if (src != PS_CAMERA_SRC_LIBCAMERA && r->has_id)
+        return ps_cfg_fail_field(c, "camera.id", "only source libcamera takes an id");
+    if (src == PS_CAMERA_SRC_FILES && !r->has_dir)
+        return ps_cfg_fail_field(c, "camera", "missing field \"dir\" (the image folder)");
+    if (src != PS_CAMERA_SRC_FILES && r->has_dir)
+        return ps_cfg_fail_field(c, "camera.dir", "only source files takes a dir");
+    if (src == PS_CAMERA_SRC_SIM && b->kind != PS_BOARD_SIM)
+        return ps_cfg_fail_field(c, "camera.source",
+                                 "the simulated camera needs a board of kind sim");
+    const ps_camera_intrinsics_t *k = &cam->tags.k;
+    if (k->cx_px > (float)cam->camera.width)
+        return ps_cfg_fail_field(c, "camera.intrinsics.cx_px", "value %g outside [0, width %u]",
+                                 (double)k->cx_px, cam->camera.width);
+    if (k->cy_px > (float)cam->camera.height)
+        return ps_cfg_fail_field(c, "camera.intrinsics.cy_px", "value %g outside [0, height %u]",
+                                 (double)k->cy_px, cam->camera.height);
+    /* MuJoCo's camera has square pixels and its axis through the centre. */
+    if (src == PS_CAMERA_SRC_SIM && fabsf(k->fx_px - k->fy_px) > 1e-3f * k->fy_px)
+        return ps_cfg_fail_field(c, "camera.intrinsics.fx_px",
+                                 "the simulated camera has square pixels: fx_px %g must equal "
+                                 "fy_px %g",
+                                 (double)k->fx_px, (double)k->fy_px);
+    if (src == PS_CAMERA_SRC_SIM && (fabsf(k->cx_px - 0.5f * (float)cam->camera.width) > 0.01f ||
+                                     fabsf(k->cy_px - 0.5f * (float)cam->camera.height) > 0.01f))
+        return ps_cfg_fail_field(c, "camera.intrinsics.cx_px",
+                                 "the simulated camera's axis is the image centre: cx_px, cy_px "
+                                 "must be %g, %g",
+                                 0.5 * cam->camera.width, 0.5 * cam->camera.height);
+    return 0;
+}
+
+/* Camera perception's fields: every one needed with camera.source, none
+ * without it (a camera: with its sensor alone is for pushstep doctor). */
+static int camera_fields_present(ps_cfg_ctx_t *c, const camera_raw_t *r)
+{
+    const struct {
+        const char *key;
+        bool is_there;
+        bool is_required;
+    } f[] = {
+        {"width", r->width != NULL, true},
+        {"height", r->height != NULL, true},
+        {"fps", r->fps != NULL, true},
+        {"intrinsics", r->intrinsics != NULL, true},
+        {"pose", r->pose != NULL, true},
+        {"tag_size_m", r->tag_size_m != NULL, true},
+        {"max_age_s", r->max_age_s != NULL, true},
+        {"id", r->id[0] != '\0', false},
+        {"dir", r->dir[0] != '\0', false},
+        {"format", r->format != NULL, false},
+        {"threads", r->threads != NULL, false},
+        {"decimate", r->decimate != NULL, false},
+        {"min_margin", r->min_margin != NULL, false},
+    };
+    char field[PS_CFG_FIELD_PATH_LEN];
+    for (size_t i = 0; i < sizeof(f) / sizeof(f[0]); i++) {
+        if (r->source == NULL && f[i].is_there) {
+            (void)snprintf(field, sizeof(field), "camera.%s", f[i].key);
+            return ps_cfg_fail_field(c, field,
+                                     "camera perception's fields need camera.source (libcamera, "
+                                     "files or sim)");
+        }
+        if (r->source != NULL && f[i].is_required && !f[i].is_there)
+            return ps_cfg_fail_field(c, "camera", "missing field \"%s\"", f[i].key);
+    }
+    /* camera: {} names neither a sensor (for doctor) nor a source */
+    if (r->source == NULL && r->sensor[0] == '\0')
+        return ps_cfg_fail_field(c, "camera", "missing field \"sensor\"");
+    return 0;
+}
+
+/* @pre camera_fields_present passed and r->source != NULL */
+static void camera_from_raw(const camera_raw_t *r, ps_perception_cfg_t *out)
+{
+    memset(out, 0, sizeof(*out));
+    ps_camera_cfg_t *cc = &out->camera;
+    cc->source = *r->source;
+    memcpy(cc->id, r->id, sizeof(cc->id));
+    memcpy(cc->dir, r->dir, sizeof(cc->dir));
+    cc->width = *r->width;
+    cc->height = *r->height;
+    cc->format = r->format != NULL ? *r->format : PS_PIX_R8;
+    cc->fps = *r->fps;
+    ps_tags_cfg_t *t = &out->tags;
+    t->k = (ps_camera_intrinsics_t){r->intrinsics->fx_px, r->intrinsics->fy_px,
+                                    r->intrinsics->cx_px, r->intrinsics->cy_px};
+    memcpy(t->cam_pos_m, r->pose->xyz_m, sizeof(t->cam_pos_m));
+    memcpy(t->cam_rpy_rad, r->pose->rpy_rad, sizeof(t->cam_rpy_rad));
+    t->tag_size_m = *r->tag_size_m;
+    t->n_threads = r->threads != NULL ? *r->threads : 1u;
+    t->decimate = r->decimate != NULL ? *r->decimate : 1.0f;
+    t->min_margin = r->min_margin != NULL ? *r->min_margin : PS_BOARD_CAMERA_MIN_MARGIN;
+    out->max_age_s = *r->max_age_s;
+}
 
 static int check_board(ps_cfg_ctx_t *c, const ps_board_cfg_t *b)
 {
+    /* Camera perception's rules only with camera.source: without it, the
+     * table less the rules whose key starts with "camera.". */
+    ps_cfg_rule_t rules[PS_CFG_COUNT(BOARD_RANGES)];
+    size_t n = 0;
+    for (size_t i = 0; i < PS_CFG_COUNT(BOARD_RANGES); i++)
+        if (b->has_perception || strncmp(BOARD_RANGES[i].key, "camera.", 7) != 0)
+            rules[n++] = BOARD_RANGES[i];
+    const ps_cfg_rule_t *all = c->rules;
+    const size_t n_all = c->n_rules;
+    c->rules = rules;
+    c->n_rules = n;
     int rc = ps_cfg_check_ranges(c, b);
+    c->rules = all;
+    c->n_rules = n_all;
     if (rc != 0)
         return rc;
     char field[PS_CFG_FIELD_PATH_LEN];
@@ -286,12 +527,22 @@ int ps_config_load_board(const char *path, ps_board_cfg_t *out, char *err, size_
                 dbr_without_fd = (int)i;
         }
         b.rt = raw->rt;
-        if (raw->camera != NULL) {
-            b.has_camera = true;
-            b.camera = *raw->camera;
-        }
         rc = gpio_from_raw(&c, &raw->gpio, &b.gpio);
+        b.has_camera = raw->camera != NULL;
+        if (b.has_camera) {
+            memcpy(b.camera.sensor, raw->camera->sensor, sizeof(b.camera.sensor));
+            b.camera_line = ps_cfg_line_of(&c, "camera");
+            if (rc == 0)
+                rc = camera_fields_present(&c, raw->camera);
+            b.has_perception = rc == 0 && raw->camera->source != NULL;
+            if (b.has_perception)
+                camera_from_raw(raw->camera, &b.perception);
+        }
     }
+    camera_written_t cam_written = {false, false, false}; /* check_camera's, past the free */
+    if (rc == 0 && raw->camera != NULL)
+        cam_written = (camera_written_t){raw->camera->format != NULL, raw->camera->id[0] != '\0',
+                                         raw->camera->dir[0] != '\0'};
     if (raw != NULL)
         (void)cyaml_free(&c.cyaml, &BOARD_SCHEMA, raw, 0); /* only fails on a NULL schema */
     if (rc == 0 && dbr_without_fd >= 0) {
@@ -301,6 +552,8 @@ int ps_config_load_board(const char *path, ps_board_cfg_t *out, char *err, size_
     }
     if (rc == 0)
         rc = check_board(&c, &b);
+    if (rc == 0 && b.has_perception)
+        rc = check_camera(&c, &b, &cam_written);
     if (rc == 0)
         *out = b;
     ps_cfg_ctx_close(&c);

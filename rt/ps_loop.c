@@ -6,6 +6,7 @@
 #include "../policy/ps_servo.h"
 #include "ps_config.h"
 #include "ps_err.h"
+#include "ps_perception.h"
 
 static const char *const STAGE_NAMES[PS_STAGE_COUNT] = {
     [PS_STAGE_WAKE] = "wake",
@@ -80,6 +81,9 @@ int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg)
     if (cfg->gpio.ops == NULL || !is_schedule_valid(cfg->board, cfg->robot) ||
         !(c->ramp_s > 0.0f) || !(c->damping_s > 0.0f))
         return -EINVAL;
+    if (cfg->neighbours != NULL && (!cfg->board->has_perception ||
+                                     !(cfg->board->perception.max_age_s > 0)))
+        return -EINVAL;
 
     memset(loop, 0, sizeof(*loop)); /* also touches every page of the struct */
     loop->cfg = *cfg;
@@ -88,6 +92,8 @@ int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg)
     if (loop->cfg.deadline_clock == NULL)
         loop->cfg.deadline_clock = cfg->clock;
     loop->period_ns = PS_NS_PER_S / c->servo_hz;
+    loop->neighbours_max_age_ns =
+        cfg->neighbours != NULL ? ps_s_to_ns((double)cfg->board->perception.max_age_s) : 0;
     loop->policy_div = c->servo_hz / c->policy_hz;
     loop->state = PS_SM_STANDBY;
     atomic_init(&loop->published_state, (int)PS_SM_STANDBY);
@@ -241,6 +247,18 @@ static void read_bus_states(ps_loop_t *loop)
     }
 }
 
+/* The newest neighbour list from perception, aged at this tick's deadline. */
+static void read_neighbours(ps_loop_t *loop)
+{
+    if (loop->cfg.neighbours == NULL)
+        return;
+    if (ps_perception_take(loop->cfg.neighbours, loop->t_deadline_ns, loop->neighbours_max_age_ns,
+                           &loop->meas.neighbours))
+        loop->counters.n_neighbour_lists++;
+    if (!loop->meas.neighbours.is_valid)
+        loop->counters.n_neighbour_stale++;
+}
+
 static void stage_read(ps_loop_t *loop)
 {
     loop->newest_reply_rx_ns = 0;
@@ -248,6 +266,7 @@ static void stage_read(ps_loop_t *loop)
     for (uint32_t b = 0; b < loop->cfg.board->n_buses; b++)
         read_bus(loop, b);
     read_bus_states(loop);
+    read_neighbours(loop);
 }
 
 /* ---- POLICY ----------------------------------------------------------- */

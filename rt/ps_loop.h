@@ -22,6 +22,12 @@
  * frames in the last write. HOLD holds the position targets of the last
  * valid policy step (the measured pose if there was none).
  *
+ * Neighbours (cfg.neighbours): each tick's READ takes the newest list the
+ * perception thread published (rt/ps_perception.h, ps_perception_take) into
+ * meas.neighbours, which the policy sees, and ages it on the loop's clock;
+ * older than the board's camera.max_age_s it is emptied (no neighbour
+ * information). Never a wait: one atomic exchange at most.
+ *
  * Stale-data rule: a joint's reply is stale when older than
  * control.reply_timeout_s + rate_div servo periods (a joint commanded every
  * rate_div ticks can only answer that often); the IMU likewise with
@@ -49,6 +55,7 @@
 #include "../policy/ps_servo.h"
 #include "ps_clock.h"
 #include "ps_limits.h"
+#include "ps_mailbox.h"
 #include "ps_pacer.h"
 #include "ps_perf.h"
 #include "ps_ring.h"
@@ -138,6 +145,9 @@ typedef struct {
     ps_trace_t *trace;     /**< trace_marker points; NULL: off */
     ps_ring_t *frame_ring; /**< every frame read and sent (ps_loop_frame_rec_t), for a
                                 candump log on the non-RT side; NULL: off */
+    ps_mailbox_t *neighbours; /**< camera perception's neighbour lists (ps_neighbours_t),
+                                   read each tick into meas.neighbours and aged against
+                                   board->camera.max_age_s; NULL: no camera */
     ps_loop_tap_t tap;     /**< .on_tick may be NULL: none */
 } ps_loop_cfg_t;
 
@@ -192,6 +202,8 @@ typedef struct {
     uint64_t n_transitions;
     uint64_t n_refused;      /**< operator requests refused */
     uint64_t n_ring_dropped; /**< records the ring had no room for */
+    uint64_t n_neighbour_lists;  /**< neighbour lists taken from perception's mailbox */
+    uint64_t n_neighbour_stale;  /**< ticks with a camera but no valid neighbour list */
     bool has_fallen;         /**< estimator reported a fall in RAMP or ACTIVE */
 } ps_loop_counters_t;
 
@@ -257,6 +269,7 @@ struct ps_loop {
     bool tx_mode_prev[PS_MAX_BUSES][PS_LOOP_MAX_TX];    /**< is_entered before that request */
     uint32_t n_tx[PS_MAX_BUSES];
     int64_t t_deadline_ns; /**< deadline of the current tick */
+    int64_t neighbours_max_age_ns; /**< board->camera.max_age_s */
     ps_perf_hist_t perf[PS_STAGE_COUNT];
     int64_t newest_reply_rx_ns; /**< this tick's newest reply stamp; 0: none */
     ps_perf_us_hist_t wake_us;  /**< wake-up latency, cyclictest's 1-us layout */

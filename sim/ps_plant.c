@@ -656,3 +656,8 @@ void ps_plant_destroy(ps_plant_t *p)
     free(p->is_robot);
     free(p);
 }
+
+void ps_plant_get_qpos(const ps_plant_t *p, double *out_qpos)
+{
+    memcpy(out_qpos, p->d->qpos, sizeof(mjtNum) * (size_t)p->m->nq);
+}

@@ -161,6 +161,10 @@ void ps_plant_get_timing(const ps_plant_t *p, int64_t *out_crowd_ns, int64_t *ou
 /** @return the robot's root body index  @rt RT-SAFE */
 int ps_plant_root_body(const ps_plant_t *p);
 
+/** @post out_qpos holds the model's nq position coordinates (for the
+ *  simulated camera's scene mailbox)  @rt RT-SAFE O(nq) */
+void ps_plant_get_qpos(const ps_plant_t *p, double *out_qpos);
+
 /** Safe on NULL. */
 void ps_plant_destroy(ps_plant_t *p);
 

@@ -8,7 +8,10 @@
 #include <string.h>
 #include <time.h>
 
+#include <mujoco/mujoco.h>
+
 #include "../rt/ps_err.h"
+#include "../rt/ps_mailbox.h"
 #include "ps_can_sim.h"
 #include "ps_gpio_sim.h"
 #include "ps_plant.h"
@@ -86,9 +89,34 @@ struct ps_sim {
     double first_fall_t_s; /**< plant time of the first fall, -1: none yet */
     bool has_mutex;
     ps_sim_truth_t truth;
+
+    /* the scene for a rendering camera (ps_sim_read_scene) */
+    ps_mailbox_t scene_mb;
+    uint8_t *scene_slots; /**< PS_MAILBOX_SLOTS x (scene_hdr_t + nq doubles) */
+    uint32_t scene_nq;
+    uint64_t scene_seq;
     atomic_uint truth_seq;   /**< odd while truth_rt is being written */
     ps_sim_truth_t truth_rt; /**< lock-free copy for ps_sim_read_truth_rt */
 };
+
+/* A scene slot: this header, then nq doubles of qpos. */
+typedef struct {
+    int64_t t_ns;
+    uint64_t seq;
+} scene_hdr_t;
+
+static int init_scene(ps_sim_t *s, char *err, size_t err_len);
+
+static void publish_scene(ps_sim_t *s)
+{
+    if (s->scene_slots == NULL)
+        return;
+    uint8_t *slot = ps_mailbox_write_slot(&s->scene_mb);
+    const scene_hdr_t h = {.t_ns = s->start_ns + s->plant_rel_ns, .seq = s->scene_seq++};
+    memcpy(slot, &h, sizeof(h));
+    ps_plant_get_qpos(s->plant, (double *)(void *)(slot + sizeof(h)));
+    ps_mailbox_publish(&s->scene_mb);
+}
 
 /* ---- one physics step ------------------------------------------------ */
 
@@ -329,6 +357,7 @@ static void update_truth(ps_sim_t *s)
     pthread_mutex_lock(&s->truth_mu);
     s->truth = t;
     pthread_mutex_unlock(&s->truth_mu);
+    publish_scene(s);
 }
 
 /* ---- lockstep clock ---------------------------------------------------- */
@@ -600,6 +629,9 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
     for (uint32_t j = 0; j < s->robot.n_joints; j++)
         ps_devices_init_actuator(&s->act[j], &s->robot.act[j], &s->robot.lim[j], &s->robot.devices);
     ps_devices_init_imu(&s->imu, &s->robot.imu, &s->robot.devices, (uint64_t)s->scenario.seed);
+    rc = init_scene(s, err, err_len);
+    if (rc < 0)
+        goto fail;
     update_truth(s);
     *out_sim = s;
     return 0;
@@ -724,5 +756,46 @@ void ps_sim_destroy(ps_sim_t *s)
     ps_plant_destroy(s->plant);
     if (s->has_mutex)
         pthread_mutex_destroy(&s->truth_mu);
+    free(s->scene_slots);
     free(s);
+}
+
+/* ---- the scene -------------------------------------------------------- */
+
+static int init_scene(ps_sim_t *s, char *err, size_t err_len)
+{
+    s->scene_nq = (uint32_t)ps_plant_model(s->plant)->nq;
+    const size_t slot = sizeof(scene_hdr_t) + sizeof(double) * s->scene_nq;
+    s->scene_slots = malloc(PS_MAILBOX_SLOTS * slot);
+    if (s->scene_slots == NULL) {
+        ps_err_format(err, err_len, "sim: no memory for the scene");
+        return -ENOMEM;
+    }
+    return ps_mailbox_init(&s->scene_mb, s->scene_slots, slot);
+}
+
+struct mjModel_ *ps_sim_copy_model(ps_sim_t *s)
+{
+    return mj_copyModel(NULL, ps_plant_model(s->plant));
+}
+
+uint32_t ps_sim_scene_nq(const ps_sim_t *s)
+{
+    return s->scene_nq;
+}
+
+int ps_sim_read_scene(ps_sim_t *s, double *out_qpos, uint32_t nq, int64_t *out_t_ns,
+                      uint64_t *out_seq)
+{
+    if (s == NULL || out_qpos == NULL || nq != s->scene_nq || s->scene_slots == NULL)
+        return -EINVAL;
+    const uint8_t *slot = ps_mailbox_read(&s->scene_mb, NULL);
+    scene_hdr_t h;
+    memcpy(&h, slot, sizeof(h));
+    memcpy(out_qpos, slot + sizeof(h), sizeof(double) * nq);
+    if (out_t_ns != NULL)
+        *out_t_ns = h.t_ns;
+    if (out_seq != NULL)
+        *out_seq = h.seq;
+    return 0;
 }

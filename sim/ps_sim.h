@@ -272,7 +272,27 @@ uint64_t ps_sim_crowd_samples_dropped(ps_sim_t *s);
 struct ps_plant;
 const struct ps_plant *ps_sim_plant(const ps_sim_t *s);
 
-/** @post all resources freed; s invalid. Safe on NULL.  @rt INIT */
+/* ---- the scene, for a rendering camera (sim/ps_camera_sim) ---------------
+ * At create and at the end of every servo period the sim publishes the
+ * model's positions (qpos) with their simulated time into a latest-wins
+ * mailbox (rt/ps_mailbox.h): the plant never waits for the camera. */
+
+struct mjModel_;
+
+/** @return a copy of the plant's MuJoCo model, or NULL (no memory); the
+ *  caller frees it with mj_deleteModel  @rt INIT */
+struct mjModel_ *ps_sim_copy_model(ps_sim_t *s);
+
+/** @return the model's nq (positions per scene)  @rt any */
+uint32_t ps_sim_scene_nq(const ps_sim_t *s);
+
+/** The newest scene: qpos and its simulated time (the loop's clock; 0 before
+ *  ps_sim_start) and its number (0 at create, then one per servo period).
+ *  @return 0 | -EINVAL (nq is not the model's)
+ *  @rt RT-SAFE O(nq), wait-free; one reader thread (the camera's) */
+int ps_sim_read_scene(ps_sim_t *s, double *out_qpos, uint32_t nq, int64_t *out_t_ns,
+                      uint64_t *out_seq);
+
 /** Pictures: fn(ctx, plant) after each physics step that ends on the
  *  frame_ns grid of simulated time (sim/ps_render.h offers the state), on
  *  the thread that steps the plant; it must not block in real time. Set
@@ -281,6 +301,7 @@ const struct ps_plant *ps_sim_plant(const ps_sim_t *s);
 int ps_sim_set_frame_hook(ps_sim_t *s, int64_t frame_ns,
                           void (*fn)(void *ctx, const struct ps_plant *p), void *ctx);
 
+/** @post all resources freed; s invalid. Safe on NULL.  @rt INIT */
 void ps_sim_destroy(ps_sim_t *s);
 
 #endif /* PS_SIM_H */

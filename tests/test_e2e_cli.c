@@ -30,67 +30,44 @@
 
 #include "../drivers/ps_candump.h"
 #include "../rt/ps_limits.h"
+#include "fakes/ps_cli.h"
 
 #define OUT_MAX (256 * 1024)
 
 static char out[OUT_MAX];
 
+/* The shared command-line helpers (tests/fakes/ps_cli.c) under this file's
+ * short names. */
 static const char *bin(void)
 {
-    const char *b = getenv("PUSHSTEP_BIN");
-    return b ? b : "build/pushstep";
+    return ps_cli_bin();
 }
 
 /* Run `bin args` with stdout and stderr captured into out; return its exit status. */
 static int run(const char *args)
 {
-    char cmd[1024];
-    snprintf(cmd, sizeof(cmd), "%s %s 2>&1", bin(), args);
-    FILE *p = popen(cmd, "r");
-    assert_non_null(p);
-    size_t n = fread(out, 1, sizeof(out) - 1, p);
-    out[n] = '\0';
-    int status = pclose(p);
-    assert_true(WIFEXITED(status));
-    return WEXITSTATUS(status);
+    return ps_cli_run(args, out, sizeof(out));
 }
 
 /* An empty file under /tmp for a summary to be written to. */
 static void make_temp_file(char *path, size_t len)
 {
-    snprintf(path, len, "/tmp/ps_cli_XXXXXX");
-    int fd = mkstemp(path);
-    assert_true(fd >= 0);
-    close(fd);
+    ps_cli_temp_file(path, len);
 }
 
 static cJSON *read_json(const char *path)
 {
-    FILE *f = fopen(path, "r");
-    assert_non_null(f);
-    static char text[OUT_MAX];
-    size_t n = fread(text, 1, sizeof(text) - 1, f);
-    text[n] = '\0';
-    fclose(f);
-    cJSON *j = cJSON_Parse(text);
-    assert_non_null(j);
-    return j;
+    return ps_cli_read_json(path);
 }
 
 static double num(const cJSON *o, const char *key)
 {
-    const cJSON *v = cJSON_GetObjectItemCaseSensitive(o, key);
-    if (!cJSON_IsNumber(v))
-        fail_msg("JSON key \"%s\" missing or not a number", key);
-    return v->valuedouble;
+    return ps_cli_num(o, key);
 }
 
 static const cJSON *obj(const cJSON *o, const char *key)
 {
-    const cJSON *v = cJSON_GetObjectItemCaseSensitive(o, key);
-    if (v == NULL)
-        fail_msg("JSON key \"%s\" missing", key);
-    return v;
+    return ps_cli_obj(o, key);
 }
 
 static void test_cli_help_documents_every_option(void **state)

@@ -64,6 +64,7 @@ typedef struct {
     uint8_t imu_status;
     uint8_t imu_seq;
     float policy_value;             /* NAN: the policy returns a NaN target */
+    ps_neighbours_t policy_neighbours; /* meas.neighbours at the last policy step */
     int64_t policy_extra_ns;        /* time the policy takes */
     ps_clock_fake_t cpu_clock;      /* stands for the thread's CPU time */
     bool is_policy_preempted;       /* policy time passes on the wall clock only */
@@ -217,8 +218,8 @@ static int fake_policy_step(void *ctx, const ps_meas_t *m, const ps_estimate_t *
                             ps_targets_t *out)
 {
     (void)ctx;
-    (void)m;
     (void)e;
+    fx->policy_neighbours = m->neighbours; /* what the policy was shown */
     out->n_joints = fx->robot.n_joints;
     for (uint32_t j = 0; j < fx->robot.n_joints; j++) {
         out->q_rad[j] =
@@ -1128,6 +1129,72 @@ static void test_loop_frame_ring_gets_sent_and_read_frames(void **state)
     fx->loop.cfg.frame_ring = NULL;
 }
 
+/* ---- neighbours from camera perception ----------------------------------- */
+
+static void publish_neighbours(ps_mailbox_t *mb, int64_t t_exposure_ns, uint32_t n)
+{
+    ps_neighbours_t *nb = ps_mailbox_write_slot(mb);
+    memset(nb, 0, sizeof(*nb));
+    nb->t_exposure_ns = t_exposure_ns;
+    nb->n_shoulders = n;
+    for (uint32_t i = 0; i < n; i++)
+        nb->shoulders[i] = (ps_shoulder_t){.pos_robot_m = {1.0f, 0.1f * (float)i, 0.3f},
+                                           .confidence = 1.0f,
+                                           .neighbour_id = (uint16_t)(i / 2),
+                                           .side = (uint8_t)(i % 2)};
+    ps_mailbox_publish(mb);
+}
+
+/* The loop takes each new list, the policy sees it, and a list older than
+ * camera.max_age_s becomes "no neighbour information" until a fresh one. */
+static void test_loop_neighbours_taken_aged_then_stale(void **state)
+{
+    (void)state;
+    static ps_loop_t loop2;
+    static ps_neighbours_t slots[PS_MAILBOX_SLOTS];
+    ps_mailbox_t mb;
+    assert_int_equal(ps_mailbox_init(&mb, slots, sizeof(slots[0])), 0);
+    ps_loop_cfg_t lc = fx->loop.cfg;
+    lc.neighbours = &mb;
+    assert_int_equal(ps_loop_init(&loop2, &lc), -EINVAL); /* the board has no camera */
+    fx->board.has_perception = true;
+    fx->board.perception.max_age_s = 0.05f; /* 50 ticks */
+    assert_int_equal(ps_loop_init(&loop2, &lc), 0);
+    assert_int_equal(ps_loop_start(&loop2, fx->clock.now_ns), 0);
+    const unsigned div = loop2.policy_div;
+    for (unsigned i = 0; i < div; i++)
+        assert_int_equal(ps_loop_step(&loop2), 0);
+    assert_false(loop2.meas.neighbours.is_valid); /* nothing yet */
+    assert_int_equal(loop2.counters.n_neighbour_stale, div);
+    publish_neighbours(&mb, fx->clock.now_ns, 3);
+    for (unsigned i = 0; i < div; i++)
+        assert_int_equal(ps_loop_step(&loop2), 0);
+    assert_int_equal(loop2.counters.n_neighbour_lists, 1);
+    assert_true(fx->policy_neighbours.is_valid);
+    assert_int_equal(fx->policy_neighbours.n_shoulders, 3);
+    assert_float_equal(fx->policy_neighbours.shoulders[2].pos_robot_m[1], 0.2f, 1e-6);
+    assert_int_equal(loop2.counters.n_neighbour_stale, div);
+    /* 60 ms later with no new list: stale, emptied, and so at the policy */
+    for (unsigned i = 0; i < 60; i++)
+        assert_int_equal(ps_loop_step(&loop2), 0);
+    assert_false(loop2.meas.neighbours.is_valid);
+    assert_int_equal(loop2.meas.neighbours.n_shoulders, 0);
+    assert_true(loop2.meas.neighbours.age_ns > 50 * PS_NS_PER_MS);
+    for (unsigned i = 0; i < div; i++)
+        assert_int_equal(ps_loop_step(&loop2), 0);
+    assert_false(fx->policy_neighbours.is_valid);
+    assert_int_equal(fx->policy_neighbours.n_shoulders, 0);
+    const uint64_t n_stale = loop2.counters.n_neighbour_stale;
+    assert_true(n_stale > div);
+    /* a fresh list: valid again */
+    publish_neighbours(&mb, fx->clock.now_ns, 1);
+    assert_int_equal(ps_loop_step(&loop2), 0);
+    assert_true(loop2.meas.neighbours.is_valid);
+    assert_int_equal(loop2.meas.neighbours.n_shoulders, 1);
+    assert_int_equal(loop2.counters.n_neighbour_lists, 2);
+    assert_int_equal(loop2.counters.n_neighbour_stale, n_stale);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -1170,6 +1237,7 @@ int main(void)
         T(test_loop_latched_fault_cleared_by_enter_no_estop),
         T(test_loop_run_end_releases_drives),
         T(test_loop_run_clock_failure_estops),
+        T(test_loop_neighbours_taken_aged_then_stale),
 #undef T
     };
     return cmocka_run_group_tests_name("loop", tests, NULL, NULL);

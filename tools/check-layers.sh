@@ -4,7 +4,8 @@
 # include anything). Each file's project includes are followed transitively,
 # so a header that drags a forbidden one in counts too.
 #
-#   base     rt/ps_err, rt/ps_clock, rt/ps_ring, rt/ps_limits: nothing else
+#   base     rt/ps_err, rt/ps_clock, rt/ps_ring, rt/ps_limits, rt/ps_mailbox,
+#            rt/ps_neighbours: nothing else
 #   drivers  base and drivers/
 #   policy   base, policy/, and of drivers/ only the neutral actuator types
 #            (ps_actuator.h and the ps_can.h frame it uses): no protocol
@@ -20,8 +21,9 @@ set -uo pipefail
 ROOT=${1:-$(cd "$(dirname "$0")/.." && pwd)}
 # The loader files that fill sim's own structs (the scenario, the robot file's
 # `sim:` section) belong to the composition root too.
-COMPOSITION_ROOT="rt/main.c rt/ps_app.c rt/ps_app.h rt/ps_emulate.c rt/ps_doctor.c rt/ps_config_sim.h rt/ps_config_robot.c rt/ps_config_scenario.c"
-BASE="rt/ps_err.h rt/ps_err.c rt/ps_clock.h rt/ps_clock.c rt/ps_ring.h rt/ps_ring.c rt/ps_limits.h"
+COMPOSITION_ROOT="rt/main.c rt/ps_app.c rt/ps_app.h rt/ps_emulate.c rt/ps_doctor.c rt/ps_camview.c rt/ps_config_sim.h rt/ps_config_robot.c rt/ps_config_scenario.c"
+BASE="rt/ps_err.h rt/ps_err.c rt/ps_clock.h rt/ps_clock.c rt/ps_ring.h rt/ps_ring.c rt/ps_limits.h
+      rt/ps_mailbox.h rt/ps_mailbox.c rt/ps_neighbours.h"
 POLICY_DRIVERS="drivers/ps_actuator.h drivers/ps_can.h"
 # Actuator protocols: only drivers/ (the registry) and sim/ (the drives' side)
 # may name one; the loop, the servo and the loader go through ps_actuator.h.

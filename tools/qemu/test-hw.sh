@@ -12,6 +12,6 @@ if ! bash "$D/ensure.sh" "$W" > "$W.setup.log" 2>&1; then
     exit 77
 fi
 # The console is a serial line: CR LF endings, and firmware escape codes.
-QEMU_WORK=$W VM_TIMEOUT=${VM_TIMEOUT:-400} bash "$D/run-in-vm.sh" -s "$D/guest-modules.sh" \
+QEMU_WORK=$W VM_TIMEOUT=${VM_TIMEOUT:-600} bash "$D/run-in-vm.sh" -s "$D/guest-modules.sh" \
     -- sh tools/qemu/in-vm.sh $bins 2>&1 | tr -d '\r' | sed 's/\x1b\[[0-9;?]*[a-zA-Z]//g; s/\x1bc//g'
 exit "${PIPESTATUS[0]}"

@@ -1,0 +1,32 @@
+/*
+ * Helpers of the command-line tests (tests/test_e2e_*.c): run the binary the
+ * Makefile built ($PUSHSTEP_BIN, default build/pushstep) from the repository
+ * root and capture its output, temporary files, and the JSON it writes.
+ * Failures are cmocka assertions. Threads: the test's. Allocation: cJSON's.
+ */
+#ifndef PS_CLI_H
+#define PS_CLI_H
+
+#include <stddef.h>
+
+#include <cjson/cJSON.h>
+
+/** @return $PUSHSTEP_BIN, or build/pushstep */
+const char *ps_cli_bin(void);
+
+/** Run `bin args` with stdout and stderr captured into out (NUL-terminated,
+ *  cut at out_len - 1). @return its exit status (asserts it exited) */
+int ps_cli_run(const char *args, char *out, size_t out_len);
+
+/** An empty file under /tmp (its path into path). */
+void ps_cli_temp_file(char *path, size_t len);
+
+/** A JSON file parsed (asserts it parses); the caller cJSON_Deletes it. */
+cJSON *ps_cli_read_json(const char *path);
+
+/** o's member key: a number (asserts it is one), an object or any item
+ *  (asserts it is there). */
+double ps_cli_num(const cJSON *o, const char *key);
+const cJSON *ps_cli_obj(const cJSON *o, const char *key);
+
+#endif /* PS_CLI_H */
