@@ -321,8 +321,17 @@ static int load_scene(ps_plant_t *p, const ps_plant_cfg_t *robot, ps_crowd_agent
         ps_err_format(err, err_len, "%s: %s", robot->model_path, strerror(errno));
         return -PS_ERR_PLANT;
     }
+    /* The scene lives (in the VFS) beside the robot's model file and includes
+     * it by its own name: MuJoCo resolves every include, the model's own
+     * nested ones too, from the main file's directory, as when the model is
+     * loaded alone. */
+    char scene_name[PATH_MAX + sizeof(SCENE_VFS_NAME)];
+    char *slash = strrchr(abs_path, '/');
+    *slash = '\0';
+    (void)snprintf(scene_name, sizeof(scene_name), "%s/%s", abs_path, SCENE_VFS_NAME);
+    const char *model_file = slash + 1;
     char *xml = NULL;
-    rc = ps_scene_write_mjcf(robot->crowd, agents, *out_n, abs_path, p->m->nconmax, p->m->njmax,
+    rc = ps_scene_write_mjcf(robot->crowd, agents, *out_n, model_file, p->m->nconmax, p->m->njmax,
                              &xml, err, err_len);
     if (rc < 0)
         return rc;
@@ -333,15 +342,15 @@ static int load_scene(ps_plant_t *p, const ps_plant_cfg_t *robot, ps_crowd_agent
     }
     mj_defaultVFS(vfs);
     const int len = (int)strlen(xml);
-    if (mj_makeEmptyFileVFS(vfs, SCENE_VFS_NAME, len) != 0) {
+    if (mj_makeEmptyFileVFS(vfs, scene_name, len) != 0) {
         free(xml);
         free(vfs);
         return -ENOMEM;
     }
-    memcpy(vfs->filedata[mj_findFileVFS(vfs, SCENE_VFS_NAME)], xml, (size_t)len);
+    memcpy(vfs->filedata[mj_findFileVFS(vfs, scene_name)], xml, (size_t)len);
     free(xml);
     char mj_err[512] = "";
-    mjModel *scene = mj_loadXML(SCENE_VFS_NAME, vfs, mj_err, (int)sizeof(mj_err));
+    mjModel *scene = mj_loadXML(scene_name, vfs, mj_err, (int)sizeof(mj_err));
     mj_deleteVFS(vfs);
     free(vfs);
     if (scene == NULL) {
