@@ -201,8 +201,11 @@ else
 # The native suite, then the quick part of the aarch64 one under qemu-user
 # (tools/test-aarch64.sh) when the cross tools are installed (deps-test
 # installs them where apt can), then the VM tests.
-test: deps-test deps-npm $(BUILD)/pushstep $(CAMERA_SO) $(TEST_BINS) $(TSAN_BINS) $(HW_BINS) \
+test: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(TEST_BINS) $(TSAN_BINS) $(HW_BINS) \
       aarch64-test-bins
+	@# without the npm packages the rest of the suite still runs; the reader
+	@# check then fails (tests/test_e2e_recorder.c) and says why
+	@bash tools/npm-deps.sh $(BUILD)/npm || echo "make test: continuing without the MCAP readers"
 	@PUSHSTEP_BIN=$(BUILD)/pushstep PUSHSTEP_NPM=$(BUILD)/npm QEMU_WORK=$(QEMU_WORK) \
 	    HW_BINS="$(HW_BINS)" AARCH64_BUILD=$(AARCH64_BUILD) bash tools/run-tests.sh \
 	    tools/check-layers.sh $(TEST_BINS) $(TSAN_BINS) tools/test-install.sh tools/test-aarch64.sh \
