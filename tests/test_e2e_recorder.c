@@ -694,6 +694,54 @@ static int teardown(void **state)
     return system(cmd) == 0 ? 0 : -1;
 }
 
+/* In a crowd: /truth lists the crowd's contacts on the robot (agent, force,
+ * point), each agent one of the scene's, each force no larger than the
+ * run's largest total crowd force on the robot, and there is contact while
+ * the crowd presses (the default scenario, board sim). */
+static void test_e2e_rec_cli_crowd_contacts_in_truth(void **state)
+{
+    (void)state;
+    char mcap[128], csv[128], sum[128];
+    snprintf(mcap, sizeof(mcap), "%s/crowd.mcap", dir);
+    snprintf(csv, sizeof(csv), "%s/contacts.csv", dir);
+    snprintf(sum, sizeof(sum), "%s/summary.json", dir);
+    assert_int_equal(sh("%s --board sim --lockstep --duration 3 --quiet --record %s --summary %s",
+                        bin(), mcap, sum),
+                     0);
+    cJSON *j = read_json(sum);
+    const cJSON *crowd = get(j, "crowd");
+    const double n_agents = num(crowd, "agents");
+    const double force_max_n = num(crowd, "robot_force_max_n");
+    cJSON_Delete(j);
+    assert_true(n_agents >= 1 && force_max_n > 10.0);
+    assert_int_equal(sh("%s log %s --csv %s --signals truth.contact_agent[0],truth.contact_fx_n[0],"
+                        "truth.contact_fy_n[0],truth.contact_fz_n[0],truth.contact_z_m[0]",
+                        bin(), mcap, csv),
+                     0);
+    FILE *f = fopen(csv, "r");
+    assert_non_null(f);
+    static char line[1024];
+    assert_non_null(fgets(line, sizeof(line), f)); /* header */
+    uint32_t n_rows = 0, n_touching = 0;
+    while (fgets(line, sizeof(line), f) != NULL) {
+        n_rows++;
+        double t_s, agent, fx, fy, fz, z;
+        if (sscanf(line, "%lf,%lf,%lf,%lf,%lf,%lf", &t_s, &agent, &fx, &fy, &fz, &z) != 6)
+            continue; /* no contact this tick: empty columns */
+        n_touching++;
+        if (!(agent == 65535.0 || (agent >= 0.0 && agent < n_agents)))
+            fail_msg("t=%.3f: contact with agent %g of %g", t_s, agent, n_agents);
+        const double fn = sqrt(fx * fx + fy * fy + fz * fz);
+        if (!(fn <= force_max_n * 1.001 && z > 0.0 && z < 2.0))
+            fail_msg("t=%.3f: contact force %.1f N (run's max %.1f N) at z %.3f m", t_s, fn,
+                     force_max_n, z);
+    }
+    fclose(f);
+    printf("crowd contacts in /truth: %u of %u ticks\n", n_touching, n_rows);
+    assert_true(n_rows >= 3000); /* 3 s, then the stop ramp */
+    assert_true(n_touching > 300);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -713,6 +761,7 @@ int main(void)
                                         teardown),
         cmocka_unit_test_setup_teardown(test_e2e_rec_cli_gpio_button_dumps_the_window, setup,
                                         teardown),
+        cmocka_unit_test_setup_teardown(test_e2e_rec_cli_crowd_contacts_in_truth, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
