@@ -633,12 +633,19 @@ static void test_cli_profile_without_rt_privileges_says_so(void **state)
     if (ticks < 1 || fabs(ticks + missed - periods) > 2)
         fail_msg("ticks %.0f + missed %.0f != %.1f periods of loop time", ticks, missed, periods);
     cJSON_Delete(j);
+    /* --require-rt as nobody: refused (exit 1), saying why */
     snprintf(cmd, sizeof(cmd),
-             "setpriv --reuid=65534 --regid=65534 --clear-groups %s --duration 1 --require-rt "
-             ">/dev/null 2>&1",
+             "setpriv --reuid=65534 --regid=65534 --clear-groups %s --scenario "
+             "scenarios/stand.yaml --duration 1 --require-rt 2>&1",
              bin());
-    status = system(cmd);
-    assert_true(WIFEXITED(status) && WEXITSTATUS(status) == 1);
+    p = popen(cmd, "r");
+    assert_non_null(p);
+    n = fread(out, 1, sizeof(out) - 1, p);
+    out[n] = '\0';
+    status = pclose(p);
+    if (!WIFEXITED(status) || WEXITSTATUS(status) != 1 ||
+        strstr(out, "--require-rt: real-time setup not permitted") == NULL)
+        fail_msg("--require-rt as nobody: status 0x%x, not exit 1:\n%s", status, out);
     snprintf(cmd, sizeof(cmd), "rm -rf %s", dir);
     assert_int_equal(system(cmd), 0);
 }
