@@ -148,6 +148,7 @@ typedef struct {
     float robot_a_n;      /**< its repulsion strength; 0: agents do not shy from it */
     float crowd_dt_s;     /**< crowd update period (0.002 s) */
     float timestep_s;     /**< physics step of the scene (0.001 s); 0: the robot model's own */
+    bool gate_capsules;   /**< agents' capsules collide only near what they can touch (true) */
     uint32_t n_groups;
     ps_crowd_group_cfg_t groups[PS_CROWD_MAX_GROUPS];
     uint32_t n_walls;

@@ -645,6 +645,53 @@ static void test_crowd_same_seed_identical_trajectories(void **state)
     ps_plant_destroy(p[1]);
 }
 
+/* Capsule gating (crowd.gate_capsules): agents far from the robot and the
+ * walls have their capsules switched out of collision, and the run is
+ * bitwise the one without gating (the capsules it switches off would have
+ * touched nothing). */
+static void test_crowd_capsule_gating_keeps_contacts(void **state)
+{
+    (void)state;
+    ps_crowd_cfg_t c = base_cfg();
+    c.arena = (ps_crowd_rect_t){-3, -3, 3, 3};
+    c.has_arena_walls = true;
+    c.groups[0].density_m2 = 2.5f;
+    c.groups[0].region = c.arena;
+    c.groups[0].goal = PS_CROWD_GOAL_ROBOT;
+    c.groups[0].clear_m = 0.45f;
+    c.robot_a_n = 0.0f;
+    c.n_walls = 1; /* a wall segment the agents by it touch */
+    c.walls[0] = (ps_crowd_wall_cfg_t){-2.5f, 2.3f, 2.5f, 2.3f};
+    ps_plant_t *p[2];
+    uint32_t n_off = 0, n_agents = 0;
+    for (int k = 0; k < 2; k++) {
+        c.gate_capsules = k == 0;
+        p[k] = make_plant(&c, 0, 0, 9);
+        run_s(p[k], 1.0);
+        const mjModel *m = ps_plant_model(p[k]);
+        n_agents = ps_crowd_agent_count(ps_plant_crowd(p[k]));
+        for (uint32_t i = 0; i < n_agents && k == 0; i++) {
+            char name[32];
+            (void)snprintf(name, sizeof(name), "agent%u_body", i);
+            n_off += m->geom_contype[mj_name2id(m, mjOBJ_GEOM, name)] == 0 ? 1u : 0u;
+        }
+    }
+    ps_crowd_stats_t st;
+    ps_crowd_get_stats(ps_plant_crowd(p[0]), &st);
+    printf("gating: %u of %u capsules out of collision after 1 s; crowd force on the robot up "
+           "to %.0f N\n",
+           n_off, n_agents, st.robot_force_max_n);
+    assert_true(n_off > n_agents / 2 && n_off < n_agents); /* it gates, not all */
+    assert_true(st.robot_force_max_n > 50.0);              /* and the press is on */
+    const mjModel *m = ps_plant_model(p[0]);
+    assert_memory_equal(ps_plant_data(p[0])->qpos, ps_plant_data(p[1])->qpos,
+                        (size_t)m->nq * sizeof(mjtNum));
+    assert_memory_equal(ps_plant_data(p[0])->qvel, ps_plant_data(p[1])->qvel,
+                        (size_t)m->nv * sizeof(mjtNum));
+    ps_plant_destroy(p[0]);
+    ps_plant_destroy(p[1]);
+}
+
 /* People pressing on the robot: force per robot part, transmitted impulse,
  * local density, penetration. */
 static void test_crowd_measures_the_press_on_the_robot(void **state)
@@ -704,6 +751,7 @@ int main(void)
         cmocka_unit_test(test_crowd_torso_force_equals_mj_applyft),
         cmocka_unit_test(test_crowd_arena_side_stops_agent),
         cmocka_unit_test(test_crowd_same_seed_identical_trajectories),
+        cmocka_unit_test(test_crowd_capsule_gating_keeps_contacts),
         cmocka_unit_test(test_crowd_measures_the_press_on_the_robot),
     };
     return cmocka_run_group_tests(tests, setup_robot, NULL);
