@@ -412,7 +412,7 @@ static void social_force(ps_crowd_t *c, uint32_t i, const mjModel *m, double out
     uint32_t n_near = 0;
     const double reach = sp->range_m > sp->evasive_range_m ? (double)sp->range_m
                                                            : (double)sp->evasive_range_m;
-    const double reach2 = reach * reach;
+    const double reach2 = reach * reach, range2 = (double)sp->range_m * sp->range_m;
     bool is_blocked = false;
     for (int gy = cy - 1; gy <= cy + 1; gy++) {
         for (int gx = cx - 1; gx <= cx + 1; gx++) {
@@ -423,13 +423,17 @@ static void social_force(ps_crowd_t *c, uint32_t i, const mjModel *m, double out
                 const uint32_t j = c->grid.items[k];
                 if (j == i)
                     continue;
-                const agent_t *b = &c->a[j];
-                const double xj[2] = {b->com[0], b->com[1]};
+                /* positions from the grid's packed copy: the agents'
+                 * records stay out of the cache unless near */
+                const double xj[2] = {c->xy[2 * j], c->xy[2 * j + 1]};
                 const double dx = xj[0] - xi[0], dy = xj[1] - xi[1];
-                if (dx * dx + dy * dy > reach2)
+                const double d2 = dx * dx + dy * dy;
+                if (d2 > reach2)
                     continue; /* beyond the repulsion's and the evasion's range */
-                double f[2];
-                ps_social_agent_repulsion(sp, xi, a->radius, e, xj, b->radius, f);
+                const agent_t *b = &c->a[j];
+                double f[2] = {0.0, 0.0};
+                if (d2 <= range2)
+                    ps_social_agent_repulsion(sp, xi, a->radius, e, xj, b->radius, f);
                 out[0] += f[0];
                 out[1] += f[1];
                 if (f[0] != 0.0 || f[1] != 0.0) {
