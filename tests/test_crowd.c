@@ -274,6 +274,11 @@ static void test_scene_loads_around_unchanged_robot_with_sizes(void **state)
     assert_true(mj_name2id(m, mjOBJ_BODY, "agent7") < 0);
     assert_true(mj_name2id(m, mjOBJ_GEOM, "arena_wall3") >= 0);
     assert_true(m->opt.timestep == 0.0005); /* ps1.xml's */
+    /* the scene's solver settings (sim/ps_scene.c), the model's integrator */
+    assert_int_equal(m->opt.solver, mjSOL_NEWTON);
+    assert_int_equal(m->opt.cone, mjCONE_PYRAMIDAL);
+    assert_int_equal(m->opt.jacobian, mjJAC_SPARSE);
+    assert_int_equal(m->opt.integrator, mjINT_EULER);
     int nconmax, njmax;
     ps_scene_sizes(7, 150, 600, &nconmax, &njmax);
     assert_int_equal(m->nconmax, nconmax);
