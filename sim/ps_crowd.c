@@ -42,6 +42,12 @@ typedef struct {
     double goal_xy[2]; /* hold: the start place */
     double surge_until, surge_v[2];
     double f_social[2];  /* self-propulsion (drive, repulsion, evasion): through the feet */
+    /* this update's heading and desired speed, and what its neighbours add
+     * up to (neighbour_pass): repulsion, their offsets, how many repel,
+     * whether one ahead is down or slow */
+    double e[2], v0_now, f_near[2], o_near[2];
+    uint32_t n_near;
+    bool is_blocked;
     double f_contact[2]; /* sliding friction between bodies: at the torso's CoM */
     double f_base[2], tau_ankle[2];
     /* kinematics at the last update */
@@ -398,57 +404,94 @@ static void heading(const ps_crowd_t *c, const agent_t *a, double e[2], double *
         *v0 *= d < 0.5 ? d / 0.5 : 1.0;
 }
 
-static void social_force(ps_crowd_t *c, uint32_t i, const mjModel *m, double out[2])
+/* What j does to i in the social force: repulsion within range_m, and
+ * whether j, ahead within evasive_range_m, blocks i's way. */
+static void neighbour_acts(const ps_crowd_t *c, agent_t *a, const double xi[2], const agent_t *b,
+                           const double xj[2], double d2)
 {
     const ps_social_params_t *sp = &c->cfg.social;
-    agent_t *a = &c->a[i];
-    double e[2], v0;
-    heading(c, a, e, &v0);
-    ps_social_drive(a->mass, v0, sp->tau_s, e, a->vfeet, out);
-    const double xi[2] = {a->com[0], a->com[1]};
-    int cx, cy;
-    ps_social_grid_cell(&c->grid, xi, &cx, &cy);
-    double o[2] = {0.0, 0.0};
-    uint32_t n_near = 0;
+    if (d2 <= (double)sp->range_m * sp->range_m) {
+        double f[2];
+        ps_social_agent_repulsion(sp, xi, a->radius, a->e, xj, b->radius, f);
+        a->f_near[0] += f[0];
+        a->f_near[1] += f[1];
+        if (f[0] != 0.0 || f[1] != 0.0) {
+            a->o_near[0] += xj[0] - xi[0];
+            a->o_near[1] += xj[1] - xi[1];
+            a->n_near++;
+        }
+    }
+    if (!a->is_blocked && a->v0_now > 0.2 &&
+        ps_social_is_ahead(xi, a->e, xj, sp->evasive_range_m)) {
+        const double sj = sqrt(b->vcom[0] * b->vcom[0] + b->vcom[1] * b->vcom[1]);
+        a->is_blocked = b->is_fallen || sj < SLOW_FRAC * a->v0_now;
+    }
+}
+
+/* Every pair of agents in the same or adjacent grid cells, once: each
+ * cell with itself and four of its eight neighbours (the other four see it
+ * from their side), both agents of a pair served by one distance test. */
+static void neighbour_pass(ps_crowd_t *c)
+{
+    const ps_social_params_t *sp = &c->cfg.social;
     const double reach = sp->range_m > sp->evasive_range_m ? (double)sp->range_m
                                                            : (double)sp->evasive_range_m;
-    const double reach2 = reach * reach, range2 = (double)sp->range_m * sp->range_m;
-    bool is_blocked = false;
-    for (int gy = cy - 1; gy <= cy + 1; gy++) {
-        for (int gx = cx - 1; gx <= cx + 1; gx++) {
-            if (gx < 0 || gy < 0 || gx >= c->grid.nx || gy >= c->grid.ny)
-                continue;
-            const uint32_t cell = (uint32_t)(gy * c->grid.nx + gx);
-            for (uint32_t k = c->grid.cell_start[cell]; k < c->grid.cell_start[cell + 1u]; k++) {
-                const uint32_t j = c->grid.items[k];
-                if (j == i)
-                    continue;
-                /* positions from the grid's packed copy: the agents'
-                 * records stay out of the cache unless near */
-                const double xj[2] = {c->xy[2 * j], c->xy[2 * j + 1]};
-                const double dx = xj[0] - xi[0], dy = xj[1] - xi[1];
-                const double d2 = dx * dx + dy * dy;
-                if (d2 > reach2)
-                    continue; /* beyond the repulsion's and the evasion's range */
-                const agent_t *b = &c->a[j];
-                double f[2] = {0.0, 0.0};
-                if (d2 <= range2)
-                    ps_social_agent_repulsion(sp, xi, a->radius, e, xj, b->radius, f);
-                out[0] += f[0];
-                out[1] += f[1];
-                if (f[0] != 0.0 || f[1] != 0.0) {
-                    o[0] += xj[0] - xi[0];
-                    o[1] += xj[1] - xi[1];
-                    n_near++;
-                }
-                if (!is_blocked && v0 > 0.2 &&
-                    ps_social_is_ahead(xi, e, xj, sp->evasive_range_m)) {
-                    const double sj = sqrt(b->vcom[0] * b->vcom[0] + b->vcom[1] * b->vcom[1]);
-                    is_blocked = b->is_fallen || sj < SLOW_FRAC * v0;
+    const double reach2 = reach * reach;
+    for (uint32_t i = 0; i < c->n; i++) {
+        agent_t *a = &c->a[i];
+        heading(c, a, a->e, &a->v0_now);
+        a->f_near[0] = a->f_near[1] = a->o_near[0] = a->o_near[1] = 0.0;
+        a->n_near = 0;
+        a->is_blocked = false;
+    }
+    static const int HALF[5][2] = {{0, 0}, {1, 0}, {-1, 1}, {0, 1}, {1, 1}};
+    const ps_social_grid_t *g = &c->grid;
+    for (int cy = 0; cy < g->ny; cy++) {
+        for (int cx = 0; cx < g->nx; cx++) {
+            const uint32_t cell = (uint32_t)(cy * g->nx + cx);
+            for (uint32_t k = g->cell_start[cell]; k < g->cell_start[cell + 1u]; k++) {
+                const uint32_t i = g->items[k];
+                const double xi[2] = {c->xy[2 * i], c->xy[2 * i + 1]};
+                for (int h = 0; h < 5; h++) {
+                    const int gx = cx + HALF[h][0], gy = cy + HALF[h][1];
+                    if (gx < 0 || gy < 0 || gx >= g->nx || gy >= g->ny)
+                        continue;
+                    const uint32_t other = (uint32_t)(gy * g->nx + gx);
+                    /* in its own cell, each pair once: those after it */
+                    const uint32_t q0 = h == 0 ? k + 1u : g->cell_start[other];
+                    for (uint32_t q = q0; q < g->cell_start[other + 1u]; q++) {
+                        const uint32_t j = g->items[q];
+                        /* positions from the grid's packed copy: the
+                         * agents' records stay out of the cache unless near */
+                        const double xj[2] = {c->xy[2 * j], c->xy[2 * j + 1]};
+                        const double dx = xj[0] - xi[0], dy = xj[1] - xi[1];
+                        const double d2 = dx * dx + dy * dy;
+                        if (d2 > reach2)
+                            continue; /* beyond the repulsion's and the evasion's range */
+                        agent_t *a = &c->a[i], *b = &c->a[j];
+                        if (!a->is_fallen)
+                            neighbour_acts(c, a, xi, b, xj, d2);
+                        if (!b->is_fallen)
+                            neighbour_acts(c, b, xj, a, xi, d2);
+                    }
                 }
             }
         }
     }
+}
+
+static void social_force(ps_crowd_t *c, uint32_t i, const mjModel *m, double out[2])
+{
+    const ps_social_params_t *sp = &c->cfg.social;
+    agent_t *a = &c->a[i];
+    const double *e = a->e;
+    ps_social_drive(a->mass, a->v0_now, sp->tau_s, e, a->vfeet, out);
+    const double xi[2] = {a->com[0], a->com[1]};
+    out[0] += a->f_near[0];
+    out[1] += a->f_near[1];
+    const double o[2] = {a->o_near[0], a->o_near[1]};
+    const uint32_t n_near = a->n_near;
+    const bool is_blocked = a->is_blocked;
     if (c->cfg.robot_a_n > 0.0f) {
         ps_social_params_t rp = *sp;
         rp.a_n = c->cfg.robot_a_n;
@@ -782,6 +825,7 @@ static void update(ps_crowd_t *c, const mjModel *m, mjData *d, double t_s)
     ps_social_grid_build(&c->grid, c->xy, c->n);
     run_events(c, t_s);
     uint32_t n_stepping = 0;
+    neighbour_pass(c);
     for (uint32_t i = 0; i < c->n; i++) {
         agent_t *a = &c->a[i];
         if (!a->is_fallen)
