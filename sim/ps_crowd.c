@@ -404,25 +404,21 @@ static void heading(const ps_crowd_t *c, const agent_t *a, double e[2], double *
         *v0 *= d < 0.5 ? d / 0.5 : 1.0;
 }
 
-/* What j does to i in the social force: repulsion within range_m, and
- * whether j, ahead within evasive_range_m, blocks i's way. */
+/* What j does to i in the social force: its repulsion f (within range_m;
+ * zero beyond), and whether j, ahead within evasive_range_m, blocks i's
+ * way. */
 static void neighbour_acts(const ps_crowd_t *c, agent_t *a, const double xi[2], const agent_t *b,
-                           const double xj[2], double d2)
+                           const double xj[2], const double f[2])
 {
-    const ps_social_params_t *sp = &c->cfg.social;
-    if (d2 <= (double)sp->range_m * sp->range_m) {
-        double f[2];
-        ps_social_agent_repulsion(sp, xi, a->radius, a->e, xj, b->radius, f);
-        a->f_near[0] += f[0];
-        a->f_near[1] += f[1];
-        if (f[0] != 0.0 || f[1] != 0.0) {
-            a->o_near[0] += xj[0] - xi[0];
-            a->o_near[1] += xj[1] - xi[1];
-            a->n_near++;
-        }
+    a->f_near[0] += f[0];
+    a->f_near[1] += f[1];
+    if (f[0] != 0.0 || f[1] != 0.0) {
+        a->o_near[0] += xj[0] - xi[0];
+        a->o_near[1] += xj[1] - xi[1];
+        a->n_near++;
     }
     if (!a->is_blocked && a->v0_now > 0.2 &&
-        ps_social_is_ahead(xi, a->e, xj, sp->evasive_range_m)) {
+        ps_social_is_ahead(xi, a->e, xj, c->cfg.social.evasive_range_m)) {
         const double sj = sqrt(b->vcom[0] * b->vcom[0] + b->vcom[1] * b->vcom[1]);
         a->is_blocked = b->is_fallen || sj < SLOW_FRAC * a->v0_now;
     }
@@ -436,7 +432,7 @@ static void neighbour_pass(ps_crowd_t *c)
     const ps_social_params_t *sp = &c->cfg.social;
     const double reach = sp->range_m > sp->evasive_range_m ? (double)sp->range_m
                                                            : (double)sp->evasive_range_m;
-    const double reach2 = reach * reach;
+    const double reach2 = reach * reach, range2 = (double)sp->range_m * sp->range_m;
     for (uint32_t i = 0; i < c->n; i++) {
         agent_t *a = &c->a[i];
         heading(c, a, a->e, &a->v0_now);
@@ -469,10 +465,14 @@ static void neighbour_pass(ps_crowd_t *c)
                         if (d2 > reach2)
                             continue; /* beyond the repulsion's and the evasion's range */
                         agent_t *a = &c->a[i], *b = &c->a[j];
+                        double fa[2] = {0.0, 0.0}, fb[2] = {0.0, 0.0};
+                        if (d2 <= range2)
+                            ps_social_pair_repulsion(sp, xi, a->radius, a->e, xj, b->radius,
+                                                     b->e, fa, fb);
                         if (!a->is_fallen)
-                            neighbour_acts(c, a, xi, b, xj, d2);
+                            neighbour_acts(c, a, xi, b, xj, fa);
                         if (!b->is_fallen)
-                            neighbour_acts(c, b, xj, a, xi, d2);
+                            neighbour_acts(c, b, xj, a, xi, fb);
                     }
                 }
             }

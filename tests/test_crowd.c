@@ -148,6 +148,26 @@ static void test_social_agent_repulsion_hand_computed(void **state)
     assert_true(f[0] == 0.0 && f[1] == 0.0);
 }
 
+/* Both sides of a pair at once are the two one-sided terms, bit for bit,
+ * in range, out of range, and with no heading. */
+static void test_social_pair_repulsion_equals_both_sides(void **state)
+{
+    (void)state;
+    ps_social_params_t p;
+    ps_social_default_params(&p);
+    const double xi[2] = {0.1, -0.2}, ei[2] = {0.6, 0.8}, ej[2] = {0.0, 0.0};
+    const double xjs[3][2] = {{0.5, 0.1}, {0.05, -0.6}, {2.0, 0.0}}; /* last beyond range */
+    for (int k = 0; k < 3; k++) {
+        double fi[2], fj[2], gi[2], gj[2];
+        ps_social_pair_repulsion(&p, xi, 0.17, ei, xjs[k], 0.19, ej, fi, fj);
+        ps_social_agent_repulsion(&p, xi, 0.17, ei, xjs[k], 0.19, gi);
+        ps_social_agent_repulsion(&p, xjs[k], 0.19, ej, xi, 0.17, gj);
+        assert_memory_equal(fi, gi, sizeof(fi));
+        assert_memory_equal(fj, gj, sizeof(fj));
+        assert_true(k == 2 ? fi[0] == 0.0 : fi[0] != 0.0);
+    }
+}
+
 static void test_social_wall_repulsion_hand_computed(void **state)
 {
     (void)state;
@@ -741,6 +761,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_social_drive_hand_computed),
         cmocka_unit_test(test_social_agent_repulsion_hand_computed),
+        cmocka_unit_test(test_social_pair_repulsion_equals_both_sides),
         cmocka_unit_test(test_social_wall_repulsion_hand_computed),
         cmocka_unit_test(test_social_evasive_steps_aside_away_from_neighbours),
         cmocka_unit_test(test_social_grid_finds_every_neighbour_in_range),
