@@ -643,24 +643,24 @@ static void test_crowd_arena_side_stops_agent(void **state)
     ps_plant_destroy(p);
 }
 
-/* Same scene, seed and events: the same trajectories, bit for bit. */
-static void test_crowd_same_seed_identical_trajectories(void **state)
+/* A walled square arena of half side half_m filled at density_m2 with
+ * people walking at the robot (at the origin), clear_m around it. */
+static ps_crowd_cfg_t press_cfg(float half_m, float density_m2, float clear_m)
 {
-    (void)state;
     ps_crowd_cfg_t c = base_cfg();
-    c.arena = (ps_crowd_rect_t){-2, -2, 2, 2};
+    c.arena = (ps_crowd_rect_t){-half_m, -half_m, half_m, half_m};
     c.has_arena_walls = true;
-    c.groups[0].density_m2 = 3.0f;
+    c.groups[0].density_m2 = density_m2;
     c.groups[0].region = c.arena;
     c.groups[0].goal = PS_CROWD_GOAL_ROBOT;
-    c.groups[0].clear_m = 0.5f;
-    c.groups[0].speed_sd_m_s = 0.1f;
+    c.groups[0].clear_m = clear_m;
     c.robot_a_n = 0.0f;
-    ps_plant_t *p[2];
-    for (int k = 0; k < 2; k++) {
-        p[k] = make_plant(&c, 0, 0, 6);
-        run_s(p[k], 1.0);
-    }
+    return c;
+}
+
+/* Both plants' states bit for bit, then both destroyed. */
+static void assert_same_state_and_destroy(ps_plant_t *p[2])
+{
     const mjModel *m = ps_plant_model(p[0]);
     assert_memory_equal(ps_plant_data(p[0])->qpos, ps_plant_data(p[1])->qpos,
                         (size_t)m->nq * sizeof(mjtNum));
@@ -670,6 +670,20 @@ static void test_crowd_same_seed_identical_trajectories(void **state)
     ps_plant_destroy(p[1]);
 }
 
+/* Same scene, seed and events: the same trajectories, bit for bit. */
+static void test_crowd_same_seed_identical_trajectories(void **state)
+{
+    (void)state;
+    ps_crowd_cfg_t c = press_cfg(2.0f, 3.0f, 0.5f);
+    c.groups[0].speed_sd_m_s = 0.1f;
+    ps_plant_t *p[2];
+    for (int k = 0; k < 2; k++) {
+        p[k] = make_plant(&c, 0, 0, 6);
+        run_s(p[k], 1.0);
+    }
+    assert_same_state_and_destroy(p);
+}
+
 /* Capsule gating (crowd.gate_capsules): agents far from the robot and the
  * walls have their capsules switched out of collision, and the run is
  * bitwise the one without gating (the capsules it switches off would have
@@ -677,14 +691,7 @@ static void test_crowd_same_seed_identical_trajectories(void **state)
 static void test_crowd_capsule_gating_keeps_contacts(void **state)
 {
     (void)state;
-    ps_crowd_cfg_t c = base_cfg();
-    c.arena = (ps_crowd_rect_t){-3, -3, 3, 3};
-    c.has_arena_walls = true;
-    c.groups[0].density_m2 = 2.5f;
-    c.groups[0].region = c.arena;
-    c.groups[0].goal = PS_CROWD_GOAL_ROBOT;
-    c.groups[0].clear_m = 0.45f;
-    c.robot_a_n = 0.0f;
+    ps_crowd_cfg_t c = press_cfg(3.0f, 2.5f, 0.45f);
     c.n_walls = 1; /* a wall segment the agents by it touch */
     c.walls[0] = (ps_crowd_wall_cfg_t){-2.5f, 2.3f, 2.5f, 2.3f};
     ps_plant_t *p[2];
@@ -708,13 +715,7 @@ static void test_crowd_capsule_gating_keeps_contacts(void **state)
            n_off, n_agents, st.robot_force_max_n);
     assert_true(n_off > n_agents / 2 && n_off < n_agents); /* it gates, not all */
     assert_true(st.robot_force_max_n > 50.0);              /* and the press is on */
-    const mjModel *m = ps_plant_model(p[0]);
-    assert_memory_equal(ps_plant_data(p[0])->qpos, ps_plant_data(p[1])->qpos,
-                        (size_t)m->nq * sizeof(mjtNum));
-    assert_memory_equal(ps_plant_data(p[0])->qvel, ps_plant_data(p[1])->qvel,
-                        (size_t)m->nv * sizeof(mjtNum));
-    ps_plant_destroy(p[0]);
-    ps_plant_destroy(p[1]);
+    assert_same_state_and_destroy(p);
 }
 
 /* People pressing on the robot: force per robot part, transmitted impulse,
