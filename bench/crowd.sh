@@ -3,8 +3,8 @@
 # pressed around the robot, the plant's speed (physics + crowd, simulated s
 # per s) beside the bare mj_step of the same generated model from the same
 # states, interleaved step by step, in thread CPU time (one core's work) and
-# wall time; MuJoCo's stage timers; the crowd's own work as a share of
-# mj_step. Each size runs REPEAT times so the spread on a shared machine shows.
+# wall time; MuJoCo's stage timers (a separate pass); the crowd's own work as
+# a share of mj_step. Each size runs REPEAT times so the spread on a shared machine shows.
 # Writes bench/results/crowd.json and bench/results/crowd.md.
 # Env: BUILD (build), CROWD_BENCH_S (simulated s per run, 2),
 #      CROWD_BENCH_NS ("0 20 50 100 200"), CROWD_BENCH_DTS ("0.001 0": 1 ms is
@@ -64,7 +64,9 @@ with open(os.path.join(out, "crowd.md"), "w") as f:
             "settling, %g simulated s in which each plant step (MuJoCo step + the crowd's forces, decisions\n"
             "and measurements) follows the bare `mj_step` of the same model from a copy of the same state.\n"
             "Speed = simulated s per s of one core's CPU time (thread CPU time; wall-clock in the JSON),\n"
-            "the range over %d runs; crowd share = the crowd's own time / mj_step time.\n\n"
+            "the range over %d runs; plant / bare = CPU time per plant step over per bare step (what\n"
+            "the crowd and the plant's bookkeeping add); crowd share = the crowd's own time / mj_step\n"
+            "time, both wall clock inside the plant.\n\n"
             % (sim_s, len(rows) // max(1, len(groups))))
     f.write("| timestep | agents | nv | contacts | rows | plant speed (CPU) | bare mj_step speed (CPU) | plant / bare | crowd share of mj_step |\n|---|---|---|---|---|---|---|---|---|\n")
     for (dt, n), rs in sorted(groups.items(), key=lambda kv: (-kv[0][0], kv[0][1])):
@@ -73,7 +75,9 @@ with open(os.path.join(out, "crowd.md"), "w") as f:
             span([r["plant_rtf_cpu"] for r in rs], "%.2f"), span([r["bare_rtf_cpu"] for r in rs], "%.2f"),
             span([r["bare_us_per_step_cpu"] and r["plant_us_per_step_cpu"] / r["bare_us_per_step_cpu"] for r in rs], "%.2f"),
             span([100 * r["crowd_share_of_mj_step"] for r in rs], "%.1f")))
-    f.write("\nMuJoCo's stage timers (us per bare step, CPU time, first run):\n\n")
+    f.write("\nMuJoCo's stage timers (us per bare step, CPU time, first run; a separate pass of 500 bare\n"
+            "steps after the timed ones: the timers read the thread CPU clock, a system call, which\n"
+            "the timed steps are spared):\n\n")
     keys = list(rows[0]["mujoco_stage_us_cpu"].keys())
     f.write("| timestep | agents | " + " | ".join(keys) + " |\n|---|---|" + "---|" * len(keys) + "\n")
     for (dt, n), rs in sorted(groups.items(), key=lambda kv: (-kv[0][0], kv[0][1])):

@@ -166,6 +166,8 @@ static const cyaml_schema_field_t CROWD_FIELDS[] = {
                      has_arena_walls),
     CYAML_FIELD_BOOL("periodic_x", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, ps_crowd_cfg_t,
                      is_periodic_x),
+    CYAML_FIELD_BOOL("gate_capsules", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, ps_crowd_cfg_t,
+                     gate_capsules),
     CYAML_FIELD_MAPPING("measure", CYAML_FLAG_OPTIONAL, ps_crowd_cfg_t, measure, RECT_FIELDS),
     F32("local_radius_m", ps_crowd_cfg_t, local_radius_m),
     F32("robot_radius_m", ps_crowd_cfg_t, robot_radius_m),
@@ -517,6 +519,7 @@ static const crowd_opt_t CROWD_OPTS[] = {
     CROWD_OPT("robot_radius_m", robot_radius_m),
     CROWD_OPT("robot_a_n", robot_a_n),
     CROWD_OPT("crowd_dt_s", crowd_dt_s),
+    CROWD_OPT("timestep_s", timestep_s),
     CROWD_OPT("social.v0_m_s", social.v0_m_s),
     CROWD_OPT("social.tau_s", social.tau_s),
     CROWD_OPT("social.a_n", social.a_n),
@@ -573,6 +576,8 @@ static void copy_crowd(const ps_cfg_ctx_t *c, const ps_crowd_cfg_t *raw, ps_crow
             memcpy((char *)out + CROWD_OPTS[k].off, (const char *)&defaults + CROWD_OPTS[k].off,
                    sizeof(float));
     }
+    if (ps_cfg_line_of(c, "crowd.gate_capsules") == 0)
+        out->gate_capsules = defaults.gate_capsules;
     if (ps_cfg_line_of(c, "crowd.measure") == 0)
         out->measure = out->arena;
     for (uint32_t g = 0; g < out->n_groups; g++) {

@@ -17,6 +17,11 @@
 #define STANCE_SHIFT_S  0.3  /* feet drift under the CoM between steps */
 #define FALLEN_DRAG_N_S 400.0
 #define SLOW_FRAC       0.25 /* ahead and slower than this share of v0: in the way */
+/* Capsule gating (gate_capsules): a capsule is on while anything it can
+ * touch is within its reach plus GATE_MARGIN_M plus what GATE_SPEED_M_S
+ * closes in one crowd update and one step (the geoms' places lag a step). */
+#define GATE_MARGIN_M   0.05
+#define GATE_SPEED_M_S  10.0 /* a falling head, 1.5 m at 5 rad/s, plus the robot's */
 
 typedef struct {
     int qx, qy, qtx, qty; /* qpos addresses */
@@ -37,6 +42,12 @@ typedef struct {
     double goal_xy[2]; /* hold: the start place */
     double surge_until, surge_v[2];
     double f_social[2];  /* self-propulsion (drive, repulsion, evasion): through the feet */
+    /* this update's heading and desired speed, and what its neighbours add
+     * up to (neighbour_pass): repulsion, their offsets, how many repel,
+     * whether one ahead is down or slow */
+    double e[2], v0_now, f_near[2], o_near[2];
+    uint32_t n_near;
+    bool is_blocked;
     double f_contact[2]; /* sliding friction between bodies: at the torso's CoM */
     double f_base[2], tau_ankle[2];
     /* kinematics at the last update */
@@ -62,6 +73,17 @@ struct ps_crowd {
     int step_count;
     double robot_xy[2];
     double wall_pen_m; /* deepest overlap with the arena's sides, this step */
+    /* capsule gating: the model's contype/conaffinity (written), the
+     * capsules' own bits, the geoms that can touch a capsule */
+    int *geom_contype, *geom_conaffinity;
+    int cap_contype, cap_conaffinity;
+    bool is_gated;    /* false: capsules stay on (off in cfg, or a plane can touch them) */
+    int *toucher;     /* geoms (not the robot's) that can touch a capsule */
+    int n_touchers;
+    double *toucher_circle; /* per toucher: x, y, reach (this update) */
+    int *robot_geom;  /* the robot's geoms that can touch a capsule: one circle */
+    int n_robot_geoms;
+    double gate_margin_m;
     ps_crowd_stats_t st;
 };
 
@@ -86,6 +108,7 @@ void ps_crowd_default_cfg(ps_crowd_cfg_t *out)
     out->robot_a_n = out->social.a_n;
     out->crowd_dt_s = 0.002f;
     out->timestep_s = 0.001f; /* docs/crowd.md, "Performance": the robot stands at it */
+    out->gate_capsules = true; /* docs/crowd.md, "Performance" */
 }
 
 /* ---- create ---------------------------------------------------------------- */
@@ -165,6 +188,41 @@ static int bind_agent(ps_crowd_t *c, mjModel *m, const ps_crowd_agent_spec_t *s,
     return 0;
 }
 
+/* Which geoms can touch an agent's capsule (by the contype/conaffinity
+ * rule), split into the robot's and the rest. Gating stays off when there
+ * are no agents or when a plane or height field could touch a capsule (no
+ * bounding radius). */
+static int bind_gating(ps_crowd_t *c, mjModel *m)
+{
+    c->geom_contype = m->geom_contype;
+    c->geom_conaffinity = m->geom_conaffinity;
+    c->is_gated = c->cfg.gate_capsules && c->n > 0;
+    if (c->n == 0)
+        return 0;
+    c->cap_contype = m->geom_contype[c->a[0].geom];
+    c->cap_conaffinity = m->geom_conaffinity[c->a[0].geom];
+    c->toucher = calloc((size_t)m->ngeom, sizeof(int));
+    c->robot_geom = calloc((size_t)m->ngeom, sizeof(int));
+    c->toucher_circle = calloc(3u * (size_t)m->ngeom, sizeof(double));
+    if (c->toucher == NULL || c->robot_geom == NULL || c->toucher_circle == NULL)
+        return -ENOMEM;
+    for (int g = 0; g < m->ngeom; g++) {
+        const int b = m->geom_bodyid[g];
+        if (c->agent_of_body[b] >= 0 || !((c->cap_contype & m->geom_conaffinity[g]) ||
+                                          (m->geom_contype[g] & c->cap_conaffinity)))
+            continue;
+        if (m->geom_rbound[g] <= 0.0)
+            c->is_gated = false;
+        if (c->is_robot[b])
+            c->robot_geom[c->n_robot_geoms++] = g;
+        else
+            c->toucher[c->n_touchers++] = g;
+    }
+    c->gate_margin_m =
+        GATE_MARGIN_M + GATE_SPEED_M_S * ((double)c->cfg.crowd_dt_s + m->opt.timestep);
+    return 0;
+}
+
 static int bind_parts(ps_crowd_t *c, const mjModel *m)
 {
     c->st.n_parts = 0;
@@ -237,6 +295,11 @@ int ps_crowd_create(const ps_crowd_cfg_t *cfg, const ps_crowd_agent_spec_t *agen
     if (rc < 0)
         goto fail;
     (void)bind_parts(c, m);
+    rc = bind_gating(c, m);
+    if (rc < 0) {
+        ps_err_format(err, err_len, "crowd: out of memory");
+        goto fail;
+    }
     for (uint32_t e = 0; e < cfg->n_events; e++) {
         c->wall_mocap[e] = -1;
         if (cfg->events[e].kind != PS_CROWD_EVENT_WALL)
@@ -269,6 +332,9 @@ void ps_crowd_destroy(ps_crowd_t *c)
     free(c->part_of_body);
     free(c->agent_of_body);
     free(c->ring_of_geom);
+    free(c->toucher);
+    free(c->robot_geom);
+    free(c->toucher_circle);
     free(c);
 }
 
@@ -338,47 +404,94 @@ static void heading(const ps_crowd_t *c, const agent_t *a, double e[2], double *
         *v0 *= d < 0.5 ? d / 0.5 : 1.0;
 }
 
-static void social_force(ps_crowd_t *c, uint32_t i, const mjModel *m, double out[2])
+/* What j does to i in the social force: its repulsion f (within range_m;
+ * zero beyond), and whether j, ahead within evasive_range_m, blocks i's
+ * way. */
+static void neighbour_acts(const ps_crowd_t *c, agent_t *a, const double xi[2], const agent_t *b,
+                           const double xj[2], const double f[2])
+{
+    a->f_near[0] += f[0];
+    a->f_near[1] += f[1];
+    if (f[0] != 0.0 || f[1] != 0.0) {
+        a->o_near[0] += xj[0] - xi[0];
+        a->o_near[1] += xj[1] - xi[1];
+        a->n_near++;
+    }
+    if (!a->is_blocked && a->v0_now > 0.2 &&
+        ps_social_is_ahead(xi, a->e, xj, c->cfg.social.evasive_range_m)) {
+        const double sj = sqrt(b->vcom[0] * b->vcom[0] + b->vcom[1] * b->vcom[1]);
+        a->is_blocked = b->is_fallen || sj < SLOW_FRAC * a->v0_now;
+    }
+}
+
+/* Every pair of agents in the same or adjacent grid cells, once: each
+ * cell with itself and four of its eight neighbours (the other four see it
+ * from their side), both agents of a pair served by one distance test. */
+static void neighbour_pass(ps_crowd_t *c)
 {
     const ps_social_params_t *sp = &c->cfg.social;
-    agent_t *a = &c->a[i];
-    double e[2], v0;
-    heading(c, a, e, &v0);
-    ps_social_drive(a->mass, v0, sp->tau_s, e, a->vfeet, out);
-    const double xi[2] = {a->com[0], a->com[1]};
-    int cx, cy;
-    ps_social_grid_cell(&c->grid, xi, &cx, &cy);
-    double o[2] = {0.0, 0.0};
-    uint32_t n_near = 0;
-    bool is_blocked = false;
-    for (int gy = cy - 1; gy <= cy + 1; gy++) {
-        for (int gx = cx - 1; gx <= cx + 1; gx++) {
-            if (gx < 0 || gy < 0 || gx >= c->grid.nx || gy >= c->grid.ny)
-                continue;
-            const uint32_t cell = (uint32_t)(gy * c->grid.nx + gx);
-            for (uint32_t k = c->grid.cell_start[cell]; k < c->grid.cell_start[cell + 1u]; k++) {
-                const uint32_t j = c->grid.items[k];
-                if (j == i)
-                    continue;
-                const agent_t *b = &c->a[j];
-                const double xj[2] = {b->com[0], b->com[1]};
-                double f[2];
-                ps_social_agent_repulsion(sp, xi, a->radius, e, xj, b->radius, f);
-                out[0] += f[0];
-                out[1] += f[1];
-                if (f[0] != 0.0 || f[1] != 0.0) {
-                    o[0] += xj[0] - xi[0];
-                    o[1] += xj[1] - xi[1];
-                    n_near++;
-                }
-                if (!is_blocked && v0 > 0.2 &&
-                    ps_social_is_ahead(xi, e, xj, sp->evasive_range_m)) {
-                    const double sj = sqrt(b->vcom[0] * b->vcom[0] + b->vcom[1] * b->vcom[1]);
-                    is_blocked = b->is_fallen || sj < SLOW_FRAC * v0;
+    const double reach = sp->range_m > sp->evasive_range_m ? (double)sp->range_m
+                                                           : (double)sp->evasive_range_m;
+    const double reach2 = reach * reach, range2 = (double)sp->range_m * sp->range_m;
+    for (uint32_t i = 0; i < c->n; i++) {
+        agent_t *a = &c->a[i];
+        heading(c, a, a->e, &a->v0_now);
+        a->f_near[0] = a->f_near[1] = a->o_near[0] = a->o_near[1] = 0.0;
+        a->n_near = 0;
+        a->is_blocked = false;
+    }
+    static const int HALF[5][2] = {{0, 0}, {1, 0}, {-1, 1}, {0, 1}, {1, 1}};
+    const ps_social_grid_t *g = &c->grid;
+    for (int cy = 0; cy < g->ny; cy++) {
+        for (int cx = 0; cx < g->nx; cx++) {
+            const uint32_t cell = (uint32_t)(cy * g->nx + cx);
+            for (uint32_t k = g->cell_start[cell]; k < g->cell_start[cell + 1u]; k++) {
+                const uint32_t i = g->items[k];
+                const double xi[2] = {c->xy[2 * i], c->xy[2 * i + 1]};
+                for (int h = 0; h < 5; h++) {
+                    const int gx = cx + HALF[h][0], gy = cy + HALF[h][1];
+                    if (gx < 0 || gy < 0 || gx >= g->nx || gy >= g->ny)
+                        continue;
+                    const uint32_t other = (uint32_t)(gy * g->nx + gx);
+                    /* in its own cell, each pair once: those after it */
+                    const uint32_t q0 = h == 0 ? k + 1u : g->cell_start[other];
+                    for (uint32_t q = q0; q < g->cell_start[other + 1u]; q++) {
+                        const uint32_t j = g->items[q];
+                        /* positions from the grid's packed copy: the
+                         * agents' records stay out of the cache unless near */
+                        const double xj[2] = {c->xy[2 * j], c->xy[2 * j + 1]};
+                        const double dx = xj[0] - xi[0], dy = xj[1] - xi[1];
+                        const double d2 = dx * dx + dy * dy;
+                        if (d2 > reach2)
+                            continue; /* beyond the repulsion's and the evasion's range */
+                        agent_t *a = &c->a[i], *b = &c->a[j];
+                        double fa[2] = {0.0, 0.0}, fb[2] = {0.0, 0.0};
+                        if (d2 <= range2)
+                            ps_social_pair_repulsion(sp, xi, a->radius, a->e, xj, b->radius,
+                                                     b->e, fa, fb);
+                        if (!a->is_fallen)
+                            neighbour_acts(c, a, xi, b, xj, fa);
+                        if (!b->is_fallen)
+                            neighbour_acts(c, b, xj, a, xi, fb);
+                    }
                 }
             }
         }
     }
+}
+
+static void social_force(ps_crowd_t *c, uint32_t i, const mjModel *m, double out[2])
+{
+    const ps_social_params_t *sp = &c->cfg.social;
+    agent_t *a = &c->a[i];
+    const double *e = a->e;
+    ps_social_drive(a->mass, a->v0_now, sp->tau_s, e, a->vfeet, out);
+    const double xi[2] = {a->com[0], a->com[1]};
+    out[0] += a->f_near[0];
+    out[1] += a->f_near[1];
+    const double o[2] = {a->o_near[0], a->o_near[1]};
+    const uint32_t n_near = a->n_near;
+    const bool is_blocked = a->is_blocked;
     if (c->cfg.robot_a_n > 0.0f) {
         ps_social_params_t rp = *sp;
         rp.a_n = c->cfg.robot_a_n;
@@ -639,6 +752,57 @@ static void wrap_x(ps_crowd_t *c, mjData *d)
     }
 }
 
+/* Horizontal circle around a geom: its centre and bounding radius plus margin. */
+static void geom_circle(const mjModel *m, const mjData *d, int g, double out[3])
+{
+    out[0] = d->geom_xpos[3 * g];
+    out[1] = d->geom_xpos[3 * g + 1];
+    out[2] = m->geom_rbound[g] + m->geom_margin[g];
+}
+
+/* Capsule gating. An agent's capsule touches only the robot and walls
+ * (contype/conaffinity), but MuJoCo 2.2.2's broadphase boxes every body by
+ * its geoms' bounding spheres: a capsule the height of a person makes a
+ * 1.7 m cube that overlaps dozens of other bodies, and every robot body
+ * within it goes on to the narrow phase. So a capsule takes part in
+ * collision only while the robot (one circle around its touching geoms) or
+ * another geom that can touch it is horizontally within reach; otherwise
+ * its contype and conaffinity are 0 and the broadphase skips its body. The
+ * test is conservative (gate_margin_m covers what moves in an update), so
+ * the contacts are those without gating. */
+static void gate_capsules(ps_crowd_t *c, const mjModel *m, const mjData *d)
+{
+    if (!c->is_gated)
+        return;
+    double robot[3] = {c->robot_xy[0], c->robot_xy[1], 0.0};
+    for (int k = 0; k < c->n_robot_geoms; k++) {
+        double q[3];
+        geom_circle(m, d, c->robot_geom[k], q);
+        const double r = sqrt((q[0] - robot[0]) * (q[0] - robot[0]) +
+                              (q[1] - robot[1]) * (q[1] - robot[1])) + q[2];
+        robot[2] = r > robot[2] ? r : robot[2];
+    }
+    for (int k = 0; k < c->n_touchers; k++)
+        geom_circle(m, d, c->toucher[k], c->toucher_circle + 3 * k);
+    for (uint32_t i = 0; i < c->n; i++) {
+        const agent_t *a = &c->a[i];
+        const mjtNum *p0 = d->xpos + 3 * a->body, *R = d->xmat + 9 * a->body;
+        /* the capsule's horizontal circle: its axis's midpoint, half its
+         * horizontal length plus the radius */
+        const double h[2] = {a->len * R[2], a->len * R[5]};
+        const double cx = p0[0] + h[0] / 2.0, cy = p0[1] + h[1] / 2.0;
+        const double reach = sqrt(h[0] * h[0] + h[1] * h[1]) / 2.0 + a->radius + c->gate_margin_m;
+        bool is_near = false;
+        for (int k = -1; k < c->n_touchers && !is_near; k++) {
+            const double *q = k < 0 ? robot : c->toucher_circle + 3 * k;
+            const double dx = cx - q[0], dy = cy - q[1], r = reach + q[2];
+            is_near = (k >= 0 || c->n_robot_geoms > 0) && dx * dx + dy * dy < r * r;
+        }
+        c->geom_contype[a->geom] = is_near ? c->cap_contype : 0;
+        c->geom_conaffinity[a->geom] = is_near ? c->cap_conaffinity : 0;
+    }
+}
+
 static void update(ps_crowd_t *c, const mjModel *m, mjData *d, double t_s)
 {
     const mjtNum *rp = d->xpos + 3 * c->robot_root;
@@ -661,6 +825,7 @@ static void update(ps_crowd_t *c, const mjModel *m, mjData *d, double t_s)
     ps_social_grid_build(&c->grid, c->xy, c->n);
     run_events(c, t_s);
     uint32_t n_stepping = 0;
+    neighbour_pass(c);
     for (uint32_t i = 0; i < c->n; i++) {
         agent_t *a = &c->a[i];
         if (!a->is_fallen)
@@ -695,6 +860,7 @@ static void update(ps_crowd_t *c, const mjModel *m, mjData *d, double t_s)
     c->st.local_density_m2 = (double)n_local / (M_PI * rl * rl);
     c->st.measure_density_m2 = area > 0.0 ? (double)n_meas / area : 0.0;
     c->st.measure_speed_m_s = n_meas > 0 ? speed_sum / (double)n_meas : 0.0;
+    gate_capsules(c, m, d);
 }
 
 static double profile(const ps_crowd_event_cfg_t *ev, double t_s)
@@ -742,6 +908,12 @@ static double arena_contact(ps_crowd_t *c, const agent_t *a, mjData *d)
     const ps_crowd_rect_t *ar = &c->cfg.arena;
     const ps_crowd_body_cfg_t *bc = &c->cfg.body;
     const mjtNum *p0 = d->xpos + 3 * a->body, *R = d->xmat + 9 * a->body;
+    /* nothing of the capsule reaches a side: most agents, most steps */
+    const double reach = a->len + a->radius;
+    const bool is_far_x = c->cfg.is_periodic_x ||
+                          (p0[0] - ar->x_min_m > reach && ar->x_max_m - p0[0] > reach);
+    if (is_far_x && p0[1] - ar->y_min_m > reach && ar->y_max_m - p0[1] > reach)
+        return 0.0;
     const double p1[3] = {p0[0] + a->len * R[2], p0[1] + a->len * R[5], p0[2] + a->len * R[8]};
     /* angular velocity from the hinges' world axes; endpoint velocities */
     const mjtNum *ax = d->xaxis + 3 * a->jtx, *ay = d->xaxis + 3 * a->jty;

@@ -19,6 +19,11 @@
  *  - falling: tilted past fall_tilt_rad the agent falls (no ankle, no drive;
  *    the body lies on its hinge limit at floor level; the base drags with
  *    ground friction): an obstacle on the floor.
+ * Each update also switches each agent's capsule in or out of collision
+ * (gate_capsules): only near the robot or a wall does it keep its
+ * contype/conaffinity, which spares MuJoCo's broadphase the person-high
+ * bounding boxes (docs/crowd.md, "Performance"); the contacts are those
+ * without it.
  * Crowd events (pushes with a force profile, rear-row surges, moving walls)
  * act at their times. Measurements (every physics step): contact force of
  * the crowd on each robot body, impulse the robot transmits to the agents
@@ -150,6 +155,7 @@ typedef struct {
     float robot_a_n;      /**< its repulsion strength; 0: agents do not shy from it */
     float crowd_dt_s;     /**< crowd update period (0.002 s) */
     float timestep_s;     /**< physics step of the scene (0.001 s); 0: the robot model's own */
+    bool gate_capsules;   /**< agents' capsules collide only near what they can touch (true) */
     uint32_t n_groups;
     ps_crowd_group_cfg_t groups[PS_CROWD_MAX_GROUPS];
     uint32_t n_walls;
@@ -224,7 +230,9 @@ void ps_crowd_default_cfg(ps_crowd_cfg_t *out);
  *  agents): finds each agent's joints and bodies by name, the moving walls,
  *  the robot's bodies (is_robot_body, nbody entries), and sets each agent
  *  geom's contact stiffness so that two agents pressed together compress as
- *  body_k_n_m says (writes m->geom_solref, INIT only).
+ *  body_k_n_m says (writes m->geom_solref, INIT only). Keeps m: every
+ *  update writes its agents' capsules' m->geom_contype/conaffinity
+ *  (gate_capsules), so m is not to be shared with another thread.
  *  @pre timestep_s divides cfg->crowd_dt_s within 1 %  @post *out owned by
  *       the caller  @return 0 | -PS_ERR_CONFIG (an agent or wall missing in
  *       the model, err says which) | -ENOMEM | -EINVAL  @rt INIT */

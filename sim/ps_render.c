@@ -38,7 +38,7 @@ typedef struct {
 struct ps_render {
     ps_render_cfg_t cfg;
     char dir[512];
-    const mjModel *m;
+    mjModel *m; /* own copy: the plant's crowd switches collisions in its model as it steps */
     mjData *d;
     int root;
     unsigned char *is_robot; /* nbody */
@@ -136,8 +136,12 @@ int ps_render_create(const ps_render_cfg_t *cfg, const mjModel *m, ps_render_t *
     if (r == NULL)
         return -ENOMEM;
     r->cfg = *cfg;
-    r->m = m;
     int rc = 0;
+    r->m = mj_copyModel(NULL, m);
+    if (r->m == NULL) {
+        rc = -ENOMEM;
+        goto fail;
+    }
     if (cfg->dir != NULL) {
         (void)snprintf(r->dir, sizeof(r->dir), "%s", cfg->dir);
         rc = make_dir(r->dir);
@@ -713,6 +717,8 @@ void ps_render_destroy(ps_render_t *r)
     }
     if (r->d != NULL)
         mj_deleteData(r->d);
+    if (r->m != NULL)
+        mj_deleteModel(r->m);
     free(r->is_robot);
     free(r->agent_of_body);
     free(r->agent_body);

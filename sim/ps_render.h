@@ -56,7 +56,9 @@ typedef struct {
 
 /** Check cfg, make the folder, bind the model (root body, agents by name
  *  "agentI_ring"), and with is_view open the window here (refused without a
- *  display). The model must outlive the renderer and stay unchanged.
+ *  display). The renderer works on its own copy of m, taken here: create it
+ *  before the plant's first step (the crowd switches its agents' capsule
+ *  collisions in the plant's model as it steps, sim/ps_crowd.h).
  *  @return 0 | -EINVAL (cfg: err names the field) | -ENOENT (no root body)
  *          | -ENXIO (view: no display) | -EIO | -ENOMEM  @rt INIT */
 int ps_render_create(const ps_render_cfg_t *cfg, const struct mjModel_ *m, ps_render_t **out,

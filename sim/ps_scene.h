@@ -7,16 +7,18 @@
  * contact and constraint capacity (<size nconmax njmax>) derived from the
  * agent count. The plant loads it through MuJoCo's virtual file system.
  *
- * Names in the scene (sim/ps_crowd.c binds them): bodies "agentI" (base, slide
- * joints "agentI_x", "agentI_y"), "agentI_torso" (hinges "agentI_tx",
- * "agentI_ty", capsule geom "agentI_body") and its jointless child
- * "agentI_ring" (sphere geom "agentI_ring" at the torso's centre of mass);
+ * Names in the scene (sim/ps_crowd.c binds them): bodies "agentI" (slide
+ * joints "agentI_x", "agentI_y", hinges "agentI_tx", "agentI_ty", capsule
+ * geom "agentI_body") and its jointless child "agentI_ring" (sphere geom
+ * "agentI_ring" at the torso's centre of mass);
  * static bodies "wallK_S" (segment S of wall K, box geom of the same name)
  * and "obstacleK"; body "arena" with the arena's drawn sides "arena_wallK"
  * (no contact: sim/ps_crowd.c pushes agents out of them); mocap bodies
  * "crowd_wallE" for moving-wall event E.
  * Collision bits (contype/conaffinity): capsule 8/2|16 (the robot and the
- * walls), ring 4/4 (other rings), walls and obstacles 16/1|2. The robot
+ * walls; the crowd zeroes them while nothing is near, sim/ps_crowd.h), ring
+ * 4/4 (other rings), walls and obstacles 16/1|2. Solver: Newton, pyramidal
+ * cone, sparse Jacobian, whatever the robot model says. The robot
  * model keeps its own (ps1: robot 2/1, floor 1/1), so agents never touch
  * the floor.
  *

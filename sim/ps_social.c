@@ -51,6 +51,34 @@ void ps_social_agent_repulsion(const ps_social_params_t *p, const double xi[2], 
     out_n[1] = f * n[1];
 }
 
+/* w(phi) of an agent heading e toward a neighbour in direction -n. */
+static double anisotropy(const ps_social_params_t *p, const double e[2], const double n[2])
+{
+    if (e[0] == 0.0 && e[1] == 0.0)
+        return 1.0;
+    const double cos_phi = -(e[0] * n[0] + e[1] * n[1]);
+    const double lambda = (double)p->lambda;
+    return lambda + (1.0 - lambda) * 0.5 * (1.0 + cos_phi);
+}
+
+void ps_social_pair_repulsion(const ps_social_params_t *p, const double xi[2], double ri_m,
+                              const double e_i[2], const double xj[2], double rj_m,
+                              const double e_j[2], double out_i_n[2], double out_j_n[2])
+{
+    out_i_n[0] = out_i_n[1] = out_j_n[0] = out_j_n[1] = 0.0;
+    const double dx = xi[0] - xj[0], dy = xi[1] - xj[1];
+    const double d = sqrt(dx * dx + dy * dy);
+    if (d <= 0.0 || d > (double)p->range_m)
+        return;
+    const double n[2] = {dx / d, dy / d}, nj[2] = {-n[0], -n[1]};
+    const double s = (double)p->a_n * exp((ri_m + rj_m - d) / (double)p->b_m);
+    const double fi = s * anisotropy(p, e_i, n), fj = s * anisotropy(p, e_j, nj);
+    out_i_n[0] = fi * n[0];
+    out_i_n[1] = fi * n[1];
+    out_j_n[0] = fj * nj[0];
+    out_j_n[1] = fj * nj[1];
+}
+
 void ps_social_wall_repulsion(const ps_social_params_t *p, const double x[2], double r_m,
                               const double a[2], const double b[2], double out_n[2])
 {

@@ -54,6 +54,13 @@ void ps_social_agent_repulsion(const ps_social_params_t *p, const double xi[2], 
                                const double e_i[2], const double xj[2], double rj_m,
                                double out_n[2]);
 
+/** Both sides of one pair at once: out_i_n = ps_social_agent_repulsion(i
+ *  by j), out_j_n = (j by i), bit for bit, one sqrt and one exp between
+ *  them.  @units m -> N  @rt RT-SAFE O(1) */
+void ps_social_pair_repulsion(const ps_social_params_t *p, const double xi[2], double ri_m,
+                              const double e_i[2], const double xj[2], double rj_m,
+                              const double e_j[2], double out_i_n[2], double out_j_n[2]);
+
 /** Repulsion of an agent (at x, radius r) by the wall segment a-b:
  *  A_w exp((r - d) / B_w) along the normal from the closest point. Zero
  *  beyond range_m.  @units m -> N  @rt RT-SAFE O(1) */

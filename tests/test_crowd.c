@@ -148,6 +148,26 @@ static void test_social_agent_repulsion_hand_computed(void **state)
     assert_true(f[0] == 0.0 && f[1] == 0.0);
 }
 
+/* Both sides of a pair at once are the two one-sided terms, bit for bit,
+ * in range, out of range, and with no heading. */
+static void test_social_pair_repulsion_equals_both_sides(void **state)
+{
+    (void)state;
+    ps_social_params_t p;
+    ps_social_default_params(&p);
+    const double xi[2] = {0.1, -0.2}, ei[2] = {0.6, 0.8}, ej[2] = {0.0, 0.0};
+    const double xjs[3][2] = {{0.5, 0.1}, {0.05, -0.6}, {2.0, 0.0}}; /* last beyond range */
+    for (int k = 0; k < 3; k++) {
+        double fi[2], fj[2], gi[2], gj[2];
+        ps_social_pair_repulsion(&p, xi, 0.17, ei, xjs[k], 0.19, ej, fi, fj);
+        ps_social_agent_repulsion(&p, xi, 0.17, ei, xjs[k], 0.19, gi);
+        ps_social_agent_repulsion(&p, xjs[k], 0.19, ej, xi, 0.17, gj);
+        assert_memory_equal(fi, gi, sizeof(fi));
+        assert_memory_equal(fj, gj, sizeof(fj));
+        assert_true(k == 2 ? fi[0] == 0.0 : fi[0] != 0.0);
+    }
+}
+
 static void test_social_wall_repulsion_hand_computed(void **state)
 {
     (void)state;
@@ -274,6 +294,11 @@ static void test_scene_loads_around_unchanged_robot_with_sizes(void **state)
     assert_true(mj_name2id(m, mjOBJ_BODY, "agent7") < 0);
     assert_true(mj_name2id(m, mjOBJ_GEOM, "arena_wall3") >= 0);
     assert_true(m->opt.timestep == 0.0005); /* ps1.xml's */
+    /* the scene's solver settings (sim/ps_scene.c), the model's integrator */
+    assert_int_equal(m->opt.solver, mjSOL_NEWTON);
+    assert_int_equal(m->opt.cone, mjCONE_PYRAMIDAL);
+    assert_int_equal(m->opt.jacobian, mjJAC_SPARSE);
+    assert_int_equal(m->opt.integrator, mjINT_EULER);
     int nconmax, njmax;
     ps_scene_sizes(7, 150, 600, &nconmax, &njmax);
     assert_int_equal(m->nconmax, nconmax);
@@ -618,24 +643,24 @@ static void test_crowd_arena_side_stops_agent(void **state)
     ps_plant_destroy(p);
 }
 
-/* Same scene, seed and events: the same trajectories, bit for bit. */
-static void test_crowd_same_seed_identical_trajectories(void **state)
+/* A walled square arena of half side half_m filled at density_m2 with
+ * people walking at the robot (at the origin), clear_m around it. */
+static ps_crowd_cfg_t press_cfg(float half_m, float density_m2, float clear_m)
 {
-    (void)state;
     ps_crowd_cfg_t c = base_cfg();
-    c.arena = (ps_crowd_rect_t){-2, -2, 2, 2};
+    c.arena = (ps_crowd_rect_t){-half_m, -half_m, half_m, half_m};
     c.has_arena_walls = true;
-    c.groups[0].density_m2 = 3.0f;
+    c.groups[0].density_m2 = density_m2;
     c.groups[0].region = c.arena;
     c.groups[0].goal = PS_CROWD_GOAL_ROBOT;
-    c.groups[0].clear_m = 0.5f;
-    c.groups[0].speed_sd_m_s = 0.1f;
+    c.groups[0].clear_m = clear_m;
     c.robot_a_n = 0.0f;
-    ps_plant_t *p[2];
-    for (int k = 0; k < 2; k++) {
-        p[k] = make_plant(&c, 0, 0, 6);
-        run_s(p[k], 1.0);
-    }
+    return c;
+}
+
+/* Both plants' states bit for bit, then both destroyed. */
+static void assert_same_state_and_destroy(ps_plant_t *p[2])
+{
     const mjModel *m = ps_plant_model(p[0]);
     assert_memory_equal(ps_plant_data(p[0])->qpos, ps_plant_data(p[1])->qpos,
                         (size_t)m->nq * sizeof(mjtNum));
@@ -643,6 +668,54 @@ static void test_crowd_same_seed_identical_trajectories(void **state)
                         (size_t)m->nv * sizeof(mjtNum));
     ps_plant_destroy(p[0]);
     ps_plant_destroy(p[1]);
+}
+
+/* Same scene, seed and events: the same trajectories, bit for bit. */
+static void test_crowd_same_seed_identical_trajectories(void **state)
+{
+    (void)state;
+    ps_crowd_cfg_t c = press_cfg(2.0f, 3.0f, 0.5f);
+    c.groups[0].speed_sd_m_s = 0.1f;
+    ps_plant_t *p[2];
+    for (int k = 0; k < 2; k++) {
+        p[k] = make_plant(&c, 0, 0, 6);
+        run_s(p[k], 1.0);
+    }
+    assert_same_state_and_destroy(p);
+}
+
+/* Capsule gating (crowd.gate_capsules): agents far from the robot and the
+ * walls have their capsules switched out of collision, and the run is
+ * bitwise the one without gating (the capsules it switches off would have
+ * touched nothing). */
+static void test_crowd_capsule_gating_keeps_contacts(void **state)
+{
+    (void)state;
+    ps_crowd_cfg_t c = press_cfg(3.0f, 2.5f, 0.45f);
+    c.n_walls = 1; /* a wall segment the agents by it touch */
+    c.walls[0] = (ps_crowd_wall_cfg_t){-2.5f, 2.3f, 2.5f, 2.3f};
+    ps_plant_t *p[2];
+    uint32_t n_off = 0, n_agents = 0;
+    for (int k = 0; k < 2; k++) {
+        c.gate_capsules = k == 0;
+        p[k] = make_plant(&c, 0, 0, 9);
+        run_s(p[k], 1.0);
+        const mjModel *m = ps_plant_model(p[k]);
+        n_agents = ps_crowd_agent_count(ps_plant_crowd(p[k]));
+        for (uint32_t i = 0; i < n_agents && k == 0; i++) {
+            char name[32];
+            (void)snprintf(name, sizeof(name), "agent%u_body", i);
+            n_off += m->geom_contype[mj_name2id(m, mjOBJ_GEOM, name)] == 0 ? 1u : 0u;
+        }
+    }
+    ps_crowd_stats_t st;
+    ps_crowd_get_stats(ps_plant_crowd(p[0]), &st);
+    printf("gating: %u of %u capsules out of collision after 1 s; crowd force on the robot up "
+           "to %.0f N\n",
+           n_off, n_agents, st.robot_force_max_n);
+    assert_true(n_off > n_agents / 2 && n_off < n_agents); /* it gates, not all */
+    assert_true(st.robot_force_max_n > 50.0);              /* and the press is on */
+    assert_same_state_and_destroy(p);
 }
 
 /* People pressing on the robot: force per robot part, transmitted impulse,
@@ -689,6 +762,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_social_drive_hand_computed),
         cmocka_unit_test(test_social_agent_repulsion_hand_computed),
+        cmocka_unit_test(test_social_pair_repulsion_equals_both_sides),
         cmocka_unit_test(test_social_wall_repulsion_hand_computed),
         cmocka_unit_test(test_social_evasive_steps_aside_away_from_neighbours),
         cmocka_unit_test(test_social_grid_finds_every_neighbour_in_range),
@@ -704,6 +778,7 @@ int main(void)
         cmocka_unit_test(test_crowd_torso_force_equals_mj_applyft),
         cmocka_unit_test(test_crowd_arena_side_stops_agent),
         cmocka_unit_test(test_crowd_same_seed_identical_trajectories),
+        cmocka_unit_test(test_crowd_capsule_gating_keeps_contacts),
         cmocka_unit_test(test_crowd_measures_the_press_on_the_robot),
     };
     return cmocka_run_group_tests(tests, setup_robot, NULL);
