@@ -306,6 +306,21 @@ static void place_in_stance(ps_plant_t *p, const ps_plant_cfg_t *robot)
         p->anchor_quat[k] = root[3 + k];
 }
 
+/* The first tag id free for the crowd: past every "tag36h11_<id>" texture
+ * the robot model has itself (a test scene's tagged people), even. */
+static uint32_t first_free_tag_id(const mjModel *m)
+{
+    uint32_t first = 0;
+    for (int t = 0; t < m->ntex; t++) {
+        unsigned id = 0;
+        char rest = 0;
+        if (sscanf(m->names + m->name_texadr[t], "tag36h11_%u%c", &id, &rest) == 1 &&
+            id + 1u > first)
+            first = id + 1u;
+    }
+    return (first + 1u) & ~1u;
+}
+
 /* The robot model (p->m, loaded) plus the crowd: place the agents, write the
  * scene that includes the model file, load it from memory in place of the
  * robot model. */
@@ -332,7 +347,7 @@ static int load_scene(ps_plant_t *p, const ps_plant_cfg_t *robot, ps_crowd_agent
     const char *model_file = slash + 1;
     char *xml = NULL;
     rc = ps_scene_write_mjcf(robot->crowd, agents, *out_n, model_file, p->m->nconmax, p->m->njmax,
-                             &xml, err, err_len);
+                             first_free_tag_id(p->m), &xml, err, err_len);
     if (rc < 0)
         return rc;
     mjVFS *vfs = calloc(1, sizeof(*vfs));

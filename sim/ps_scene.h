@@ -15,6 +15,10 @@
  * and "obstacleK"; body "arena" with the arena's drawn sides "arena_wallK"
  * (no contact: sim/ps_crowd.c pushes agents out of them); mocap bodies
  * "crowd_wallE" for moving-wall event E.
+ * Tags (cfg->tags on): sites "agentI_tag_left" and "agentI_tag_right" on
+ * body "agentI", box plates with the material "tag36h11_<id>" (a texture of
+ * that name, which sim/ps_camera_sim fills with the tag), ids 2k and 2k + 1
+ * for agent k counted from first_tag_id (rt/ps_neighbours.h).
  * Collision bits (contype/conaffinity): capsule 8/2|16 (the robot and the
  * walls), ring 4/4 (other rings), walls and obstacles 16/1|2. The robot
  * model keeps its own (ps1: robot 2/1, floor 1/1), so agents never touch
@@ -30,6 +34,12 @@
 #include <stdint.h>
 
 #include "ps_crowd.h"
+
+/** tag36h11's ids (libapriltag 3.3: 587 codes): enough for 293 people. */
+#define PS_SCENE_TAG_IDS 587u
+/** A tag texture's edge in texels: 8 per cell of the tag's 10 (black
+ *  square 8, white border 1 each side), 19.2 KB of RGB per tag. */
+#define PS_SCENE_TAG_TEX_PX 80
 
 /** Place every group's agents: lattice, random or line layouts, sizes drawn
  *  from the group's distributions with a generator seeded by seed; none
@@ -48,12 +58,20 @@ int ps_scene_place(const ps_crowd_cfg_t *cfg, uint32_t seed, const double robot_
 void ps_scene_sizes(uint32_t n_agents, int robot_nconmax, int robot_njmax, int *out_nconmax,
                     int *out_njmax);
 
-/** The scene document: robot model (by absolute path) plus crowd.
+/** How many of n_agents wear tags when the first wears first_id: agent k
+ *  wears first_id + 2k and first_id + 2k + 1 while both are tag36h11 ids
+ *  (PS_SCENE_TAG_IDS), the rest none.  @rt any */
+uint32_t ps_scene_tagged_agents(uint32_t n_agents, uint32_t first_id);
+
+/** The scene document: robot model (by absolute path) plus crowd. With
+ *  cfg->tags PS_CROWD_TAGS_ON (AUTO is off here) the agents wear tags from
+ *  first_tag_id on (see above; even: a person's pair is 2k, 2k + 1).
  *  @pre robot_model_path readable; robot_nconmax/njmax the robot model's
  *  @post *out_xml malloc'd, NUL-terminated; the caller frees it
- *  @return 0 | -ENOMEM | -EINVAL  @rt INIT */
+ *  @return 0 | -ENOMEM | -EINVAL (NULL, odd first_tag_id)  @rt INIT */
 int ps_scene_write_mjcf(const ps_crowd_cfg_t *cfg, const ps_crowd_agent_spec_t *agents,
                         uint32_t n_agents, const char *robot_model_path, int robot_nconmax,
-                        int robot_njmax, char **out_xml, char *err, size_t err_len);
+                        int robot_njmax, uint32_t first_tag_id, char **out_xml, char *err,
+                        size_t err_len);
 
 #endif /* PS_SCENE_H */

@@ -35,11 +35,17 @@
 #define BOARD "tests/data/boards/sim-camera.yaml"
 #define ROBOT "tests/data/robots/ps1-tags.yaml"
 #define MODEL "tests/data/models/ps1-tags.xml"
+/* the crowd test: the plain robot, a small tagged crowd walking up to it */
+#define CROWD_ROBOT    "robots/ps1.yaml"
+#define CROWD_MODEL    "sim/models/ps1.xml"
+#define CROWD_SCENARIO "tests/data/scenarios/camera-crowd.yaml"
 
 /* A tag seen whole must be detected when its black square spans at least
  * this many pixels and faces the camera within this angle. */
 #define MIN_SIZE_PX   24.0
 #define MAX_SLANT_RAD 1.05 /* 60 degrees */
+/* In the crowd, the share of such tags that must be found in a frame. */
+#define RATE_MIN 0.9
 
 typedef struct {
     ps_board_cfg_t board;
@@ -55,13 +61,13 @@ typedef struct {
     bool is_started;
 } fixture_t;
 
-static int setup(void **state)
+static fixture_t *make_fixture(const char *robot, const char *model, const char *scenario)
 {
     fixture_t *f = calloc(1, sizeof(*f));
     char err[PS_ERR_MSG_LEN];
     if (f == NULL || ps_config_load_board(BOARD, &f->board, err, sizeof(err)) != 0 ||
-        ps_config_load_robot_sim(ROBOT, &f->robot, &f->devices, err, sizeof(err)) != 0 ||
-        ps_config_load_scenario("scenarios/stand.yaml", &f->scenario, err, sizeof(err)) != 0)
+        ps_config_load_robot_sim(robot, &f->robot, &f->devices, err, sizeof(err)) != 0 ||
+        ps_config_load_scenario(scenario, &f->scenario, err, sizeof(err)) != 0)
         fail_msg("config: %s", err);
     ps_app_sim_board(&f->board, &f->sim_board);
     ps_app_sim_robot(&f->robot, &f->devices, &f->sim_robot);
@@ -69,7 +75,7 @@ static int setup(void **state)
         .board = &f->sim_board,
         .robot = &f->sim_robot,
         .scenario = &f->scenario,
-        .model_path = MODEL,
+        .model_path = model,
         .is_lockstep = true,
         .period_ns = PS_NS_PER_S / f->robot.control.servo_hz,
     };
@@ -92,7 +98,18 @@ static int setup(void **state)
     f->is_started = true;
     if (ps_tags_create(&pc->tags, &f->tags, err, sizeof(err)) != 0)
         fail_msg("tags: %s", err);
-    *state = f;
+    return f;
+}
+
+static int setup(void **state)
+{
+    *state = make_fixture(ROBOT, MODEL, "scenarios/stand.yaml");
+    return 0;
+}
+
+static int setup_crowd(void **state)
+{
+    *state = make_fixture(CROWD_ROBOT, CROWD_MODEL, CROWD_SCENARIO);
     return 0;
 }
 
@@ -197,6 +214,109 @@ static void test_camera_sim_lockstep_scene_follows_plant(void **state)
            worst * 1e3);
 }
 
+/* What the crowd test counts over its frames. */
+typedef struct {
+    uint32_t n_frames;
+    uint32_t n_required; /* tags seen whole, large and square enough: must be found */
+    uint32_t n_found;    /* of those, detected */
+    uint32_t n_det;      /* detections of tags seen whole */
+    double err_sum_m, err_max_m;
+    uint32_t n_partial; /* detected though not seen whole (an edge hidden) */
+    double partial_max_m;
+} crowd_tally_t;
+
+/* One frame of the crowd: every detection is a tag of the scene, within
+ * 2 cm + 2 % of its distance of the truth (the plant's shoulders, robot
+ * frame); every tag seen whole, at least MIN_SIZE_PX across and within
+ * MAX_SLANT_RAD, is counted as required, and whether it was found. */
+static void tally_crowd_frame(fixture_t *f, crowd_tally_t *t)
+{
+    ps_camera_frame_t fr;
+    assert_int_equal(f->port.ops->next(f->port.ctx, &fr, PS_NS_PER_S), 0);
+    const ps_camera_cfg_t *cc = &f->board.perception.camera;
+    static uint8_t grey[640 * 480];
+    assert_int_equal(ps_camera_to_grey(&fr, grey, sizeof(grey)), 0);
+    f->port.ops->release(f->port.ctx, &fr);
+    ps_tags_det_t det[PS_TAGS_MAX_DETECTIONS];
+    const int n = ps_tags_detect(f->tags, grey, cc->width, cc->height, cc->width, det,
+                                 PS_TAGS_MAX_DETECTIONS);
+    assert_true(n >= 0);
+    static ps_camera_sim_tag_t truth[PS_CAMERA_SIM_MAX_TAGS];
+    uint64_t seq = 0;
+    const int n_truth = ps_camera_sim_truth(f->cam, truth, PS_CAMERA_SIM_MAX_TAGS, &seq);
+    assert_int_equal(n_truth, 16); /* 8 people, two shoulders each */
+    assert_int_equal(seq, fr.seq);
+    t->n_frames++;
+    for (int i = 0; i < n; i++) {
+        const ps_camera_sim_tag_t *tr = NULL;
+        for (int k = 0; k < n_truth; k++)
+            if (truth[k].id == det[i].id)
+                tr = &truth[k];
+        if (tr == NULL)
+            fail_msg("detected tag %d is not in the scene", det[i].id);
+        double e2 = 0;
+        for (int k = 0; k < 3; k++)
+            e2 += pow(det[i].pos_robot_m[k] - tr->pos_robot_m[k], 2);
+        const double e = sqrt(e2), dist = tr->pos_cam_m[2];
+        if (e > 0.02 + 0.02 * dist)
+            fail_msg("tag %d: error %.4f m at %.2f m (detected %.3f %.3f %.3f, true %.3f %.3f "
+                     "%.3f)",
+                     tr->id, e, dist, det[i].pos_robot_m[0], det[i].pos_robot_m[1],
+                     det[i].pos_robot_m[2], tr->pos_robot_m[0], tr->pos_robot_m[1],
+                     tr->pos_robot_m[2]);
+        const bool is_whole = tr->is_facing && tr->is_in_view && tr->is_unoccluded;
+        if (is_whole) {
+            t->n_det++;
+            t->err_sum_m += e;
+            t->err_max_m = e > t->err_max_m ? e : t->err_max_m;
+        } else {
+            t->n_partial++;
+            t->partial_max_m = e > t->partial_max_m ? e : t->partial_max_m;
+        }
+    }
+    for (int k = 0; k < n_truth; k++) {
+        const ps_camera_sim_tag_t *tr = &truth[k];
+        if (!(tr->is_facing && tr->is_in_view && tr->is_unoccluded) || tr->size_px < MIN_SIZE_PX ||
+            tr->slant_rad > MAX_SLANT_RAD)
+            continue;
+        t->n_required++;
+        bool is_found = false;
+        for (int i = 0; i < n; i++)
+            is_found |= det[i].id == tr->id;
+        t->n_found += is_found ? 1u : 0u;
+        if (!is_found)
+            print_message("    frame %llu: tag %d at %.2f m, %.0f px, %.0f deg not detected\n",
+                          (unsigned long long)fr.seq, tr->id, tr->pos_cam_m[2], tr->size_px,
+                          tr->slant_rad * 57.2958);
+    }
+}
+
+/* The issue's test: in a crowd scene (8 tagged people walking up to the
+ * robot from 0.9 to 2.8 m ahead, arriving and pressing on it within 2 s of
+ * lockstep plant time), the shoulders the camera finds against the plant's
+ * truth, frame by frame. */
+static void test_camera_sim_crowd_shoulders_detected_as_truth(void **state)
+{
+    fixture_t *f = *state;
+    assert_int_equal(ps_camera_sim_n_tags(f->cam), 16);
+    const ps_clock_t *clk = ps_sim_clock(f->sim);
+    assert_int_equal(ps_sim_start(f->sim, PS_NS_PER_S), 0);
+    crowd_tally_t t = {0};
+    for (int k = 0; k <= 8; k++) { /* every 0.25 s of plant time, 0 to 2 s */
+        assert_int_equal(ps_clock_sleep_until_ns(clk, PS_NS_PER_S + k * PS_NS_PER_S / 4), 0);
+        tally_crowd_frame(f, &t);
+    }
+    const double rate = t.n_required > 0 ? (double)t.n_found / t.n_required : 0.0;
+    print_message("    crowd, %u frames: %u of %u tags in view detected (%.1f %%); shoulder "
+                  "error over %u detections of tags seen whole: mean %.1f mm, max %.1f mm; %u "
+                  "more of partly hidden tags, max %.1f mm\n",
+                  t.n_frames, t.n_found, t.n_required, 100.0 * rate, t.n_det,
+                  t.n_det > 0 ? 1e3 * t.err_sum_m / t.n_det : 0.0, 1e3 * t.err_max_m, t.n_partial,
+                  1e3 * t.partial_max_m);
+    assert_true(t.n_required >= 3u * t.n_frames); /* the crowd is in view */
+    assert_true(rate >= RATE_MIN);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -204,6 +324,8 @@ int main(void)
                                         teardown),
         cmocka_unit_test_setup_teardown(test_camera_sim_lockstep_scene_follows_plant, setup,
                                         teardown),
+        cmocka_unit_test_setup_teardown(test_camera_sim_crowd_shoulders_detected_as_truth,
+                                        setup_crowd, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

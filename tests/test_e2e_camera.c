@@ -199,8 +199,9 @@ static void test_e2e_camera_tool_sim_png_json_all_tags(void **state)
     char dir[64];
     make_temp_dir(dir, sizeof(dir));
     char args[512];
-    snprintf(args, sizeof(args), "camera --board %s --robot %s --duration 2 --out %s", BOARD,
-             ROBOT, dir);
+    snprintf(args, sizeof(args),
+             "camera --board %s --robot %s --scenario scenarios/stand.yaml --duration 2 --out %s",
+             BOARD, ROBOT, dir);
     const int rc = run(args);
     if (rc != 0)
         fail_msg("exit %d:\n%s", rc, out);
