@@ -11,7 +11,11 @@
  * shoulder lies within 2 cm + 2 % of its distance of the true one, in the
  * robot frame. Then the same with the robot in motion: the scene of a
  * lockstep run after the harness let go, truth and picture from the same
- * published state. The largest error is printed.
+ * published state. The largest error is printed. Then a crowd
+ * (tests/data/scenarios/camera-crowd.yaml: 8 tagged people walking up to
+ * the robot) over 2 s of lockstep plant time: the detection rate of the
+ * tags in view and the shoulder errors, printed; and who wears tags when
+ * the scenario leaves it to the board (crowd.tags auto).
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -31,6 +35,9 @@
 #include "../rt/ps_config_sim.h"
 #include "../rt/ps_err.h"
 #include "../sim/ps_camera_sim.h"
+#include "../sim/ps_plant.h"
+
+#include <mujoco/mujoco.h>
 
 #define BOARD "tests/data/boards/sim-camera.yaml"
 #define ROBOT "tests/data/robots/ps1-tags.yaml"
@@ -317,6 +324,38 @@ static void test_camera_sim_crowd_shoulders_detected_as_truth(void **state)
     assert_true(rate >= RATE_MIN);
 }
 
+/* Who wears tags: with crowd.tags absent (auto) the crowd does when the
+ * board's camera is the simulated one, not on plain board sim; a scenario
+ * that says true puts them on without a camera. */
+static void test_camera_sim_crowd_tags_auto_with_sim_camera_only(void **state)
+{
+    (void)state;
+    static const struct {
+        const char *board, *scenario;
+        bool has_tags;
+    } CASES[] = {
+        {BOARD, "scenarios/crowd.yaml", true},
+        {"boards/sim.yaml", "scenarios/crowd.yaml", false},
+        {"boards/sim.yaml", CROWD_SCENARIO, true},
+    };
+    static ps_app_t app; /* large */
+    for (size_t k = 0; k < sizeof(CASES) / sizeof(CASES[0]); k++) {
+        char err[PS_ERR_MSG_LEN] = "";
+        const ps_app_opts_t o = {.data_dir = ".",
+                                 .board = CASES[k].board,
+                                 .scenario = CASES[k].scenario,
+                                 .is_lockstep = true};
+        if (ps_app_init(&app, &o, err, sizeof(err)) != 0)
+            fail_msg("%s, %s: %s", CASES[k].board, CASES[k].scenario, err);
+        const mjModel *m = ps_plant_model(ps_sim_plant(app.sim));
+        const int left = mj_name2id(m, mjOBJ_SITE, "agent0_tag_left");
+        print_message("    board %s, scenario %s: %s\n", CASES[k].board, CASES[k].scenario,
+                      left >= 0 ? "tags" : "no tags");
+        assert_int_equal(left >= 0, CASES[k].has_tags);
+        ps_app_deinit(&app);
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -326,6 +365,7 @@ int main(void)
                                         teardown),
         cmocka_unit_test_setup_teardown(test_camera_sim_crowd_shoulders_detected_as_truth,
                                         setup_crowd, teardown),
+        cmocka_unit_test(test_camera_sim_crowd_tags_auto_with_sim_camera_only),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
