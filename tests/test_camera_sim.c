@@ -132,20 +132,27 @@ static int teardown(void **state)
     return 0;
 }
 
+/* The next frame, its tags detected. @return how many */
+static int grab_and_detect(fixture_t *f, ps_camera_frame_t *fr, ps_tags_det_t *det)
+{
+    assert_int_equal(f->port.ops->next(f->port.ctx, fr, PS_NS_PER_S), 0);
+    const ps_camera_cfg_t *cc = &f->board.perception.camera;
+    static uint8_t grey[640 * 480];
+    assert_int_equal(fr->width, cc->width);
+    assert_int_equal(ps_camera_to_grey(fr, grey, sizeof(grey)), 0);
+    f->port.ops->release(f->port.ctx, fr);
+    const int n = ps_tags_detect(f->tags, grey, cc->width, cc->height, cc->width, det,
+                                 PS_TAGS_MAX_DETECTIONS);
+    assert_true(n >= 0);
+    return n;
+}
+
 /* One frame: detections against the truth. @return the largest error (m) */
 static double check_frame(fixture_t *f, uint32_t *out_n_seen)
 {
     ps_camera_frame_t fr;
-    assert_int_equal(f->port.ops->next(f->port.ctx, &fr, PS_NS_PER_S), 0);
-    const ps_camera_cfg_t *cc = &f->board.perception.camera;
-    static uint8_t grey[640 * 480];
-    assert_int_equal(fr.width, cc->width);
-    assert_int_equal(ps_camera_to_grey(&fr, grey, sizeof(grey)), 0);
-    f->port.ops->release(f->port.ctx, &fr);
     ps_tags_det_t det[PS_TAGS_MAX_DETECTIONS];
-    const int n = ps_tags_detect(f->tags, grey, cc->width, cc->height, cc->width, det,
-                                 PS_TAGS_MAX_DETECTIONS);
-    assert_true(n >= 0);
+    const int n = grab_and_detect(f, &fr, det);
     ps_camera_sim_tag_t truth[PS_CAMERA_SIM_MAX_TAGS];
     uint64_t seq = 99;
     const int n_truth = ps_camera_sim_truth(f->cam, truth, PS_CAMERA_SIM_MAX_TAGS, &seq);
@@ -239,15 +246,8 @@ typedef struct {
 static void tally_crowd_frame(fixture_t *f, crowd_tally_t *t)
 {
     ps_camera_frame_t fr;
-    assert_int_equal(f->port.ops->next(f->port.ctx, &fr, PS_NS_PER_S), 0);
-    const ps_camera_cfg_t *cc = &f->board.perception.camera;
-    static uint8_t grey[640 * 480];
-    assert_int_equal(ps_camera_to_grey(&fr, grey, sizeof(grey)), 0);
-    f->port.ops->release(f->port.ctx, &fr);
     ps_tags_det_t det[PS_TAGS_MAX_DETECTIONS];
-    const int n = ps_tags_detect(f->tags, grey, cc->width, cc->height, cc->width, det,
-                                 PS_TAGS_MAX_DETECTIONS);
-    assert_true(n >= 0);
+    const int n = grab_and_detect(f, &fr, det);
     static ps_camera_sim_tag_t truth[PS_CAMERA_SIM_MAX_TAGS];
     uint64_t seq = 0;
     const int n_truth = ps_camera_sim_truth(f->cam, truth, PS_CAMERA_SIM_MAX_TAGS, &seq);

@@ -627,10 +627,9 @@ static void test_crowd_arena_side_stops_agent(void **state)
     ps_plant_destroy(p);
 }
 
-/* Same scene, seed and events: the same trajectories, bit for bit. */
-static void test_crowd_same_seed_identical_trajectories(void **state)
+/* A 4 m x 4 m pen at 3 / m^2, everyone walking at the robot in its middle. */
+static ps_crowd_cfg_t pen_cfg(void)
 {
-    (void)state;
     ps_crowd_cfg_t c = base_cfg();
     c.arena = (ps_crowd_rect_t){-2, -2, 2, 2};
     c.has_arena_walls = true;
@@ -640,16 +639,31 @@ static void test_crowd_same_seed_identical_trajectories(void **state)
     c.groups[0].clear_m = 0.5f;
     c.groups[0].speed_sd_m_s = 0.1f;
     c.robot_a_n = 0.0f;
+    return c;
+}
+
+/* Two plants after 1 s: the same state, bit for bit. */
+static void assert_same_state(ps_plant_t *a, ps_plant_t *b)
+{
+    const mjModel *m = ps_plant_model(a);
+    assert_int_equal(m->nq, ps_plant_model(b)->nq);
+    assert_memory_equal(ps_plant_data(a)->qpos, ps_plant_data(b)->qpos,
+                        (size_t)m->nq * sizeof(mjtNum));
+    assert_memory_equal(ps_plant_data(a)->qvel, ps_plant_data(b)->qvel,
+                        (size_t)m->nv * sizeof(mjtNum));
+}
+
+/* Same scene, seed and events: the same trajectories, bit for bit. */
+static void test_crowd_same_seed_identical_trajectories(void **state)
+{
+    (void)state;
+    const ps_crowd_cfg_t c = pen_cfg();
     ps_plant_t *p[2];
     for (int k = 0; k < 2; k++) {
         p[k] = make_plant(&c, 0, 0, 6);
         run_s(p[k], 1.0);
     }
-    const mjModel *m = ps_plant_model(p[0]);
-    assert_memory_equal(ps_plant_data(p[0])->qpos, ps_plant_data(p[1])->qpos,
-                        (size_t)m->nq * sizeof(mjtNum));
-    assert_memory_equal(ps_plant_data(p[0])->qvel, ps_plant_data(p[1])->qvel,
-                        (size_t)m->nv * sizeof(mjtNum));
+    assert_same_state(p[0], p[1]);
     ps_plant_destroy(p[0]);
     ps_plant_destroy(p[1]);
 }
@@ -781,15 +795,7 @@ static void test_scene_tags_limited_to_the_family(void **state)
 static void test_crowd_tags_leave_physics_unchanged(void **state)
 {
     (void)state;
-    ps_crowd_cfg_t c = base_cfg();
-    c.arena = (ps_crowd_rect_t){-2, -2, 2, 2};
-    c.has_arena_walls = true;
-    c.groups[0].density_m2 = 3.0f;
-    c.groups[0].region = c.arena;
-    c.groups[0].goal = PS_CROWD_GOAL_ROBOT;
-    c.groups[0].speed_m_s = 0.6f;
-    c.groups[0].clear_m = 0.45f;
-    c.robot_a_n = 0.0f;
+    ps_crowd_cfg_t c = pen_cfg();
     ps_plant_t *p[2];
     double wall_s[2];
     for (int k = 0; k < 2; k++) {
@@ -807,12 +813,8 @@ static void test_crowd_tags_leave_physics_unchanged(void **state)
            m0->nsite, wall_s[0], m1->nsite, m1->ntex, wall_s[1],
            ps_crowd_agent_count(ps_plant_crowd(p[0])));
     assert_int_equal(m1->nsite - m0->nsite, 2 * (int)ps_crowd_agent_count(ps_plant_crowd(p[0])));
-    assert_int_equal(m0->nq, m1->nq);
     assert_int_equal(m0->ngeom, m1->ngeom);
-    assert_memory_equal(ps_plant_data(p[0])->qpos, ps_plant_data(p[1])->qpos,
-                        (size_t)m0->nq * sizeof(mjtNum));
-    assert_memory_equal(ps_plant_data(p[0])->qvel, ps_plant_data(p[1])->qvel,
-                        (size_t)m0->nv * sizeof(mjtNum));
+    assert_same_state(p[0], p[1]);
     assert_true(ps_plant_data(p[1])->ncon > 0); /* they do press */
     assert_int_equal(ps_plant_data(p[0])->ncon, ps_plant_data(p[1])->ncon);
     ps_plant_destroy(p[0]);
