@@ -15,6 +15,7 @@
 #include "../rt/ps_clock.h"
 #include "../rt/ps_err.h"
 #include "ps_gl.h"
+#include "ps_scene.h"
 
 #define NEAR_M 0.02f
 #define FAR_M  50.0f
@@ -125,6 +126,14 @@ int ps_camera_sim_create(const ps_camera_sim_cfg_t *cfg, ps_camera_sim_t **out, 
         ps_camera_sim_destroy(c);
         ps_err_format(err, err_len, "sim camera: no memory for the model's copy");
         return -ENOMEM;
+    }
+    if ((uint32_t)c->m->ntex > PS_SCENE_MAX_TEXTURES) { /* would overrun mjrContext */
+        free(tex_tag_id);
+        ps_err_format(err, err_len,
+                      "sim camera: the model has %d textures; MuJoCo 2.2.2's renderer holds %u",
+                      c->m->ntex, PS_SCENE_MAX_TEXTURES);
+        ps_camera_sim_destroy(c);
+        return -EINVAL;
     }
     c->root_body = mj_name2id(c->m, mjOBJ_BODY, cfg->root_body);
     if (c->root_body < 0) {

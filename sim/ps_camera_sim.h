@@ -69,7 +69,8 @@ typedef struct {
 } ps_camera_sim_tag_t;
 
 /** Copy the model, find the root body and the tag textures and fill them.
- *  @return 0 | -EINVAL (a NULL, fx != fy, or a size of 0) | -ENOENT (no root
+ *  @return 0 | -EINVAL (a NULL, fx != fy, a size of 0, or more textures than
+ *  MuJoCo 2.2.2 can draw, PS_SCENE_MAX_TEXTURES) | -ENOENT (no root
  *  body) | -ENOMEM  @rt INIT */
 int ps_camera_sim_create(const ps_camera_sim_cfg_t *cfg, ps_camera_sim_t **out, char *err,
                          size_t err_len);

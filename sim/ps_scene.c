@@ -317,24 +317,45 @@ static void capsule_inertia(double m, double r, double len, double out[2])
 
 /* ---- tags ------------------------------------------------------------------ */
 
-uint32_t ps_scene_tagged_agents(uint32_t n_agents, uint32_t first_id)
+uint32_t ps_scene_choose_tagged(const ps_crowd_agent_spec_t *agents, uint32_t n_agents,
+                                const double robot_xy[2], uint32_t first_id, uint32_t max_people,
+                                int32_t *out_tag_id)
 {
-    const uint32_t n_fit = first_id < PS_SCENE_TAG_IDS ? (PS_SCENE_TAG_IDS - first_id) / 2u : 0u;
-    return n_agents < n_fit ? n_agents : n_fit;
+    /* Selection by rank: n is at most PS_CROWD_MAX_AGENTS, and this runs once. */
+    uint32_t n_tagged = 0;
+    for (uint32_t k = 0; k < n_agents; k++) {
+        out_tag_id[k] = -1;
+        const uint32_t id = first_id + 2u * k;
+        if (id + 1u >= PS_SCENE_TAG_IDS)
+            continue;
+        const double dk = hypot(agents[k].x_m - robot_xy[0], agents[k].y_m - robot_xy[1]);
+        uint32_t n_nearer = 0; /* ties: the lower index is nearer */
+        for (uint32_t j = 0; j < n_agents && n_nearer < max_people; j++) {
+            const double dj = hypot(agents[j].x_m - robot_xy[0], agents[j].y_m - robot_xy[1]);
+            n_nearer += j != k && first_id + 2u * j + 1u < PS_SCENE_TAG_IDS &&
+                        (dj < dk || (dj == dk && j < k));
+        }
+        if (n_nearer < max_people) {
+            out_tag_id[k] = (int32_t)id;
+            n_tagged++;
+        }
+    }
+    return n_tagged;
 }
 
 /* A texture and a material per tag: sim/ps_camera_sim fills every texture
  * named tag36h11_<id> with that tag. */
-static void write_tag_assets(FILE *f, uint32_t n_tagged, uint32_t first_id)
+static void write_tag_assets(FILE *f, const int32_t *tag_id, uint32_t n_agents)
 {
     fprintf(f, "  <asset>\n");
-    for (uint32_t id = first_id; id < first_id + 2u * n_tagged; id++)
-        fprintf(f,
-                "    <texture name=\"tag36h11_%u\" type=\"2d\" builtin=\"flat\" width=\"%d\" "
-                "height=\"%d\" rgb1=\"1 1 1\"/>\n"
-                "    <material name=\"tag36h11_%u\" texture=\"tag36h11_%u\" texuniform=\"false\" "
-                "texrepeat=\"1 1\" emission=\"0.6\" specular=\"0\"/>\n",
-                id, PS_SCENE_TAG_TEX_PX, PS_SCENE_TAG_TEX_PX, id, id);
+    for (uint32_t k = 0; k < n_agents; k++)
+        for (int32_t id = tag_id[k]; id >= 0 && id <= tag_id[k] + 1; id++)
+            fprintf(f,
+                    "    <texture name=\"tag36h11_%d\" type=\"2d\" builtin=\"flat\" "
+                    "width=\"%d\" height=\"%d\" rgb1=\"1 1 1\"/>\n"
+                    "    <material name=\"tag36h11_%d\" texture=\"tag36h11_%d\" "
+                    "texuniform=\"false\" texrepeat=\"1 1\" emission=\"0.6\" specular=\"0\"/>\n",
+                    id, PS_SCENE_TAG_TEX_PX, PS_SCENE_TAG_TEX_PX, id, id);
     fprintf(f, "  </asset>\n");
 }
 
@@ -347,7 +368,7 @@ static void write_tag_assets(FILE *f, uint32_t n_tagged, uint32_t first_id)
  * 0.259 h wide (Winter's body-segment proportions), the plate a little in
  * and below; 2 mm in front of the torso. */
 static void write_tags(FILE *f, const ps_crowd_cfg_t *cfg, const ps_crowd_agent_spec_t *a,
-                       uint32_t i, int tag_id)
+                       uint32_t i, int32_t tag_id)
 {
     const double half = (double)cfg->tag_size_m / 0.8 / 2.0; /* black square: 8 of 10 cells */
     const double cf = cos(a->facing_rad), sf = sin(a->facing_rad);
@@ -374,7 +395,7 @@ static void write_tags(FILE *f, const ps_crowd_cfg_t *cfg, const ps_crowd_agent_
  * (1.7 m) made a pair to sort and test; on its own body a ring pairs only
  * with rings within a diameter. */
 static void write_agent(FILE *f, const ps_crowd_cfg_t *cfg, const ps_crowd_agent_spec_t *a,
-                        uint32_t i, int tag_id)
+                        uint32_t i, int32_t tag_id)
 {
     const double r = a->radius_m;
     const double len = a->height_m - 2.0 * r; /* capsule segment; pivot at height r */
@@ -508,16 +529,25 @@ static void write_walls(FILE *f, const ps_crowd_cfg_t *cfg)
 
 int ps_scene_write_mjcf(const ps_crowd_cfg_t *cfg, const ps_crowd_agent_spec_t *agents,
                         uint32_t n_agents, const char *robot_model_path, int robot_nconmax,
-                        int robot_njmax, uint32_t first_tag_id, char **out_xml, char *err,
+                        int robot_njmax, const int32_t *tag_id, char **out_xml, char *err,
                         size_t err_len)
 {
     if (cfg == NULL || (agents == NULL && n_agents > 0) || robot_model_path == NULL ||
-        out_xml == NULL || first_tag_id % 2u != 0u) {
-        ps_err_format(err, err_len, "scene: NULL argument or an odd first tag id");
+        out_xml == NULL) {
+        ps_err_format(err, err_len, "scene: NULL argument");
         return -EINVAL;
     }
-    const uint32_t n_tagged =
-        cfg->tags == PS_CROWD_TAGS_ON ? ps_scene_tagged_agents(n_agents, first_tag_id) : 0u;
+    uint32_t n_tagged = 0;
+    for (uint32_t k = 0; tag_id != NULL && k < n_agents; k++) {
+        if (tag_id[k] < 0)
+            continue;
+        if (tag_id[k] % 2 != 0 || (uint32_t)tag_id[k] + 1u >= PS_SCENE_TAG_IDS) {
+            ps_err_format(err, err_len, "scene: agent %u: tag %d is no pair's first tag36h11 id", k,
+                          tag_id[k]);
+            return -EINVAL;
+        }
+        n_tagged++;
+    }
     char *buf = NULL;
     size_t size = 0;
     FILE *f = open_memstream(&buf, &size);
@@ -543,11 +573,11 @@ int ps_scene_write_mjcf(const ps_crowd_cfg_t *cfg, const ps_crowd_agent_spec_t *
             "  </visual>\n",
             robot_model_path, nconmax, njmax, timestep);
     if (n_tagged > 0)
-        write_tag_assets(f, n_tagged, first_tag_id);
+        write_tag_assets(f, tag_id, n_agents);
     fprintf(f, "  <worldbody>\n");
     write_walls(f, cfg);
     for (uint32_t i = 0; i < n_agents; i++)
-        write_agent(f, cfg, &agents[i], i, i < n_tagged ? (int)(first_tag_id + 2u * i) : -1);
+        write_agent(f, cfg, &agents[i], i, tag_id != NULL ? tag_id[i] : -1);
     fprintf(f, "  </worldbody>\n</mujoco>\n");
     const bool is_bad = ferror(f) != 0;
     if (fclose(f) != 0 || is_bad || buf == NULL) {

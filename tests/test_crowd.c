@@ -756,38 +756,78 @@ static unsigned count_of(const char *text, const char *what)
     return n;
 }
 
-/* tag36h11 has 587 ids: 293 people wear a pair, the rest of the largest
- * crowd none; counted from a later first id, fewer. */
-static void test_scene_tags_limited_to_the_family(void **state)
+/* Who wears tags: the people nearest the robot, as many as MuJoCo 2.2.2's
+ * renderer has texture slots for (100: 50 people on a model without
+ * textures of its own), and only those whose pair fits tag36h11's 587 ids;
+ * the scene writes their plates and textures and refuses ids that are no
+ * pair's first. */
+static void test_scene_tags_on_the_nearest_within_limits(void **state)
 {
     (void)state;
     apriltag_family_t *fam = tag36h11_create();
     assert_int_equal(fam->ncodes, PS_SCENE_TAG_IDS);
     tag36h11_destroy(fam);
-    assert_int_equal(ps_scene_tagged_agents(300, 0), 293);
-    assert_int_equal(ps_scene_tagged_agents(24, 0), 24);
-    assert_int_equal(ps_scene_tagged_agents(300, 6), 290);
-    assert_int_equal(ps_scene_tagged_agents(10, 600), 0);
-    ps_crowd_cfg_t c = base_cfg();
-    c.tags = PS_CROWD_TAGS_ON;
     static ps_crowd_agent_spec_t a[PS_CROWD_MAX_AGENTS];
-    for (uint32_t i = 0; i < PS_CROWD_MAX_AGENTS; i++)
-        a[i] = (ps_crowd_agent_spec_t){
-            .x_m = i % 20, .y_m = i / 20, .height_m = 1.7, .mass_kg = 70, .radius_m = 0.17};
+    static int32_t id[PS_CROWD_MAX_AGENTS];
+    for (uint32_t i = 0; i < PS_CROWD_MAX_AGENTS; i++) /* a 20 x 15 grid, 0.5 m apart */
+        a[i] = (ps_crowd_agent_spec_t){.x_m = 0.5 * (i % 20) - 4.75,
+                                       .y_m = 0.5 * (i / 20) - 3.5,
+                                       .height_m = 1.7,
+                                       .mass_kg = 70,
+                                       .radius_m = 0.17};
+    const double robot_xy[2] = {0.3, 0.1};
+    assert_int_equal(ps_scene_choose_tagged(a, PS_CROWD_MAX_AGENTS, robot_xy, 0, 50, id), 50);
+    double far_in = 0.0, near_out = 1e9;
+    for (uint32_t k = 0; k < PS_CROWD_MAX_AGENTS; k++) {
+        const double d = hypot(a[k].x_m - robot_xy[0], a[k].y_m - robot_xy[1]);
+        if (id[k] >= 0) {
+            assert_int_equal(id[k], 2 * (int)k);
+            far_in = d > far_in ? d : far_in;
+        } else {
+            near_out = d < near_out ? d : near_out;
+        }
+    }
+    assert_true(far_in <= near_out); /* the 50 nearest */
+    /* ids past tag36h11: agents from 293 on (and 290 on from id 6) wear none */
+    assert_int_equal(ps_scene_choose_tagged(a, PS_CROWD_MAX_AGENTS, robot_xy, 0, 300, id), 293);
+    assert_int_equal(id[292], 584);
+    assert_int_equal(id[293], -1);
+    assert_int_equal(ps_scene_choose_tagged(a, PS_CROWD_MAX_AGENTS, robot_xy, 6, 300, id), 290);
+    assert_int_equal(ps_scene_choose_tagged(a, 24, robot_xy, 0, 0, id), 0);
+    /* the scene: plates and textures for the 50 */
+    ps_crowd_cfg_t c = base_cfg();
+    (void)ps_scene_choose_tagged(a, PS_CROWD_MAX_AGENTS, robot_xy, 0, 50, id);
     char *xml = NULL;
     char err[PS_ERR_MSG_LEN];
-    assert_int_equal(ps_scene_write_mjcf(&c, a, PS_CROWD_MAX_AGENTS, "ps1.xml", 150, 600, 0, &xml,
+    assert_int_equal(ps_scene_write_mjcf(&c, a, PS_CROWD_MAX_AGENTS, "ps1.xml", 150, 600, id, &xml,
                                          err, sizeof(err)),
                      0);
-    assert_int_equal(count_of(xml, "_tag_left\""), 293);
-    assert_int_equal(count_of(xml, "_tag_right\""), 293);
-    assert_int_equal(count_of(xml, "<texture name=\"tag36h11_"), 586);
-    assert_non_null(strstr(xml, "\"tag36h11_585\""));
-    assert_null(strstr(xml, "\"tag36h11_586\""));
-    assert_null(strstr(xml, "agent293_tag_left"));
+    assert_int_equal(count_of(xml, "_tag_left\""), 50);
+    assert_int_equal(count_of(xml, "_tag_right\""), 50);
+    assert_int_equal(count_of(xml, "<texture name=\"tag36h11_"), 100);
     free(xml);
-    assert_int_equal(ps_scene_write_mjcf(&c, a, 4, "ps1.xml", 150, 600, 3, &xml, err, sizeof(err)),
+    id[3] = 7;
+    assert_int_equal(ps_scene_write_mjcf(&c, a, 4, "ps1.xml", 150, 600, id, &xml, err, sizeof(err)),
                      -EINVAL); /* a pair starts even */
+    assert_non_null(strstr(err, "agent 3: tag 7"));
+}
+
+/* A crowd bigger than the renderer's texture slots: tags on the 50 people
+ * nearest the robot; the camera can draw the scene. */
+static void test_crowd_large_crowd_tagged_nearest_fifty(void **state)
+{
+    (void)state;
+    ps_crowd_cfg_t c = pen_cfg();
+    c.arena = (ps_crowd_rect_t){-3, -3, 3, 3};
+    c.groups[0].region = c.arena;
+    c.tags = PS_CROWD_TAGS_ON;
+    ps_plant_t *p = make_plant(&c, 0, 0, 6);
+    const mjModel *m = ps_plant_model(p);
+    const uint32_t n = ps_crowd_agent_count(ps_plant_crowd(p));
+    assert_true(n > 50);
+    assert_int_equal(m->ntex, 100);
+    assert_int_equal(m->nsite, 1 + 100); /* the robot's IMU site and the plates */
+    ps_plant_destroy(p);
 }
 
 /* The plates are sites: they draw, never collide. Same scene, tags on and
@@ -871,7 +911,8 @@ int main(void)
         cmocka_unit_test(test_scene_place_seeded_lattice_density_and_clearance),
         cmocka_unit_test(test_scene_loads_around_unchanged_robot_with_sizes),
         cmocka_unit_test(test_scene_tags_on_shoulders_ids_and_sides),
-        cmocka_unit_test(test_scene_tags_limited_to_the_family),
+        cmocka_unit_test(test_scene_tags_on_the_nearest_within_limits),
+        cmocka_unit_test(test_crowd_large_crowd_tagged_nearest_fifty),
         cmocka_unit_test(test_crowd_tags_leave_physics_unchanged),
         cmocka_unit_test(test_crowd_free_speed_within_10_percent),
         cmocka_unit_test(test_crowd_two_body_compression_as_configured),
