@@ -20,4 +20,14 @@ if [ -d "$DIR/node_modules" ] && cmp -s tests/mcap/package.json "$DIR/package.js
 fi
 cp tests/mcap/package.json "$DIR/package.json"
 echo "npm-deps: installing the MCAP check's packages into $DIR"
-(cd "$DIR" && npm install --no-audit --no-fund --no-save --loglevel=error)
+# A registry that cannot be reached (no route, a TLS proxy whose CA this
+# machine does not trust) fails within about a minute instead of npm's
+# default retries of several minutes each; the reason is npm's own message.
+if ! (cd "$DIR" && npm install --no-audit --no-fund --no-save --loglevel=error \
+        --fetch-timeout=30000 --fetch-retries=1 --fetch-retry-maxtimeout=10000); then
+    rm -rf "$DIR/node_modules" "$DIR/package.json"
+    echo "npm-deps: npm install failed (above): the MCAP reader check cannot run." >&2
+    echo "npm-deps: behind a TLS-intercepting proxy, add its CA to the system's store" >&2
+    echo "npm-deps: (update-ca-certificates) or point npm's cafile at it, then rerun." >&2
+    exit 1
+fi
