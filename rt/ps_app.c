@@ -189,8 +189,23 @@ ps_sim_hooks_t ps_app_sim_hooks(ps_loop_t *loop)
     return h;
 }
 
+/* The crowd wears tags when the scenario says so, or (auto) when the board's
+ * camera is the simulated one: that camera looks at the scene and finds
+ * people by the tags on their shoulders. Their size is the camera's. */
+static void resolve_crowd_tags(ps_app_t *app)
+{
+    ps_crowd_cfg_t *crowd = &app->scenario.crowd;
+    const bool has_sim_camera =
+        app->board.has_perception && app->board.perception.camera.source == PS_CAMERA_SRC_SIM;
+    if (crowd->tags == PS_CROWD_TAGS_AUTO)
+        crowd->tags = has_sim_camera ? PS_CROWD_TAGS_ON : PS_CROWD_TAGS_OFF;
+    if (app->board.has_perception)
+        crowd->tag_size_m = app->board.perception.tags.tag_size_m;
+}
+
 static int wire_sim(ps_app_t *app, ps_loop_cfg_t *lc, char *err, size_t len)
 {
+    resolve_crowd_tags(app);
     ps_app_sim_board(&app->board, &app->sim_board);
     ps_app_sim_robot(&app->robot, &app->robot_sim, &app->sim_robot);
     ps_sim_cfg_t sc = {

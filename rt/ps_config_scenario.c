@@ -157,6 +157,12 @@ static const cyaml_schema_field_t CROWD_EVENT_FIELDS[] = {
                                &FLOAT_SCHEMA, 4),
     CYAML_FIELD_END,
 };
+static const cyaml_strval_t TAGS[] = {
+    {"auto", PS_CROWD_TAGS_AUTO},
+    {"true", PS_CROWD_TAGS_ON},
+    {"false", PS_CROWD_TAGS_OFF},
+};
+static_assert(sizeof(TAGS) / sizeof(TAGS[0]) == PS_CROWD_TAGS_COUNT, "one name per tags mode");
 static const cyaml_schema_value_t CROWD_EVENT_SCHEMA = {
     CYAML_VALUE_MAPPING(CYAML_FLAG_DEFAULT, ps_crowd_event_cfg_t, CROWD_EVENT_FIELDS),
 };
@@ -174,6 +180,8 @@ static const cyaml_schema_field_t CROWD_FIELDS[] = {
     F32("robot_a_n", ps_crowd_cfg_t, robot_a_n),
     F32("crowd_dt_s", ps_crowd_cfg_t, crowd_dt_s),
     F32("timestep_s", ps_crowd_cfg_t, timestep_s),
+    CYAML_FIELD_ENUM("tags", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, ps_crowd_cfg_t, tags, TAGS,
+                     CYAML_ARRAY_LEN(TAGS)),
     CYAML_FIELD_MAPPING("social", CYAML_FLAG_OPTIONAL, ps_crowd_cfg_t, social, SOCIAL_FIELDS),
     CYAML_FIELD_MAPPING("body", CYAML_FLAG_OPTIONAL, ps_crowd_cfg_t, body, BODY_FIELDS),
     CYAML_FIELD_SEQUENCE_COUNT("groups", CYAML_FLAG_OPTIONAL, ps_crowd_cfg_t, groups, n_groups,
@@ -569,6 +577,7 @@ static void copy_crowd(const ps_cfg_ctx_t *c, const ps_crowd_cfg_t *raw, ps_crow
     const ps_crowd_cfg_t defaults = *out;
     *out = *raw;
     out->is_enabled = true;
+    out->tag_size_m = defaults.tag_size_m; /* not in the file: the board's camera sets it */
     char field[PS_CFG_FIELD_PATH_LEN];
     for (size_t k = 0; k < sizeof(CROWD_OPTS) / sizeof(CROWD_OPTS[0]); k++) {
         (void)snprintf(field, sizeof(field), "crowd.%s", CROWD_OPTS[k].key);

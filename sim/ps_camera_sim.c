@@ -7,8 +7,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include <EGL/egl.h>
-#include <EGL/eglext.h>
 #include <apriltag/apriltag.h>
 #include <apriltag/common/image_u8.h>
 #include <apriltag/tag36h11.h>
@@ -16,14 +14,18 @@
 
 #include "../rt/ps_clock.h"
 #include "../rt/ps_err.h"
+#include "ps_gl.h"
+#include "ps_scene.h"
 
 #define NEAR_M 0.02f
 #define FAR_M  50.0f
 
+/* A tag: a geom or a site wearing a tag's material. */
 typedef struct {
-    int geom;
+    bool is_site;
+    int obj; /* geom or site index */
     int id;
-} tag_geom_t;
+} tag_obj_t;
 
 struct ps_camera_sim {
     ps_camera_sim_cfg_t cfg;
@@ -31,12 +33,10 @@ struct ps_camera_sim {
     mjData *d;
     int root_body;
     double r_root_cam[3][3]; /* camera body frame in the root body's */
-    tag_geom_t tags[PS_CAMERA_SIM_MAX_TAGS];
+    tag_obj_t tags[PS_CAMERA_SIM_MAX_TAGS];
     uint32_t n_tags;
     /* rendering, owned by the port's thread between start and stop */
-    EGLDisplay dpy;
-    EGLContext ctx;
-    bool is_gl;
+    ps_gl_t gl;
     mjvScene scn;
     mjvCamera cam;
     mjvOption opt;
@@ -49,6 +49,9 @@ struct ps_camera_sim {
     /* truth of the last frame */
     pthread_mutex_t mu;
     ps_camera_sim_tag_t truth[PS_CAMERA_SIM_MAX_TAGS];
+    ps_camera_sim_tag_t scratch[PS_CAMERA_SIM_MAX_TAGS]; /* the port's thread */
+    uint32_t occluders[PS_CAMERA_SIM_MAX_TAGS];          /* site tags ahead, this frame */
+    uint32_t n_occluders;
     uint32_t n_truth;
     uint64_t truth_seq;
     bool has_truth;
@@ -124,6 +127,14 @@ int ps_camera_sim_create(const ps_camera_sim_cfg_t *cfg, ps_camera_sim_t **out, 
         ps_err_format(err, err_len, "sim camera: no memory for the model's copy");
         return -ENOMEM;
     }
+    if ((uint32_t)c->m->ntex > PS_SCENE_MAX_TEXTURES) { /* would overrun mjrContext */
+        free(tex_tag_id);
+        ps_err_format(err, err_len,
+                      "sim camera: the model has %d textures; MuJoCo 2.2.2's renderer holds %u",
+                      c->m->ntex, PS_SCENE_MAX_TEXTURES);
+        ps_camera_sim_destroy(c);
+        return -EINVAL;
+    }
     c->root_body = mj_name2id(c->m, mjOBJ_BODY, cfg->root_body);
     if (c->root_body < 0) {
         free(tex_tag_id);
@@ -133,11 +144,15 @@ int ps_camera_sim_create(const ps_camera_sim_cfg_t *cfg, ps_camera_sim_t **out, 
     }
     rpy_to_matrix(cfg->cam_rpy_rad, c->r_root_cam);
     (void)fill_tag_textures(c->m, tex_tag_id);
-    for (int g = 0; g < c->m->ngeom && c->n_tags < PS_CAMERA_SIM_MAX_TAGS; g++) {
-        const int mat = c->m->geom_matid[g];
+    /* geoms, then sites, wearing a tag's material */
+    for (int k = 0; k < c->m->ngeom + c->m->nsite && c->n_tags < PS_CAMERA_SIM_MAX_TAGS; k++) {
+        const bool is_site = k >= c->m->ngeom;
+        const int obj = is_site ? k - c->m->ngeom : k;
+        const int mat = is_site ? c->m->site_matid[obj] : c->m->geom_matid[obj];
         const int tex = mat >= 0 ? c->m->mat_texid[mat] : -1;
         if (tex >= 0 && tex_tag_id[tex] >= 0)
-            c->tags[c->n_tags++] = (tag_geom_t){.geom = g, .id = tex_tag_id[tex]};
+            c->tags[c->n_tags++] =
+                (tag_obj_t){.is_site = is_site, .obj = obj, .id = tex_tag_id[tex]};
     }
     free(tex_tag_id);
     c->m->vis.global.offwidth = (int)cfg->camera.width;
@@ -160,70 +175,22 @@ static void gl_stop(ps_camera_sim_t *c)
     if (c->has_scene)
         mjv_freeScene(&c->scn);
     c->has_con = c->has_scene = false;
-    if (c->is_gl) {
-        (void)eglMakeCurrent(c->dpy, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
-        (void)eglDestroyContext(c->dpy, c->ctx);
-        /* (no eglTerminate: the display is shared and stays for a later start) */
-    }
-    c->is_gl = false;
+    ps_gl_close(&c->gl);
     free(c->rgb);
     free(c->frame);
     c->rgb = c->frame = NULL;
-}
-
-static int egl_start(ps_camera_sim_t *c, char *err, size_t err_len)
-{
-    /* Mesa's surfaceless platform renders with no display and no GPU; without
-     * the extension, the default display (EGL_PLATFORM=surfaceless selects it). */
-    PFNEGLGETPLATFORMDISPLAYEXTPROC get_platform_display =
-        (PFNEGLGETPLATFORMDISPLAYEXTPROC)eglGetProcAddress("eglGetPlatformDisplayEXT");
-    c->dpy = get_platform_display != NULL
-                 ? get_platform_display(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, NULL)
-                 : eglGetDisplay(EGL_DEFAULT_DISPLAY);
-    EGLint major = 0, minor = 0;
-    if (c->dpy == EGL_NO_DISPLAY || eglInitialize(c->dpy, &major, &minor) != EGL_TRUE) {
-        ps_err_format(err, err_len,
-                      "sim camera: no EGL display (error 0x%x; Mesa's libegl-mesa0 and "
-                      "libgl1-mesa-dri render without one)",
-                      (unsigned)eglGetError());
-        return -EIO;
-    }
-    /* A pbuffer-capable config: the surfaceless platform has no windows, and
-     * MuJoCo renders into its own framebuffer object anyway. */
-    const EGLint attrs[] = {EGL_RED_SIZE,     8,  EGL_GREEN_SIZE,      8,
-                            EGL_BLUE_SIZE,    8,  EGL_DEPTH_SIZE,      24,
-                            EGL_SURFACE_TYPE, EGL_PBUFFER_BIT, EGL_RENDERABLE_TYPE,
-                            EGL_OPENGL_BIT,   EGL_NONE};
-    EGLConfig conf;
-    EGLint n_conf = 0;
-    if (eglChooseConfig(c->dpy, attrs, &conf, 1, &n_conf) != EGL_TRUE || n_conf < 1 ||
-        eglBindAPI(EGL_OPENGL_API) != EGL_TRUE) {
-        ps_err_format(err, err_len, "sim camera: no EGL OpenGL config (error 0x%x)",
-                      (unsigned)eglGetError());
-        (void)eglTerminate(c->dpy);
-        return -EIO;
-    }
-    c->ctx = eglCreateContext(c->dpy, conf, EGL_NO_CONTEXT, NULL);
-    if (c->ctx == EGL_NO_CONTEXT ||
-        eglMakeCurrent(c->dpy, EGL_NO_SURFACE, EGL_NO_SURFACE, c->ctx) != EGL_TRUE) {
-        ps_err_format(err, err_len, "sim camera: no EGL context (error 0x%x)",
-                      (unsigned)eglGetError());
-        if (c->ctx != EGL_NO_CONTEXT)
-            (void)eglDestroyContext(c->dpy, c->ctx);
-        (void)eglTerminate(c->dpy);
-        return -EIO;
-    }
-    c->is_gl = true;
-    return 0;
 }
 
 static int sim_start(void *ctx, char *err, size_t err_len)
 {
     ps_camera_sim_t *c = ctx;
     gl_stop(c);
-    int rc = egl_start(c, err, err_len);
-    if (rc < 0)
+    char why[PS_ERR_MSG_LEN];
+    const int rc = ps_gl_open_offscreen(&c->gl, why, sizeof(why));
+    if (rc < 0) {
+        ps_err_format(err, err_len, "sim camera: %s", why);
         return rc;
+    }
     mjv_defaultScene(&c->scn);
     mjv_defaultCamera(&c->cam);
     mjv_defaultOption(&c->opt);
@@ -289,79 +256,123 @@ static void to_optical(const double cam_pos[3], const double r_world_cam[3][3], 
     out[2] = body[0];
 }
 
-/* Whether the ray from the camera to p meets geom g before anything else. */
-static bool is_seen(const ps_camera_sim_t *c, const double cam_pos[3], const double p[3], int g)
+/* Whether the ray from the camera to p meets tag `self` before anything
+ * else: MuJoCo's rays see geoms only (a geom tag must be the first geom
+ * hit), so the tag plates that are sites (c->occluders, those in front of
+ * the camera) are tried one by one. */
+static bool is_seen(const ps_camera_sim_t *c, const double cam_pos[3], const double p[3],
+                    uint32_t self)
 {
     const mjtNum vec[3] = {p[0] - cam_pos[0], p[1] - cam_pos[1], p[2] - cam_pos[2]};
+    const tag_obj_t *t = &c->tags[self];
     int hit = -1;
     const mjtNum x = mj_ray(c->m, c->d, cam_pos, vec, NULL, 1, -1, &hit);
-    return hit == g || x < 0 || x > 1.0 - 1e-6;
+    if (!((!t->is_site && hit == t->obj) || x < 0 || x > 1.0 - 1e-6))
+        return false;
+    for (uint32_t k = 0; k < c->n_occluders; k++) {
+        const uint32_t j = c->occluders[k];
+        const int s = c->tags[j].obj;
+        if (j == self)
+            continue;
+        const mjtNum xs = mju_rayGeom(c->d->site_xpos + 3 * s, c->d->site_xmat + 9 * s,
+                                      c->m->site_size + 3 * s, cam_pos, vec, mjGEOM_BOX);
+        if (xs >= 0 && xs < 1.0 - 1e-6)
+            return false;
+    }
+    return true;
 }
 
-/* Every tag: its face's centre in the robot and optical frames, and whether
- * the camera can see it whole. */
-static void update_truth(ps_camera_sim_t *c, const double cam_pos[3],
-                         const double r_world_cam[3][3], uint64_t seq)
+/* One tag: its face's centre in the robot and optical frames, and whether
+ * the camera can see it whole (the rays only for a tag facing the camera
+ * inside the picture: a crowd has hundreds of tags, most out of sight). */
+static void tag_truth(const ps_camera_sim_t *c, uint32_t idx, const double cam_pos[3],
+                      const double r_world_cam[3][3], ps_camera_sim_tag_t *t)
 {
+    const tag_obj_t *tag = &c->tags[idx];
     const mjtNum *p_root = c->d->xpos + 3 * c->root_body;
     const mjtNum *r_root = c->d->xmat + 9 * c->root_body;
-    ps_camera_sim_tag_t truth[PS_CAMERA_SIM_MAX_TAGS];
-    for (uint32_t i = 0; i < c->n_tags; i++) {
-        const int g = c->tags[i].geom;
-        const mjtNum *gp = c->d->geom_xpos + 3 * g, *gr = c->d->geom_xmat + 9 * g;
-        const mjtNum *size = c->m->geom_size + 3 * g;
-        double face[3], n[3], rel[3];
-        for (int k = 0; k < 3; k++) {
-            n[k] = gr[3 * k + 2]; /* the geom's z axis */
-            face[k] = gp[k] + n[k] * size[2];
-            rel[k] = cam_pos[k] - face[k];
+    const int o = tag->obj;
+    const mjtNum *gp = tag->is_site ? c->d->site_xpos + 3 * o : c->d->geom_xpos + 3 * o;
+    const mjtNum *gr = tag->is_site ? c->d->site_xmat + 9 * o : c->d->geom_xmat + 9 * o;
+    const mjtNum *size = tag->is_site ? c->m->site_size + 3 * o : c->m->geom_size + 3 * o;
+    double face[3], n[3], rel[3];
+    for (int k = 0; k < 3; k++) {
+        n[k] = gr[3 * k + 2]; /* the plate's z axis */
+        face[k] = gp[k] + n[k] * size[2];
+        rel[k] = cam_pos[k] - face[k];
+    }
+    memset(t, 0, sizeof(*t));
+    t->id = tag->id;
+    const double dist = sqrt(rel[0] * rel[0] + rel[1] * rel[1] + rel[2] * rel[2]);
+    const double cos_slant = (n[0] * rel[0] + n[1] * rel[1] + n[2] * rel[2]) / dist;
+    t->is_facing = cos_slant > 0;
+    t->slant_rad = acos(cos_slant < -1 ? -1 : cos_slant > 1 ? 1 : cos_slant);
+    for (int k = 0; k < 3; k++) { /* robot frame: R_root^T (face - p_root) */
+        t->pos_robot_m[k] = 0;
+        for (int j = 0; j < 3; j++)
+            t->pos_robot_m[k] += r_root[3 * j + k] * (face[j] - p_root[j]);
+    }
+    to_optical(cam_pos, r_world_cam, face, t->pos_cam_m);
+    /* The plate's four corners and four edge midpoints (q 0-3, 4-7), and
+     * the black square's corners (8 of the face's 10 cells; q 8-11). The
+     * detector needs the white border around the black square, so the
+     * plate as a whole must be inside the picture and in sight. */
+    static const double U[12][2] = {{-1, -1}, {1, -1}, {1, 1},     {-1, 1},   {0, -1},  {1, 0},
+                                    {0, 1},   {-1, 0}, {-.8, -.8}, {.8, -.8}, {.8, .8}, {-.8, .8}};
+    double point[12][3], uv[12][2];
+    t->is_in_view = true;
+    for (int q = 0; q < 12; q++) {
+        const double a = U[q][0] * size[0], b = U[q][1] * size[1];
+        double opt[3];
+        for (int k = 0; k < 3; k++)
+            point[q][k] = face[k] + gr[3 * k] * a + gr[3 * k + 1] * b;
+        to_optical(cam_pos, r_world_cam, point[q], opt);
+        if (opt[2] <= 0) {
+            t->is_in_view = false;
+            continue;
         }
-        ps_camera_sim_tag_t *t = &truth[i];
-        memset(t, 0, sizeof(*t));
-        t->id = c->tags[i].id;
-        const double dist = sqrt(rel[0] * rel[0] + rel[1] * rel[1] + rel[2] * rel[2]);
-        const double cos_slant = (n[0] * rel[0] + n[1] * rel[1] + n[2] * rel[2]) / dist;
-        t->is_facing = cos_slant > 0;
-        t->slant_rad = acos(cos_slant < -1 ? -1 : cos_slant > 1 ? 1 : cos_slant);
-        for (int k = 0; k < 3; k++) { /* robot frame: R_root^T (face - p_root) */
-            t->pos_robot_m[k] = 0;
-            for (int j = 0; j < 3; j++)
-                t->pos_robot_m[k] += r_root[3 * j + k] * (face[j] - p_root[j]);
-        }
-        to_optical(cam_pos, r_world_cam, face, t->pos_cam_m);
-        /* the black square's corners: 8 of the face's 10 cells */
-        t->is_in_view = true;
-        t->is_unoccluded = is_seen(c, cam_pos, face, g);
-        double uv[4][2];
-        for (int q = 0; q < 4; q++) {
-            const double a = (q == 0 || q == 3 ? -0.8 : 0.8) * size[0];
-            const double b = (q < 2 ? -0.8 : 0.8) * size[1];
-            double corner[3], opt[3];
-            for (int k = 0; k < 3; k++)
-                corner[k] = face[k] + gr[3 * k] * a + gr[3 * k + 1] * b;
-            to_optical(cam_pos, r_world_cam, corner, opt);
-            if (opt[2] <= 0) {
-                t->is_in_view = false;
-                continue;
-            }
-            uv[q][0] = c->cfg.k.fx_px * opt[0] / opt[2] + c->cfg.k.cx_px;
-            uv[q][1] = c->cfg.k.fy_px * opt[1] / opt[2] + c->cfg.k.cy_px;
+        uv[q][0] = c->cfg.k.fx_px * opt[0] / opt[2] + c->cfg.k.cx_px;
+        uv[q][1] = c->cfg.k.fy_px * opt[1] / opt[2] + c->cfg.k.cy_px;
+        if (q < 4)
             t->is_in_view &= uv[q][0] >= 2 && uv[q][1] >= 2 &&
                              uv[q][0] <= c->cfg.camera.width - 2.0 &&
                              uv[q][1] <= c->cfg.camera.height - 2.0;
-            /* a point a hair inside the corner: on the face, not its edge */
-            for (int k = 0; k < 3; k++)
-                corner[k] -= (gr[3 * k] * a + gr[3 * k + 1] * b) * 0.02;
-            t->is_unoccluded &= is_seen(c, cam_pos, corner, g);
-        }
-        for (int q = 0; q < 4 && t->is_in_view; q++) {
-            const double du = uv[(q + 1) % 4][0] - uv[q][0], dv = uv[(q + 1) % 4][1] - uv[q][1];
-            const double edge = sqrt(du * du + dv * dv);
-            t->size_px = edge > t->size_px ? edge : t->size_px;
-        }
+        /* a point a hair inside the plate: on its face, not its edge */
+        for (int k = 0; k < 3; k++)
+            point[q][k] -= (gr[3 * k] * a + gr[3 * k + 1] * b) * 0.02;
     }
+    if (!t->is_in_view)
+        return;
+    for (int q = 8; q < 12; q++) {
+        const int r = q == 11 ? 8 : q + 1;
+        const double du = uv[r][0] - uv[q][0], dv = uv[r][1] - uv[q][1];
+        const double edge = sqrt(du * du + dv * dv);
+        t->size_px = edge > t->size_px ? edge : t->size_px;
+    }
+    if (!t->is_facing)
+        return;
+    t->is_unoccluded = is_seen(c, cam_pos, face, idx);
+    for (int q = 0; q < 8 && t->is_unoccluded; q++)
+        t->is_unoccluded = is_seen(c, cam_pos, point[q], idx);
+}
+
+/* Every tag of the scene at this frame. */
+static void update_truth(ps_camera_sim_t *c, const double cam_pos[3],
+                         const double r_world_cam[3][3], uint64_t seq)
+{
+    c->n_occluders = 0;
+    for (uint32_t i = 0; i < c->n_tags; i++) {
+        double opt[3];
+        if (!c->tags[i].is_site)
+            continue;
+        to_optical(cam_pos, r_world_cam, c->d->site_xpos + 3 * c->tags[i].obj, opt);
+        if (opt[2] > 0)
+            c->occluders[c->n_occluders++] = i;
+    }
+    for (uint32_t i = 0; i < c->n_tags; i++)
+        tag_truth(c, i, cam_pos, r_world_cam, &c->scratch[i]);
     pthread_mutex_lock(&c->mu);
-    memcpy(c->truth, truth, sizeof(truth[0]) * c->n_tags);
+    memcpy(c->truth, c->scratch, sizeof(c->truth[0]) * c->n_tags);
     c->n_truth = c->n_tags;
     c->truth_seq = seq;
     c->has_truth = true;

@@ -9,10 +9,12 @@
  * AprilTags in the scene: every texture named "tag36h11_<id>" (declare it
  * `type="2d" builtin="flat"` with any size, 80 x 80 or more) is filled with
  * that tag36h11 tag (libapriltag's apriltag_to_image, white border
- * included), so a box geom wearing its material shows the tag on its +z
- * face, readable from outside. The tag's black square is 8/10 of the face.
- * The model is the sim's own (ps_sim_copy_model); a test scene adds tagged
+ * included), so a box geom or box site wearing its material shows the tag
+ * on its +z face, readable from outside. The tag's black square is 8/10 of
+ * the face. The model is the sim's own (ps_sim_copy_model): the crowd's
+ * people wear tags as sites (sim/ps_scene.h), a test scene adds tagged
  * bodies through the robot file's model (tests/data/models/ps1-tags.xml).
+ * The OpenGL context is sim/ps_gl's offscreen one.
  *
  * Each frame renders the newest scene the sim published (ps_sim_read_scene),
  * paced at cfg.fps on CLOCK_MONOTONIC; t_ns is the scene's simulated time,
@@ -35,8 +37,8 @@
 #include "../drivers/ps_camera.h"
 #include "ps_sim.h"
 
-/** Tags the truth keeps per frame. */
-#define PS_CAMERA_SIM_MAX_TAGS 64u
+/** Tags the truth keeps per frame: every id of tag36h11 (587) once. */
+#define PS_CAMERA_SIM_MAX_TAGS 600u
 
 typedef struct ps_camera_sim ps_camera_sim_t;
 
@@ -55,16 +57,20 @@ typedef struct {
     double pos_robot_m[3]; /**< centre of its face, robot (root body) frame */
     double pos_cam_m[3];   /**< the same in the optical frame (x right, y down, z ahead) */
     bool is_facing;        /**< the face looks at the camera (its normal toward it) */
-    bool is_in_view;       /**< the black square's corners project inside the image
-                                (2 px in), in front of the camera */
-    bool is_unoccluded;    /**< rays from the camera to its centre and to the black
-                                square's corners meet this tag first (mj_ray) */
-    double size_px;        /**< longest projected edge of the black square */
+    bool is_in_view;       /**< the plate's corners (the whole face: the detector needs
+                                the white border around the black square) project
+                                inside the image (2 px in), in front of the camera */
+    bool is_unoccluded;    /**< rays from the camera to the face's centre, corners and
+                                edge midpoints meet this tag first (mj_ray, and the
+                                site plates one by one); only worked out for a tag
+                                facing the camera in view, false otherwise */
+    double size_px;        /**< longest projected edge of the black square (in view) */
     double slant_rad;      /**< angle between the face's normal and the line of sight */
 } ps_camera_sim_tag_t;
 
 /** Copy the model, find the root body and the tag textures and fill them.
- *  @return 0 | -EINVAL (a NULL, fx != fy, or a size of 0) | -ENOENT (no root
+ *  @return 0 | -EINVAL (a NULL, fx != fy, a size of 0, or more textures than
+ *  MuJoCo 2.2.2 can draw, PS_SCENE_MAX_TEXTURES) | -ENOENT (no root
  *  body) | -ENOMEM  @rt INIT */
 int ps_camera_sim_create(const ps_camera_sim_cfg_t *cfg, ps_camera_sim_t **out, char *err,
                          size_t err_len);

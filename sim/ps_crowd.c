@@ -109,6 +109,8 @@ void ps_crowd_default_cfg(ps_crowd_cfg_t *out)
     out->crowd_dt_s = 0.002f;
     out->timestep_s = 0.001f; /* docs/crowd.md, "Performance": the robot stands at it */
     out->gate_capsules = true; /* docs/crowd.md, "Performance" */
+    out->tags = PS_CROWD_TAGS_AUTO;
+    out->tag_size_m = 0.12f; /* the boards' tag_size_m */
 }
 
 /* ---- create ---------------------------------------------------------------- */

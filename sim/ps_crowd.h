@@ -113,6 +113,16 @@ typedef enum {
     PS_CROWD_PROFILE_COUNT
 } ps_crowd_profile_t;
 
+/** Whether the agents wear AprilTags on their shoulders (docs/crowd.md,
+ *  "Tags"): the simulated camera (sim/ps_camera_sim) sees them. */
+typedef enum {
+    PS_CROWD_TAGS_AUTO = 0, /**< as the composition root decides: worn when the board's
+                                 camera is the simulated one; the plant takes it as off */
+    PS_CROWD_TAGS_ON,
+    PS_CROWD_TAGS_OFF,
+    PS_CROWD_TAGS_COUNT
+} ps_crowd_tags_t;
+
 typedef struct {
     float t_s, duration_s;
     ps_crowd_event_kind_t kind;
@@ -156,6 +166,9 @@ typedef struct {
     float crowd_dt_s;     /**< crowd update period (0.002 s) */
     float timestep_s;     /**< physics step of the scene (0.001 s); 0: the robot model's own */
     bool gate_capsules;   /**< agents' capsules collide only near what they can touch (true) */
+    ps_crowd_tags_t tags; /**< AprilTag plates on the shoulders (auto) */
+    float tag_size_m;     /**< their black square (0.12 m; the composition root sets the
+                               board camera's tag_size_m) */
     uint32_t n_groups;
     ps_crowd_group_cfg_t groups[PS_CROWD_MAX_GROUPS];
     uint32_t n_walls;
@@ -170,6 +183,8 @@ typedef struct {
 typedef struct {
     double x_m, y_m;
     double height_m, mass_kg, radius_m, v0_m_s;
+    double facing_rad; /**< where the front (and its tags) looks, world yaw: toward its
+                            goal at the start (the robot for hold and robot goals) */
     uint32_t group_idx;
 } ps_crowd_agent_spec_t;
 

@@ -40,7 +40,7 @@ int ps_gl_open_offscreen(ps_gl_t *g, char *err, size_t err_len)
         eglBindAPI(EGL_OPENGL_API) != EGL_TRUE) {
         ps_err_format(err, err_len, "offscreen rendering: no EGL OpenGL config (error 0x%x)",
                       (unsigned)eglGetError());
-        (void)eglTerminate(dpy);
+        /* (no eglTerminate: the display is shared, see ps_gl_close) */
         return -EIO;
     }
     EGLContext ctx = eglCreateContext(dpy, conf, EGL_NO_CONTEXT, NULL);
@@ -50,7 +50,7 @@ int ps_gl_open_offscreen(ps_gl_t *g, char *err, size_t err_len)
                       (unsigned)eglGetError());
         if (ctx != EGL_NO_CONTEXT)
             (void)eglDestroyContext(dpy, ctx);
-        (void)eglTerminate(dpy);
+        /* (no eglTerminate: the display is shared, see ps_gl_close) */
         return -EIO;
     }
     g->egl_display = dpy;
@@ -145,7 +145,11 @@ void ps_gl_close(ps_gl_t *g)
         (void)eglMakeCurrent(g->egl_display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
         if (g->egl_context != NULL)
             (void)eglDestroyContext(g->egl_display, g->egl_context);
-        (void)eglTerminate(g->egl_display);
+        /* No eglTerminate: Mesa's surfaceless display is one per process
+         * (every eglGetPlatformDisplayEXT returns it; eglInitialize again
+         * does nothing) and one eglTerminate would end it for every context
+         * on it, the renderer's and the simulated camera's alike, each on
+         * its own thread. It lives until the process ends. */
     }
     memset(g, 0, sizeof(*g));
 }

@@ -9,9 +9,10 @@
  * called ps_gl_make_current last; one thread at a time. Window events are
  * polled by ps_gl_poll (on X11 from any one thread).
  *
- * Threads: any, one at a time per context. Allocation: open (EGL, GLFW).
- * Note: the simulated camera (branch `camera`, sim/ps_camera_sim.c) sets up
- * the same EGL context for itself; one of the two goes at merge time.
+ * Threads: any, one at a time per context; offscreen contexts may be opened
+ * and closed from several threads (the renderer's, the simulated camera's):
+ * they share EGL's one display, which stays initialised until exit.
+ * Allocation: open (EGL, GLFW).
  */
 #ifndef PS_GL_H
 #define PS_GL_H

@@ -306,6 +306,21 @@ static void place_in_stance(ps_plant_t *p, const ps_plant_cfg_t *robot)
         p->anchor_quat[k] = root[3 + k];
 }
 
+/* The first tag id free for the crowd: past every "tag36h11_<id>" texture
+ * the robot model has itself (a test scene's tagged people), even. */
+static uint32_t first_free_tag_id(const mjModel *m)
+{
+    uint32_t first = 0;
+    for (int t = 0; t < m->ntex; t++) {
+        unsigned id = 0;
+        char rest = 0;
+        if (sscanf(m->names + m->name_texadr[t], "tag36h11_%u%c", &id, &rest) == 1 &&
+            id + 1u > first)
+            first = id + 1u;
+    }
+    return (first + 1u) & ~1u;
+}
+
 /* The robot model (p->m, loaded) plus the crowd: place the agents, write the
  * scene that includes the model file, load it from memory in place of the
  * robot model. */
@@ -330,9 +345,23 @@ static int load_scene(ps_plant_t *p, const ps_plant_cfg_t *robot, ps_crowd_agent
     *slash = '\0';
     (void)snprintf(scene_name, sizeof(scene_name), "%s/%s", abs_path, SCENE_VFS_NAME);
     const char *model_file = slash + 1;
+    /* Tags (crowd.tags on): on the people nearest the robot, as many as the
+     * renderer's texture slots leave room for (ps_scene.h). */
+    int32_t *tag_id = NULL;
+    if (robot->crowd->tags == PS_CROWD_TAGS_ON && *out_n > 0) {
+        tag_id = calloc(*out_n, sizeof(*tag_id));
+        if (tag_id == NULL)
+            return -ENOMEM;
+        const uint32_t n_tex = (uint32_t)p->m->ntex;
+        const uint32_t max_people =
+            n_tex < PS_SCENE_MAX_TEXTURES ? (PS_SCENE_MAX_TEXTURES - n_tex) / 2u : 0u;
+        (void)ps_scene_choose_tagged(agents, *out_n, robot->spawn_xy_m, first_free_tag_id(p->m),
+                                     max_people, tag_id); /* how many: the scene says */
+    }
     char *xml = NULL;
     rc = ps_scene_write_mjcf(robot->crowd, agents, *out_n, model_file, p->m->nconmax, p->m->njmax,
-                             &xml, err, err_len);
+                             tag_id, &xml, err, err_len);
+    free(tag_id);
     if (rc < 0)
         return rc;
     mjVFS *vfs = calloc(1, sizeof(*vfs));

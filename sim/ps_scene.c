@@ -18,6 +18,10 @@
 #define ARENA_WALL_HEIGHT_M 1.2
 #define WALL_SEG_M     2.0 /* longest box of a wall */
 #define PIVOT_MASS_FRAC 0.15 /* feet and shanks: the base */
+#define TAG_HEIGHT_FRAC     0.80 /* plate centres: height over the person's */
+#define TAG_SIDE_FRAC       0.11 /* and off the axis, sideways */
+#define TAG_GAP_M           0.002
+#define TAG_HALF_T_M        0.003
 
 /* ---- seeded generator (splitmix64) --------------------------------------- */
 
@@ -198,6 +202,25 @@ static void place_line(const ps_crowd_cfg_t *cfg, uint32_t gi, rng_t *rng,
     }
 }
 
+/* An agent faces where its goal lies at the start: along its direction, at
+ * its point, or at the robot (goals robot and hold: people standing about a
+ * robot look at it). It never turns (the agent has no yaw joint), so the
+ * facing is also where its tags look. */
+static void set_facing(const ps_crowd_cfg_t *cfg, const double robot_xy[2],
+                       ps_crowd_agent_spec_t *a)
+{
+    const ps_crowd_group_cfg_t *g = &cfg->groups[a->group_idx];
+    double v[2] = {robot_xy[0] - a->x_m, robot_xy[1] - a->y_m};
+    if (g->goal == PS_CROWD_GOAL_DIRECTION) {
+        v[0] = g->goal_xy[0];
+        v[1] = g->goal_xy[1];
+    } else if (g->goal == PS_CROWD_GOAL_POINT) {
+        v[0] = g->goal_xy[0] - a->x_m;
+        v[1] = g->goal_xy[1] - a->y_m;
+    }
+    a->facing_rad = v[0] * v[0] + v[1] * v[1] > 1e-12 ? atan2(v[1], v[0]) : 0.0;
+}
+
 int ps_scene_place(const ps_crowd_cfg_t *cfg, uint32_t seed, const double robot_xy[2],
                    ps_crowd_agent_spec_t *out, uint32_t max, uint32_t *out_n, char *err,
                    size_t err_len)
@@ -239,6 +262,8 @@ int ps_scene_place(const ps_crowd_cfg_t *cfg, uint32_t seed, const double robot_
         }
         n += got;
     }
+    for (uint32_t i = 0; i < n; i++)
+        set_facing(cfg, robot_xy, &out[i]);
     *out_n = n;
     return 0;
 }
@@ -290,6 +315,75 @@ static void capsule_inertia(double m, double r, double len, double out[2])
     out[1] = m_cyl * r * r / 2.0 + 2.0 * (2.0 / 5.0 * m_hemi * r * r);
 }
 
+/* ---- tags ------------------------------------------------------------------ */
+
+uint32_t ps_scene_choose_tagged(const ps_crowd_agent_spec_t *agents, uint32_t n_agents,
+                                const double robot_xy[2], uint32_t first_id, uint32_t max_people,
+                                int32_t *out_tag_id)
+{
+    /* Selection by rank: n is at most PS_CROWD_MAX_AGENTS, and this runs once. */
+    uint32_t n_tagged = 0;
+    for (uint32_t k = 0; k < n_agents; k++) {
+        out_tag_id[k] = -1;
+        const uint32_t id = first_id + 2u * k;
+        if (id + 1u >= PS_SCENE_TAG_IDS)
+            continue;
+        const double dk = hypot(agents[k].x_m - robot_xy[0], agents[k].y_m - robot_xy[1]);
+        uint32_t n_nearer = 0; /* ties: the lower index is nearer */
+        for (uint32_t j = 0; j < n_agents && n_nearer < max_people; j++) {
+            const double dj = hypot(agents[j].x_m - robot_xy[0], agents[j].y_m - robot_xy[1]);
+            n_nearer += j != k && first_id + 2u * j + 1u < PS_SCENE_TAG_IDS &&
+                        (dj < dk || (dj == dk && j < k));
+        }
+        if (n_nearer < max_people) {
+            out_tag_id[k] = (int32_t)id;
+            n_tagged++;
+        }
+    }
+    return n_tagged;
+}
+
+/* A texture and a material per tag: sim/ps_camera_sim fills every texture
+ * named tag36h11_<id> with that tag. */
+static void write_tag_assets(FILE *f, const int32_t *tag_id, uint32_t n_agents)
+{
+    fprintf(f, "  <asset>\n");
+    for (uint32_t k = 0; k < n_agents; k++)
+        for (int32_t id = tag_id[k]; id >= 0 && id <= tag_id[k] + 1; id++)
+            fprintf(f,
+                    "    <texture name=\"tag36h11_%d\" type=\"2d\" builtin=\"flat\" "
+                    "width=\"%d\" height=\"%d\" rgb1=\"1 1 1\"/>\n"
+                    "    <material name=\"tag36h11_%d\" texture=\"tag36h11_%d\" "
+                    "texuniform=\"false\" texrepeat=\"1 1\" emission=\"0.6\" specular=\"0\"/>\n",
+                    id, PS_SCENE_TAG_TEX_PX, PS_SCENE_TAG_TEX_PX, id, id);
+    fprintf(f, "  </asset>\n");
+}
+
+/* The two plates on the front of the shoulders: box sites (drawn with
+ * their material, never in a collision, so the physics is that of an
+ * untagged crowd), the tag on each plate's +z face looking along the
+ * agent's facing, upright; left (id) and right (id + 1) as the agent sees
+ * them. Centres at 0.80 h above the floor and 0.11 h either side of the
+ * axis: the shoulder (acromion) stands at 0.818 h and the shoulders are
+ * 0.259 h wide (Winter's body-segment proportions), the plate a little in
+ * and below; 2 mm in front of the torso. */
+static void write_tags(FILE *f, const ps_crowd_cfg_t *cfg, const ps_crowd_agent_spec_t *a,
+                       uint32_t i, int32_t tag_id)
+{
+    const double half = (double)cfg->tag_size_m / 0.8 / 2.0; /* black square: 8 of 10 cells */
+    const double cf = cos(a->facing_rad), sf = sin(a->facing_rad);
+    const double ahead = a->radius_m + TAG_GAP_M + TAG_HALF_T_M;
+    const double z = TAG_HEIGHT_FRAC * a->height_m - a->radius_m; /* body frame: pivot at r */
+    for (int side = 0; side < 2; side++) {
+        const double s = side == 0 ? TAG_SIDE_FRAC * a->height_m : -TAG_SIDE_FRAC * a->height_m;
+        fprintf(f,
+                "      <site name=\"agent%u_tag_%s\" type=\"box\" pos=\"%.4f %.4f %.4f\" "
+                "xyaxes=\"%.6f %.6f 0 0 0 1\" size=\"%.4f %.4f %.4f\" material=\"tag36h11_%d\"/>\n",
+                i, side == 0 ? "left" : "right", ahead * cf - s * sf, ahead * sf + s * cf, z, -sf,
+                cf, half, half, TAG_HALF_T_M, tag_id + side);
+    }
+}
+
 /* One agent: one body on four joints (slide x, slide y, then the tilt
  * hinges x and y, all through the pivot at height r), the feet's mass at the
  * pivot and the torso capsule's above it, so the slides carry the whole
@@ -301,7 +395,7 @@ static void capsule_inertia(double m, double r, double len, double out[2])
  * (1.7 m) made a pair to sort and test; on its own body a ring pairs only
  * with rings within a diameter. */
 static void write_agent(FILE *f, const ps_crowd_cfg_t *cfg, const ps_crowd_agent_spec_t *a,
-                        uint32_t i)
+                        uint32_t i, int32_t tag_id)
 {
     const double r = a->radius_m;
     const double len = a->height_m - 2.0 * r; /* capsule segment; pivot at height r */
@@ -342,11 +436,13 @@ static void write_agent(FILE *f, const ps_crowd_cfg_t *cfg, const ps_crowd_agent
             "contype=\"4\" conaffinity=\"4\" condim=\"1\" priority=\"1\" "
             "friction=\"%.3f 0.005 0.0001\" solref=\"0.02 1\" solimp=\"0.9 0.9 0.001 0.5 2\" "
             "margin=\"0\" gap=\"0\" group=\"3\" rgba=\"%.2f %.2f %.2f 1\"/>\n"
-            "      </body>\n"
-            "    </body>\n",
+            "      </body>\n",
             i, a->x_m, a->y_m, r, i, i, i, c, i, c, zc, a->mass_kg, i_across, i_across, it[1], i,
             len, r, (double)cfg->body.friction, (double)rgb[0], (double)rgb[1], (double)rgb[2], i,
             l, i, r, (double)cfg->body.friction, (double)rgb[0], (double)rgb[1], (double)rgb[2]);
+    if (tag_id >= 0)
+        write_tags(f, cfg, a, i, tag_id);
+    fprintf(f, "    </body>\n");
 }
 
 /* A vertical wall from (x0, y0) to (x1, y1), h high, as boxes of at most
@@ -433,12 +529,24 @@ static void write_walls(FILE *f, const ps_crowd_cfg_t *cfg)
 
 int ps_scene_write_mjcf(const ps_crowd_cfg_t *cfg, const ps_crowd_agent_spec_t *agents,
                         uint32_t n_agents, const char *robot_model_path, int robot_nconmax,
-                        int robot_njmax, char **out_xml, char *err, size_t err_len)
+                        int robot_njmax, const int32_t *tag_id, char **out_xml, char *err,
+                        size_t err_len)
 {
     if (cfg == NULL || (agents == NULL && n_agents > 0) || robot_model_path == NULL ||
         out_xml == NULL) {
         ps_err_format(err, err_len, "scene: NULL argument");
         return -EINVAL;
+    }
+    uint32_t n_tagged = 0;
+    for (uint32_t k = 0; tag_id != NULL && k < n_agents; k++) {
+        if (tag_id[k] < 0)
+            continue;
+        if (tag_id[k] % 2 != 0 || (uint32_t)tag_id[k] + 1u >= PS_SCENE_TAG_IDS) {
+            ps_err_format(err, err_len, "scene: agent %u: tag %d is no pair's first tag36h11 id", k,
+                          tag_id[k]);
+            return -EINVAL;
+        }
+        n_tagged++;
     }
     char *buf = NULL;
     size_t size = 0;
@@ -469,12 +577,14 @@ int ps_scene_write_mjcf(const ps_crowd_cfg_t *cfg, const ps_crowd_agent_spec_t *
             "    <global offwidth=\"1280\" offheight=\"720\"/>\n"
             "    <map force=\"0.004\"/>\n"
             "    <scale forcewidth=\"0.03\" contactwidth=\"0.05\" contactheight=\"0.01\"/>\n"
-            "  </visual>\n"
-            "  <worldbody>\n",
+            "  </visual>\n",
             robot_model_path, nconmax, njmax, option);
+    if (n_tagged > 0)
+        write_tag_assets(f, tag_id, n_agents);
+    fprintf(f, "  <worldbody>\n");
     write_walls(f, cfg);
     for (uint32_t i = 0; i < n_agents; i++)
-        write_agent(f, cfg, &agents[i], i);
+        write_agent(f, cfg, &agents[i], i, tag_id != NULL ? tag_id[i] : -1);
     fprintf(f, "  </worldbody>\n</mujoco>\n");
     const bool is_bad = ferror(f) != 0;
     if (fclose(f) != 0 || is_bad || buf == NULL) {

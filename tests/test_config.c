@@ -326,6 +326,14 @@ static void test_load_scenario_crowd_fixture_values_and_defaults(void **state)
     assert_int_equal(c->events[1].agent, -1); /* absent: the whole group */
     assert_true(c->events[1].direction[0] == 0.0f && c->events[1].direction[1] == 1.0f);
     assert_int_equal(c->events[2].kind, PS_CROWD_EVENT_WALL);
+    assert_int_equal(c->tags, PS_CROWD_TAGS_AUTO); /* absent: as the camera decides */
+    assert_true(c->tag_size_m == 0.12f);
+    edit(f, CROWD_OK, "arena_walls: true", "arena_walls: true\n  tags: false");
+    assert_int_equal(ps_config_load_scenario(f->path, s, f->err, sizeof(f->err)), 0);
+    assert_int_equal(s->crowd.tags, PS_CROWD_TAGS_OFF);
+    edit(f, CROWD_OK, "arena_walls: true", "arena_walls: true\n  tags: true");
+    assert_int_equal(ps_config_load_scenario(f->path, s, f->err, sizeof(f->err)), 0);
+    assert_int_equal(s->crowd.tags, PS_CROWD_TAGS_ON);
 
     /* a scenario without a crowd section has none */
     assert_int_equal(ps_config_load_scenario("scenarios/stand.yaml", s, f->err, sizeof(f->err)),
@@ -392,6 +400,11 @@ static void test_load_scenario_crowd_rejections(void **state)
 
     edit(f, CROWD_OK, "arena_walls: true", "arena_walls: yes");
     expect_scenario_error_any(f);
+
+    edit(f, CROWD_OK, "arena_walls: true", "arena_walls: true\n  tags: maybe");
+    want(f, "%s:%d: crowd.tags: unknown value \"maybe\" (allowed: auto, true, false)", f->path,
+         line_of(f, "tags: maybe"));
+    expect_scenario_error(f);
 }
 
 /* ---- robot fixture ---------------------------------------------------- */

@@ -4,8 +4,9 @@
  * scene (sim/ps_scene.c), and the crowd in the MuJoCo plant (sim/ps_crowd.c
  * through sim/ps_plant.c): free speed, body compression, a pushed queue,
  * densities, speed against density, stepping and falling, moving walls,
- * determinism. The robot (robots/ps1.yaml) hangs limp in its harness.
- * Run from the repo root.
+ * determinism; the AprilTag plates on the people's shoulders (ids, sides,
+ * the family's limit) and that they leave the physics as it was. The robot (robots/ps1.yaml) hangs
+ * limp in its harness. Run from the repo root.
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -18,7 +19,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include <apriltag/tag36h11.h>
 #include <mujoco/mujoco.h>
+#include <time.h>
 
 #include "../rt/ps_config.h"
 #include "../rt/ps_err.h"
@@ -45,10 +48,11 @@ static int setup_robot(void **state)
     return 0;
 }
 
-static ps_plant_t *make_plant(const ps_crowd_cfg_t *crowd, double rx, double ry, uint32_t seed)
+static ps_plant_t *make_plant_in(const char *model, const ps_crowd_cfg_t *crowd, double rx,
+                                 double ry, uint32_t seed)
 {
     const ps_plant_cfg_t pc = {
-        .model_path = MODEL_PATH,
+        .model_path = model,
         .n_joints = robot.n_joints,
         .joint_name = robot.joint_name,
         .stance_rad = stance,
@@ -62,6 +66,11 @@ static ps_plant_t *make_plant(const ps_crowd_cfg_t *crowd, double rx, double ry,
     if (rc != 0)
         fail_msg("ps_plant_create: %s (%s)", err, ps_strerror(rc));
     return p;
+}
+
+static ps_plant_t *make_plant(const ps_crowd_cfg_t *crowd, double rx, double ry, uint32_t seed)
+{
+    return make_plant_in(MODEL_PATH, crowd, rx, ry, seed);
 }
 
 static void run_s(ps_plant_t *p, double t_s)
@@ -658,14 +667,222 @@ static ps_crowd_cfg_t press_cfg(float half_m, float density_m2, float clear_m)
     return c;
 }
 
-/* Both plants' states bit for bit, then both destroyed. */
+/* A 4 m x 4 m pen at 3 / m^2, everyone walking at the robot in its middle. */
+static ps_crowd_cfg_t pen_cfg(void)
+{
+    ps_crowd_cfg_t c = press_cfg(2.0f, 3.0f, 0.5f);
+    c.groups[0].speed_sd_m_s = 0.1f;
+    return c;
+}
+
+/* Two plants: the same state, bit for bit. */
+static void assert_same_state(ps_plant_t *a, ps_plant_t *b)
+{
+    const mjModel *m = ps_plant_model(a);
+    assert_int_equal(m->nq, ps_plant_model(b)->nq);
+    assert_memory_equal(ps_plant_data(a)->qpos, ps_plant_data(b)->qpos,
+                        (size_t)m->nq * sizeof(mjtNum));
+    assert_memory_equal(ps_plant_data(a)->qvel, ps_plant_data(b)->qvel,
+                        (size_t)m->nv * sizeof(mjtNum));
+}
+
+/* The same, then both destroyed. */
 static void assert_same_state_and_destroy(ps_plant_t *p[2])
 {
-    const mjModel *m = ps_plant_model(p[0]);
-    assert_memory_equal(ps_plant_data(p[0])->qpos, ps_plant_data(p[1])->qpos,
-                        (size_t)m->nq * sizeof(mjtNum));
-    assert_memory_equal(ps_plant_data(p[0])->qvel, ps_plant_data(p[1])->qvel,
-                        (size_t)m->nv * sizeof(mjtNum));
+    assert_same_state(p[0], p[1]);
+    ps_plant_destroy(p[0]);
+    ps_plant_destroy(p[1]);
+}
+
+/* ---- tags on the shoulders ------------------------------------------------- */
+
+/* The name of site s's material, or "". */
+static const char *site_material(const mjModel *m, int s)
+{
+    const int mat = m->site_matid[s];
+    return mat >= 0 ? m->names + m->name_matadr[mat] : "";
+}
+
+/* Agent k wears tag36h11 2k (left) and 2k + 1 (right) on plates on the
+ * front of its shoulders, facing the robot it walks to: the left plate on
+ * its left, at 0.80 of its height, 0.11 of it off the axis, 5 mm in front
+ * of its torso; a texture and a material per tag. A robot model with tags
+ * of its own pushes the crowd's numbering past them. Off: no plates. */
+static void test_scene_tags_on_shoulders_ids_and_sides(void **state)
+{
+    (void)state;
+    ps_crowd_cfg_t c = base_cfg();
+    c.groups[0].count = 6;
+    c.groups[0].region = (ps_crowd_rect_t){1, -1.5f, 3, 1.5f};
+    c.groups[0].goal = PS_CROWD_GOAL_ROBOT;
+    c.groups[0].height_sd_m = 0.07f;
+    c.tags = PS_CROWD_TAGS_ON;
+    ps_plant_t *p = make_plant(&c, 0, 0, 2);
+    const mjModel *m = ps_plant_model(p);
+    const mjData *d = ps_plant_data(p);
+    for (uint32_t k = 0; k < 6; k++) {
+        char name[48];
+        snprintf(name, sizeof(name), "agent%u", k);
+        const int b = mj_name2id(m, mjOBJ_BODY, name);
+        snprintf(name, sizeof(name), "agent%u_body", k);
+        const int g = mj_name2id(m, mjOBJ_GEOM, name);
+        assert_true(b > 0 && g >= 0);
+        const double r = m->geom_size[3 * g], h = 2.0 * (m->geom_size[3 * g + 1] + r);
+        const double *axis = d->xpos + 3 * b;
+        double f[2] = {-axis[0], -axis[1]}; /* toward the robot at the origin */
+        const double fn = hypot(f[0], f[1]);
+        f[0] /= fn;
+        f[1] /= fn;
+        for (uint32_t side = 0; side < 2; side++) {
+            snprintf(name, sizeof(name), "agent%u_tag_%s", k, side == 0 ? "left" : "right");
+            const int si = mj_name2id(m, mjOBJ_SITE, name);
+            assert_true(si >= 0);
+            assert_int_equal(m->site_bodyid[si], b);
+            char tag[32];
+            snprintf(tag, sizeof(tag), "tag36h11_%u", 2 * k + side);
+            assert_string_equal(site_material(m, si), tag);
+            const int mat = m->site_matid[si];
+            assert_string_equal(m->names + m->name_texadr[m->mat_texid[mat]], tag);
+            const double *sp = d->site_xpos + 3 * si, *sr = d->site_xmat + 9 * si;
+            const double dx = sp[0] - axis[0], dy = sp[1] - axis[1];
+            const double ahead = dx * f[0] + dy * f[1], leftward = -dx * f[1] + dy * f[0];
+            assert_true(fabs(ahead - (r + 0.005)) < 1e-4);
+            assert_true(fabs(leftward - (side == 0 ? 0.11 : -0.11) * h) < 1e-4);
+            assert_true(fabs(sp[2] - 0.80 * h) < 1e-4);
+            assert_true(sr[2] * f[0] + sr[5] * f[1] > 0.9999);      /* the face looks ahead */
+            assert_true(fabs(m->site_size[3 * si] - 0.075) < 1e-6); /* 0.12 m black square */
+        }
+    }
+    ps_plant_destroy(p);
+    /* a model that wears tags 0-5 itself: the crowd's start at 6 */
+    p = make_plant_in("tests/data/models/ps1-tags.xml", &c, 0, 0, 2);
+    m = ps_plant_model(p);
+    assert_string_equal(site_material(m, mj_name2id(m, mjOBJ_SITE, "agent0_tag_left")),
+                        "tag36h11_6");
+    assert_string_equal(site_material(m, mj_name2id(m, mjOBJ_SITE, "agent5_tag_right")),
+                        "tag36h11_17");
+    ps_plant_destroy(p);
+    c.tags = PS_CROWD_TAGS_OFF;
+    p = make_plant(&c, 0, 0, 2);
+    m = ps_plant_model(p);
+    assert_true(mj_name2id(m, mjOBJ_SITE, "agent0_tag_left") < 0);
+    assert_true(mj_name2id(m, mjOBJ_TEXTURE, "tag36h11_0") < 0);
+    ps_plant_destroy(p);
+    c.tags = PS_CROWD_TAGS_AUTO; /* the plant's own default: none */
+    p = make_plant(&c, 0, 0, 2);
+    assert_true(mj_name2id(ps_plant_model(p), mjOBJ_SITE, "agent0_tag_left") < 0);
+    ps_plant_destroy(p);
+}
+
+static unsigned count_of(const char *text, const char *what)
+{
+    unsigned n = 0;
+    for (const char *q = strstr(text, what); q != NULL; q = strstr(q + 1, what))
+        n++;
+    return n;
+}
+
+/* Who wears tags: the people nearest the robot, as many as MuJoCo 2.2.2's
+ * renderer has texture slots for (100: 50 people on a model without
+ * textures of its own), and only those whose pair fits tag36h11's 587 ids;
+ * the scene writes their plates and textures and refuses ids that are no
+ * pair's first. */
+static void test_scene_tags_on_the_nearest_within_limits(void **state)
+{
+    (void)state;
+    apriltag_family_t *fam = tag36h11_create();
+    assert_int_equal(fam->ncodes, PS_SCENE_TAG_IDS);
+    tag36h11_destroy(fam);
+    static ps_crowd_agent_spec_t a[PS_CROWD_MAX_AGENTS];
+    static int32_t id[PS_CROWD_MAX_AGENTS];
+    for (uint32_t i = 0; i < PS_CROWD_MAX_AGENTS; i++) /* a 20 x 15 grid, 0.5 m apart */
+        a[i] = (ps_crowd_agent_spec_t){.x_m = 0.5 * (i % 20) - 4.75,
+                                       .y_m = 0.5 * (i / 20) - 3.5,
+                                       .height_m = 1.7,
+                                       .mass_kg = 70,
+                                       .radius_m = 0.17};
+    const double robot_xy[2] = {0.3, 0.1};
+    assert_int_equal(ps_scene_choose_tagged(a, PS_CROWD_MAX_AGENTS, robot_xy, 0, 50, id), 50);
+    double far_in = 0.0, near_out = 1e9;
+    for (uint32_t k = 0; k < PS_CROWD_MAX_AGENTS; k++) {
+        const double d = hypot(a[k].x_m - robot_xy[0], a[k].y_m - robot_xy[1]);
+        if (id[k] >= 0) {
+            assert_int_equal(id[k], 2 * (int)k);
+            far_in = d > far_in ? d : far_in;
+        } else {
+            near_out = d < near_out ? d : near_out;
+        }
+    }
+    assert_true(far_in <= near_out); /* the 50 nearest */
+    /* ids past tag36h11: agents from 293 on (and 290 on from id 6) wear none */
+    assert_int_equal(ps_scene_choose_tagged(a, PS_CROWD_MAX_AGENTS, robot_xy, 0, 300, id), 293);
+    assert_int_equal(id[292], 584);
+    assert_int_equal(id[293], -1);
+    assert_int_equal(ps_scene_choose_tagged(a, PS_CROWD_MAX_AGENTS, robot_xy, 6, 300, id), 290);
+    assert_int_equal(ps_scene_choose_tagged(a, 24, robot_xy, 0, 0, id), 0);
+    /* the scene: plates and textures for the 50 */
+    ps_crowd_cfg_t c = base_cfg();
+    (void)ps_scene_choose_tagged(a, PS_CROWD_MAX_AGENTS, robot_xy, 0, 50, id);
+    char *xml = NULL;
+    char err[PS_ERR_MSG_LEN];
+    assert_int_equal(ps_scene_write_mjcf(&c, a, PS_CROWD_MAX_AGENTS, "ps1.xml", 150, 600, id, &xml,
+                                         err, sizeof(err)),
+                     0);
+    assert_int_equal(count_of(xml, "_tag_left\""), 50);
+    assert_int_equal(count_of(xml, "_tag_right\""), 50);
+    assert_int_equal(count_of(xml, "<texture name=\"tag36h11_"), 100);
+    free(xml);
+    id[3] = 7;
+    assert_int_equal(ps_scene_write_mjcf(&c, a, 4, "ps1.xml", 150, 600, id, &xml, err, sizeof(err)),
+                     -EINVAL); /* a pair starts even */
+    assert_non_null(strstr(err, "agent 3: tag 7"));
+}
+
+/* A crowd bigger than the renderer's texture slots: tags on the 50 people
+ * nearest the robot; the camera can draw the scene. */
+static void test_crowd_large_crowd_tagged_nearest_fifty(void **state)
+{
+    (void)state;
+    ps_crowd_cfg_t c = pen_cfg();
+    c.arena = (ps_crowd_rect_t){-3, -3, 3, 3};
+    c.groups[0].region = c.arena;
+    c.tags = PS_CROWD_TAGS_ON;
+    ps_plant_t *p = make_plant(&c, 0, 0, 6);
+    const mjModel *m = ps_plant_model(p);
+    const uint32_t n = ps_crowd_agent_count(ps_plant_crowd(p));
+    assert_true(n > 50);
+    assert_int_equal(m->ntex, 100);
+    assert_int_equal(m->nsite, 1 + 100); /* the robot's IMU site and the plates */
+    ps_plant_destroy(p);
+}
+
+/* The plates are sites: they draw, never collide. Same scene, tags on and
+ * off: the same trajectories, bit for bit; the time of each run printed. */
+static void test_crowd_tags_leave_physics_unchanged(void **state)
+{
+    (void)state;
+    ps_crowd_cfg_t c = pen_cfg();
+    ps_plant_t *p[2];
+    double wall_s[2];
+    for (int k = 0; k < 2; k++) {
+        c.tags = k == 0 ? PS_CROWD_TAGS_OFF : PS_CROWD_TAGS_ON;
+        p[k] = make_plant(&c, 0, 0, 6);
+        struct timespec t0, t1;
+        clock_gettime(CLOCK_MONOTONIC, &t0);
+        run_s(p[k], 1.0);
+        clock_gettime(CLOCK_MONOTONIC, &t1);
+        wall_s[k] = (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
+    }
+    const mjModel *m0 = ps_plant_model(p[0]), *m1 = ps_plant_model(p[1]);
+    printf("tags off: %d sites, 1 s in %.3f s; on: %d sites, %d textures, 1 s in %.3f s "
+           "(%u agents)\n",
+           m0->nsite, wall_s[0], m1->nsite, m1->ntex, wall_s[1],
+           ps_crowd_agent_count(ps_plant_crowd(p[0])));
+    assert_int_equal(m1->nsite - m0->nsite, 2 * (int)ps_crowd_agent_count(ps_plant_crowd(p[0])));
+    assert_int_equal(m0->ngeom, m1->ngeom);
+    assert_same_state(p[0], p[1]);
+    assert_true(ps_plant_data(p[1])->ncon > 0); /* they do press */
+    assert_int_equal(ps_plant_data(p[0])->ncon, ps_plant_data(p[1])->ncon);
     ps_plant_destroy(p[0]);
     ps_plant_destroy(p[1]);
 }
@@ -768,6 +985,10 @@ int main(void)
         cmocka_unit_test(test_social_grid_finds_every_neighbour_in_range),
         cmocka_unit_test(test_scene_place_seeded_lattice_density_and_clearance),
         cmocka_unit_test(test_scene_loads_around_unchanged_robot_with_sizes),
+        cmocka_unit_test(test_scene_tags_on_shoulders_ids_and_sides),
+        cmocka_unit_test(test_scene_tags_on_the_nearest_within_limits),
+        cmocka_unit_test(test_crowd_large_crowd_tagged_nearest_fifty),
+        cmocka_unit_test(test_crowd_tags_leave_physics_unchanged),
         cmocka_unit_test(test_crowd_free_speed_within_10_percent),
         cmocka_unit_test(test_crowd_two_body_compression_as_configured),
         cmocka_unit_test(test_crowd_queue_push_arrives_in_order),

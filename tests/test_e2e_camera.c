@@ -9,7 +9,8 @@
  *    after-init counts all zero, and the loop saw fresh lists with the
  *    tags' shoulders;
  *  - `pushstep camera` on the simulated camera: the PNG (read back with
- *    libpng) and the JSON, every tag of the scene detected against the truth;
+ *    libpng) and the JSON, every tag of the static scene detected against
+ *    the truth; on the default crowd, its people wearing tags (auto);
  *  - `pushstep camera` on an image folder of a synthesised tag at a known
  *    pose: found where it is;
  *  - a board without a camera: exit 2, the file named.
@@ -199,8 +200,9 @@ static void test_e2e_camera_tool_sim_png_json_all_tags(void **state)
     char dir[64];
     make_temp_dir(dir, sizeof(dir));
     char args[512];
-    snprintf(args, sizeof(args), "camera --board %s --robot %s --duration 2 --out %s", BOARD,
-             ROBOT, dir);
+    snprintf(args, sizeof(args),
+             "camera --board %s --robot %s --scenario scenarios/stand.yaml --duration 2 --out %s",
+             BOARD, ROBOT, dir);
     const int rc = run(args);
     if (rc != 0)
         fail_msg("exit %d:\n%s", rc, out);
@@ -220,6 +222,34 @@ static void test_e2e_camera_tool_sim_png_json_all_tags(void **state)
     assert_int_equal((int)ps_cli_num(t, "tags_detected"), 6);
     assert_true(ps_cli_num(t, "max_error_mm") < 50.0);
     assert_int_equal(cJSON_GetArraySize(ps_cli_obj(j, "last_frame_detections")), 6);
+    cJSON_Delete(j);
+    remove_tree(dir);
+}
+
+/* The default scenario, its crowd of 24 around the plain robot: on the
+ * simulated camera's board the people wear tags (crowd.tags auto), and the
+ * tool finds their shoulders where the plant has them. */
+static void test_e2e_camera_tool_sim_default_crowd_wears_tags(void **state)
+{
+    (void)state;
+    char dir[64];
+    make_temp_dir(dir, sizeof(dir));
+    char args[512];
+    snprintf(args, sizeof(args), "camera --board %s --duration 1 --out %s", BOARD, dir);
+    const int rc = run(args);
+    if (rc != 0)
+        fail_msg("exit %d:\n%s", rc, out);
+    char path[128];
+    snprintf(path, sizeof(path), "%s/camera.json", dir);
+    cJSON *j = ps_cli_read_json(path);
+    const cJSON *t = ps_cli_obj(j, "truth");
+    print_message("default crowd: %d tags in the scene, %d seen whole, %d detected, largest "
+                  "error %.1f mm\n",
+                  (int)ps_cli_num(t, "tags_in_scene"), (int)ps_cli_num(t, "tags_seen_whole"),
+                  (int)ps_cli_num(t, "tags_detected"), ps_cli_num(t, "max_error_mm"));
+    assert_int_equal((int)ps_cli_num(t, "tags_in_scene"), 48); /* 24 people */
+    assert_true(ps_cli_num(t, "tags_detected") >= 1);
+    assert_true(ps_cli_num(t, "max_error_mm") < 50.0);
     cJSON_Delete(j);
     remove_tree(dir);
 }
@@ -294,6 +324,7 @@ int main(void)
                                   teardown_app),
         cmocka_unit_test(test_e2e_camera_realtime_fresh_lists_summary_no_alloc),
         cmocka_unit_test(test_e2e_camera_tool_sim_png_json_all_tags),
+        cmocka_unit_test(test_e2e_camera_tool_sim_default_crowd_wears_tags),
         cmocka_unit_test(test_e2e_camera_tool_image_folder_tag_where_it_is),
         cmocka_unit_test(test_e2e_camera_tool_board_without_camera_exit_2),
     };
