@@ -25,6 +25,7 @@
 typedef struct {
     char name[PS_NAME_LEN];
     ps_act_range_t r;
+    ps_act_motor_t m; /* optional dynamics; all 0: not modelled */
 } driver_raw_t;
 
 /* The robot file's own shape, flat as written; checked here, then composed
@@ -41,7 +42,8 @@ typedef struct {
     char name[PS_NAME_LEN];
     uint32_t bus_idx, can_id, reply_id;
     ps_act_proto_id_t protocol;
-    ps_act_range_t wire; /* the driver's, motor side */
+    ps_act_range_t wire;  /* the driver's, motor side */
+    ps_act_motor_t motor; /* the driver's dynamics, motor side */
     float pos_min_rad, pos_max_rad, vel_max_rad_s, torque_max_nm;
     float kp_nm_rad, kd_nm_s_rad, kp_max_nm_rad, kd_max_nm_s_rad;
     float stance_rad, kt_nm_a, temp_max_c;
@@ -178,6 +180,13 @@ static const cyaml_schema_field_t DRIVER_FIELDS[] = {
     CYAML_FIELD_FLOAT("t_max_nm", CYAML_FLAG_DEFAULT, driver_raw_t, r.t_max_nm),
     CYAML_FIELD_FLOAT("i_min_a", CYAML_FLAG_DEFAULT, driver_raw_t, r.i_min_a),
     CYAML_FIELD_FLOAT("i_max_a", CYAML_FLAG_DEFAULT, driver_raw_t, r.i_max_a),
+    CYAML_FIELD_FLOAT("peak_torque_nm", CYAML_FLAG_OPTIONAL, driver_raw_t, m.peak_torque_nm),
+    CYAML_FIELD_FLOAT("rated_torque_nm", CYAML_FLAG_OPTIONAL, driver_raw_t, m.rated_torque_nm),
+    CYAML_FIELD_FLOAT("rated_speed_rad_s", CYAML_FLAG_OPTIONAL, driver_raw_t, m.rated_speed_rad_s),
+    CYAML_FIELD_FLOAT("no_load_speed_rad_s", CYAML_FLAG_OPTIONAL, driver_raw_t,
+                      m.no_load_speed_rad_s),
+    CYAML_FIELD_FLOAT("armature_kg_m2", CYAML_FLAG_OPTIONAL, driver_raw_t, m.armature_kg_m2),
+    CYAML_FIELD_FLOAT("pd_hz", CYAML_FLAG_OPTIONAL, driver_raw_t, m.pd_hz),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_value_t DRIVER_SCHEMA = {
@@ -306,6 +315,15 @@ static const ps_cfg_rule_t ROBOT_RANGES[] = {
     PS_CFG_RULE_F32(RA_DRIVERS, 0, "t_max_nm", driver_raw_t, r.t_max_nm, -1000.0, 1000.0),
     PS_CFG_RULE_F32(RA_DRIVERS, 0, "i_min_a", driver_raw_t, r.i_min_a, -1000.0, 1000.0),
     PS_CFG_RULE_F32(RA_DRIVERS, 0, "i_max_a", driver_raw_t, r.i_max_a, -1000.0, 1000.0),
+    PS_CFG_RULE_F32(RA_DRIVERS, 0, "peak_torque_nm", driver_raw_t, m.peak_torque_nm, 0.0, 1000.0),
+    PS_CFG_RULE_F32(RA_DRIVERS, 0, "rated_torque_nm", driver_raw_t, m.rated_torque_nm, 0.0,
+                    1000.0),
+    PS_CFG_RULE_F32(RA_DRIVERS, 0, "rated_speed_rad_s", driver_raw_t, m.rated_speed_rad_s, 0.0,
+                    10000.0),
+    PS_CFG_RULE_F32(RA_DRIVERS, 0, "no_load_speed_rad_s", driver_raw_t, m.no_load_speed_rad_s,
+                    0.0, 10000.0),
+    PS_CFG_RULE_F32(RA_DRIVERS, 0, "armature_kg_m2", driver_raw_t, m.armature_kg_m2, 0.0, 10.0),
+    PS_CFG_RULE_F32(RA_DRIVERS, 0, "pd_hz", driver_raw_t, m.pd_hz, 0.0, 1000000.0),
     PS_CFG_RULE_U32(RA_JOINTS, 0, "bus", joint_file_t, bus_idx, 0.0, PS_MAX_BUSES - 1u),
     PS_CFG_RULE_U32(RA_JOINTS, PS_CFG_RANGE_HEX, "can_id", joint_file_t, can_id, 1.0,
                     PS_CAN_EFF_MASK),
@@ -363,6 +381,23 @@ static int check_drivers(ps_cfg_ctx_t *c, const robot_work_t *w)
                                          pairs[p].min_key, (double)pairs[p].min);
             }
         }
+        /* The dynamics: all or nothing, consistent; the message starts with the key. */
+        char why[PS_ERR_MSG_LEN];
+        if (ps_act_check_motor(&d->m, why, sizeof(why)) != 0) {
+            const char *colon = strchr(why, ':');
+            const int key_len = colon != NULL ? (int)(colon - why) : (int)strlen(why);
+            (void)snprintf(field, sizeof(field), "drivers[%u].%.*s", i, key_len, why);
+            /* an absent key has no line: the driver's entry has one */
+            char entry[PS_CFG_FIELD_PATH_LEN];
+            (void)snprintf(entry, sizeof(entry), "drivers[%u].name", i);
+            const uint32_t line = ps_cfg_line_of(c, field) ? ps_cfg_line_of(c, field)
+                                                           : ps_cfg_line_of(c, entry);
+            return ps_cfg_fail_at(c, line, field,
+                                  "%s (give all six of peak_torque_nm, rated_torque_nm, "
+                                  "rated_speed_rad_s, no_load_speed_rad_s, armature_kg_m2, "
+                                  "pd_hz, or none)",
+                                  colon != NULL ? colon + 2 : why);
+        }
     }
     return 0;
 }
@@ -377,6 +412,7 @@ static int resolve_drivers(ps_cfg_ctx_t *c, robot_work_t *w)
             d++;
         if (d < w->n_drivers) {
             w->cfg.joints[i].wire = w->drivers[d].r;
+            w->cfg.joints[i].motor = w->drivers[d].m;
             continue;
         }
         char known[PS_ERR_MSG_LEN / 2] = "";
@@ -411,6 +447,7 @@ static ps_act_cfg_t act_of(const joint_file_t *j)
         .kt_nm_a = j->kt_nm_a,
         .temp_max_c = j->temp_max_c,
         .rate_div = j->rate_div,
+        .motor = j->motor,
     };
     return a;
 }
@@ -466,6 +503,12 @@ static int check_joint_limits(ps_cfg_ctx_t *c, const robot_work_t *w, uint32_t i
         return ps_cfg_fail_field(
             c, JFIELD("torque_max_nm"), "+/-%g outside driver \"%s\" wire range [%g, %g]",
             (double)j->torque_max_nm, drv, (double)r->t_min_nm, (double)r->t_max_nm);
+    /* The drive's peak torque seen from the joint (gear ratio N multiplies torque). */
+    const float peak_joint_nm = j->motor.peak_torque_nm * j->gear_ratio;
+    if (ps_act_motor_is_modelled(&j->motor) && j->torque_max_nm > peak_joint_nm * (1.0f + 1e-6f))
+        return ps_cfg_fail_field(c, JFIELD("torque_max_nm"),
+                                 "value %g above driver \"%s\" peak torque %g at the joint",
+                                 (double)j->torque_max_nm, drv, (double)peak_joint_nm);
     if (j->kp_max_nm_rad > r->kp_max_nm_rad)
         return ps_cfg_fail_field(c, JFIELD("kp_max_nm_rad"),
                                  "value %g above driver \"%s\" kp_max_nm_rad %g",

@@ -523,6 +523,13 @@ double ps_plant_foot_min_z_m(const ps_plant_t *p)
     return foot_min_z(p);
 }
 
+void ps_plant_get_body_pos(const ps_plant_t *p, int body_idx, double out_m[3])
+{
+    const bool is_valid = body_idx >= 0 && body_idx < p->m->nbody;
+    for (int k = 0; k < 3; k++)
+        out_m[k] = is_valid ? p->d->xpos[3 * body_idx + k] : NAN;
+}
+
 void ps_plant_destroy(ps_plant_t *p)
 {
     if (p == NULL)

@@ -132,6 +132,11 @@ double ps_plant_total_mass_kg(const ps_plant_t *p);
  *  @rt RT-SAFE O(ngeom) */
 double ps_plant_foot_min_z_m(const ps_plant_t *p);
 
+/** World position of a body's frame origin (ps_plant_find_body), from the
+ *  last computed kinematics. An invalid body_idx writes NaN.
+ *  @units m  @rt RT-SAFE O(1) */
+void ps_plant_get_body_pos(const ps_plant_t *p, int body_idx, double out_m[3]);
+
 /** Safe on NULL. */
 void ps_plant_destroy(ps_plant_t *p);
 
