@@ -4,6 +4,7 @@
  * machinery: ps_config_common.h. Part of the composition root: it fills
  * sim's ps_sim_devices_cfg_t, so it includes rt/ps_config_sim.h.
  */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -152,6 +153,21 @@ static const cyaml_schema_field_t KIN_FIELDS[] = {
     CYAML_FIELD_FLOAT("fall_tilt_rad", CYAML_FLAG_DEFAULT, ps_kinematics_cfg_t, fall_tilt_rad),
     CYAML_FIELD_FLOAT("fall_com_height_m", CYAML_FLAG_DEFAULT, ps_kinematics_cfg_t,
                       fall_com_height_m),
+#define KIN_OPT(key, field)                                                                        \
+    CYAML_FIELD_FLOAT(key, CYAML_FLAG_OPTIONAL, ps_kinematics_cfg_t, field)
+    KIN_OPT("trunk_mass_kg", trunk_mass_kg),
+    KIN_OPT("trunk_com_x_m", trunk_com_x_m),
+    KIN_OPT("trunk_com_y_m", trunk_com_y_m),
+    KIN_OPT("trunk_com_z_m", trunk_com_z_m),
+    KIN_OPT("hip_mass_kg", hip_mass_kg),
+    KIN_OPT("thigh_mass_kg", thigh_mass_kg),
+    KIN_OPT("thigh_com_m", thigh_com_m),
+    KIN_OPT("shank_mass_kg", shank_mass_kg),
+    KIN_OPT("shank_com_m", shank_com_m),
+    KIN_OPT("foot_mass_kg", foot_mass_kg),
+    KIN_OPT("foot_com_x_m", foot_com_x_m),
+    KIN_OPT("foot_com_z_m", foot_com_z_m),
+#undef KIN_OPT
     CYAML_FIELD_END,
 };
 static const cyaml_schema_field_t SIM_FIELDS[] = {
@@ -290,6 +306,27 @@ static const ps_cfg_rule_t ROBOT_RANGES[] = {
                     cfg.kin.fall_tilt_rad, 0.0, 1.5708),
     PS_CFG_RULE_F32(0, 0, "kinematics.fall_com_height_m", robot_work_t, cfg.kin.fall_com_height_m,
                     0.0, 3.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.trunk_mass_kg", robot_work_t, cfg.kin.trunk_mass_kg, 0.0,
+                    1000.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.trunk_com_x_m", robot_work_t, cfg.kin.trunk_com_x_m, -1.0,
+                    1.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.trunk_com_y_m", robot_work_t, cfg.kin.trunk_com_y_m, -1.0,
+                    1.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.trunk_com_z_m", robot_work_t, cfg.kin.trunk_com_z_m, -1.0,
+                    2.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.hip_mass_kg", robot_work_t, cfg.kin.hip_mass_kg, 0.0, 100.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.thigh_mass_kg", robot_work_t, cfg.kin.thigh_mass_kg, 0.0,
+                    100.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.thigh_com_m", robot_work_t, cfg.kin.thigh_com_m, 0.0, 2.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.shank_mass_kg", robot_work_t, cfg.kin.shank_mass_kg, 0.0,
+                    100.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.shank_com_m", robot_work_t, cfg.kin.shank_com_m, 0.0, 2.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.foot_mass_kg", robot_work_t, cfg.kin.foot_mass_kg, 0.0,
+                    100.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.foot_com_x_m", robot_work_t, cfg.kin.foot_com_x_m, -1.0,
+                    1.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.foot_com_z_m", robot_work_t, cfg.kin.foot_com_z_m, -1.0,
+                    1.0),
     PS_CFG_RULE_F32(0, 0, "sim.gyro_noise_rad_s", robot_work_t, cfg.sim.gyro_noise_rad_s, 0.0, 1.0),
     PS_CFG_RULE_F32(0, 0, "sim.gyro_bias_rad_s", robot_work_t, cfg.sim.gyro_bias_rad_s, 0.0, 1.0),
     PS_CFG_RULE_F32(0, 0, "sim.accel_noise_m_s2", robot_work_t, cfg.sim.accel_noise_m_s2, 0.0,
@@ -601,6 +638,18 @@ static int check_robot(ps_cfg_ctx_t *c, robot_work_t *w)
     const int trc = check_timing(c, w);
     if (trc != 0)
         return trc;
+    /* The mass model, when given, accounts for the whole mass. */
+    const ps_kinematics_cfg_t *kin = &w->cfg.kin;
+    const float parts = kin->trunk_mass_kg + 2.0f * (kin->hip_mass_kg + kin->thigh_mass_kg +
+                                                     kin->shank_mass_kg + kin->foot_mass_kg);
+    if (parts > 0.0f &&
+        (kin->trunk_mass_kg <= 0.0f || fabsf(parts - kin->mass_kg) > 0.01f * kin->mass_kg))
+        return ps_cfg_fail_field(c, "kinematics.trunk_mass_kg",
+                                 "the mass model (trunk %g + 2 x legs %g = %g kg) does not add up "
+                                 "to mass_kg %g within 1 %%",
+                                 (double)kin->trunk_mass_kg,
+                                 (double)(parts - kin->trunk_mass_kg) / 2.0, (double)parts,
+                                 (double)kin->mass_kg);
     /* Every device is sampled on every policy tick only if its divider
      * divides the number of servo ticks per policy tick. */
     const uint32_t ticks_per_policy = ctl->servo_hz / ctl->policy_hz;

@@ -20,6 +20,7 @@
 
 #include "../rt/ps_config.h"
 #include "../rt/ps_err.h"
+#include "../policy/ps_balance.h"
 #include "../policy/ps_legik.h"
 #include "../sim/ps_plant.h"
 
@@ -812,6 +813,57 @@ static void test_model_kinematics_match_convention(void **st)
     mj_deleteModel(m);
 }
 
+
+/* The mass model of robots/ps1.yaml (policy/ps_balance) against MuJoCo's
+ * whole-body CoM (subtree_com of the pelvis) in the pelvis frame, both legs
+ * moved, arms at their stance (the model lumps them into the trunk): within
+ * 2 mm in every pose. */
+static void test_ps1_mass_model_com_matches_mujoco(void **st)
+{
+    (void)st;
+    ps_robot_cfg_t r;
+    char err[PS_ERR_MSG_LEN] = "";
+    if (ps_config_load_robot(ROBOT_PATH, &r, err, sizeof(err)) != 0)
+        fail_msg("%s", err);
+    assert_true(ps_balance_has_mass_model(&r.kin));
+    mjModel *m = mj_loadXML(MODEL_PATH, NULL, err, (int)sizeof(err));
+    assert_non_null(m);
+    mjData *d = mj_makeData(m);
+    static const char *const LEG[2][6] = {
+        {"l_hip_yaw", "l_hip_roll", "l_hip_pitch", "l_knee", "l_ankle_pitch", "l_ankle_roll"},
+        {"r_hip_yaw", "r_hip_roll", "r_hip_pitch", "r_knee", "r_ankle_pitch", "r_ankle_roll"}};
+    const float POSES[][2][6] = {
+        {{0, 0, -0.28f, 0.5f, -0.25f, 0}, {0, 0, -0.28f, 0.5f, -0.25f, 0}},
+        {{0, 0, 0, 0, 0, 0}, {0, 0, 0, 0, 0, 0}},
+        {{0.3f, 0.2f, -0.7f, 1.1f, -0.3f, 0.15f}, {-0.2f, -0.3f, 0.4f, 0.2f, 0.3f, -0.2f}},
+        {{-0.4f, -0.3f, 0.5f, 0.2f, 0.4f, -0.35f}, {0, 0.3f, -1.5f, 2.0f, -0.5f, 0.1f}},
+    };
+    const int pelvis = mj_name2id(m, mjOBJ_BODY, "pelvis");
+    for (size_t n = 0; n < sizeof(POSES) / sizeof(POSES[0]); n++) {
+        mj_resetData(m, d);
+        d->qpos[2] = 1.0;
+        for (uint32_t i = 0; i < r.n_joints; i++) /* arms and waist at the stance */
+            d->qpos[m->jnt_qposadr[mj_name2id(m, mjOBJ_JOINT, r.joint_name[i])]] =
+                r.servo[i].stance_rad;
+        for (int s = 0; s < 2; s++)
+            for (int j = 0; j < 6; j++)
+                d->qpos[m->jnt_qposadr[mj_name2id(m, mjOBJ_JOINT, LEG[s][j])]] = POSES[n][s][j];
+        mj_forward(m, d);
+        ps_balance_point_t pts[PS_BALANCE_N_POINTS];
+        float com[3];
+        assert_int_equal(ps_balance_points(&r.kin, POSES[n], pts), (int)PS_BALANCE_N_POINTS);
+        assert_int_equal(ps_balance_com(pts, PS_BALANCE_N_POINTS, com), 0);
+        for (int k = 0; k < 3; k++) {
+            const double want = d->subtree_com[3 * pelvis + k] - d->xpos[3 * pelvis + k];
+            if (fabs(com[k] - want) > 0.002)
+                fail_msg("pose %zu axis %d: mass model %.4f, MuJoCo %.4f", n, k, (double)com[k],
+                         want);
+        }
+    }
+    mj_deleteData(d);
+    mj_deleteModel(m);
+}
+
 /* ---- the robot file -------------------------------------------------------- */
 
 /* The robot file against the MJCF it names, read with MuJoCo itself: every
@@ -1051,6 +1103,7 @@ int main(void)
         cmocka_unit_test(test_model_kinematics_match_convention),
         cmocka_unit_test(test_ps_config_load_robot_ps1_matches_model),
         cmocka_unit_test(test_ps1_stands_on_one_leg_2s_within_torque_limits),
+        cmocka_unit_test(test_ps1_mass_model_com_matches_mujoco),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
