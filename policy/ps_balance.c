@@ -259,3 +259,25 @@ int ps_balance_cop(const float (*point_xy)[2], const float *force_n, uint32_t n,
     out_xy[1] = y / f;
     return 0;
 }
+
+int ps_balance_com_velocity_odometry(const float com_now[3], const float com_before[3],
+                                     const float sole_now[3], const float sole_before[3],
+                                     const float gyro_rad_s[3], const float (*rot)[3], float dt_s,
+                                     float out_m_s[3])
+{
+    if (com_now == NULL || com_before == NULL || sole_now == NULL || sole_before == NULL ||
+        gyro_rad_s == NULL || rot == NULL || out_m_s == NULL || !(dt_s > 0.0f))
+        return -EINVAL;
+    const float *w = gyro_rad_s;
+    float r[3], v[3];
+    for (int a = 0; a < 3; a++)
+        r[a] = com_now[a] - sole_now[a];
+    for (int a = 0; a < 3; a++)
+        v[a] = (com_now[a] - com_before[a] - (sole_now[a] - sole_before[a])) / dt_s;
+    v[0] += w[1] * r[2] - w[2] * r[1];
+    v[1] += w[2] * r[0] - w[0] * r[2];
+    v[2] += w[0] * r[1] - w[1] * r[0];
+    for (int a = 0; a < 3; a++)
+        out_m_s[a] = rot[a][0] * v[0] + rot[a][1] * v[1] + rot[a][2] * v[2];
+    return 0;
+}

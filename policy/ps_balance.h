@@ -66,6 +66,20 @@ int ps_balance_com(const ps_balance_point_t *pts, uint32_t n, float out_com_m[3]
 int ps_balance_momentum(const ps_balance_point_t *now, const ps_balance_point_t *before,
                         uint32_t n, float dt_s, float out_p[3], float out_l[3]);
 
+/** CoM velocity over the ground by leg odometry: a sole that stays on the
+ *  ground is the fixed point. With c and f the CoM and that sole in the
+ *  trunk frame now and dt_s before, and w the trunk's angular velocity
+ *  (gyro), the CoM moves relative to the sole at
+ *    v = (c - c_before)/dt - (f - f_before)/dt + w x (c - f)
+ *  in the trunk frame; out = R v with R the trunk's orientation in the
+ *  ground frame. Unlike differencing ground-frame positions, it does not
+ *  differentiate the tilt estimate (which a push's acceleration disturbs).
+ *  @return 0 | -EINVAL NULL or dt <= 0  @units m, rad/s, s, m/s  @rt RT-SAFE */
+int ps_balance_com_velocity_odometry(const float com_now[3], const float com_before[3],
+                                     const float sole_now[3], const float sole_before[3],
+                                     const float gyro_rad_s[3], const float (*rot)[3], float dt_s,
+                                     float out_m_s[3]);
+
 /** Capture point (instantaneous, LIPM) of a CoM at com_m (z: height above the
  *  ground) moving at vel_m_s: xi = c_xy + v_xy / sqrt(g / z).
  *  @return 0 | -EINVAL (NULL, z or g <= 0, not finite)  @units m, m/s, m/s^2

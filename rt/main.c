@@ -55,6 +55,8 @@ typedef struct {
     bool is_trace;            /**< trace_marker points */
     const char *candump_path; /**< --candump: every frame as a candump -L line */
     const char *replay_path;  /**< --replay: buses fed from this candump -L log */
+    const char *policy;       /**< --policy: the controller in the policy slot */
+    const char *weights;      /**< --weights: the MLP's policy file */
     unsigned hist_us;         /**< wake-up histogram buckets (cyclictest -h N) */
 } options_t;
 
@@ -98,6 +100,12 @@ static const char USAGE[] =
     "                        (default robots/ps1.yaml)\n"
     "  --scenario FILE       simulation scenario: operator events, pushes, faults\n"
     "                        (default scenarios/stand.yaml on board sim)\n"
+    "  --policy NAME         the controller in the policy slot: stand (ankle\n"
+    "                        strategy), capture (capture-point stepping) or mlp\n"
+    "                        (the trained policy, capture as its fallback)\n"
+    "                        (default: the robot file's policy.controller, else stand)\n"
+    "  --weights FILE        --policy mlp: the policy file (safetensors with its\n"
+    "                        contract; default: the robot file's policy.weights)\n"
     "  --duration S          run S seconds of loop time, then stop through damping\n"
     "                        (default: the scenario's duration_s; 0 = until Ctrl-C)\n"
     "  --lockstep            simulation only: no real-time pacing; loop and plant\n"
@@ -174,7 +182,9 @@ static int parse_options(int argc, char **argv, options_t *o)
         O_TRACE,
         O_HIST_US,
         O_CANDUMP,
-        O_REPLAY
+        O_REPLAY,
+        O_POLICY,
+        O_WEIGHTS
     };
     static const struct option LONG[] = {
         {"board", required_argument, NULL, 'b'},
@@ -192,6 +202,8 @@ static int parse_options(int argc, char **argv, options_t *o)
         {"hist-us", required_argument, NULL, O_HIST_US},
         {"candump", required_argument, NULL, O_CANDUMP},
         {"replay", required_argument, NULL, O_REPLAY},
+        {"policy", required_argument, NULL, O_POLICY},
+        {"weights", required_argument, NULL, O_WEIGHTS},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
@@ -241,6 +253,17 @@ static int parse_options(int argc, char **argv, options_t *o)
             break;
         case O_REPLAY:
             o->replay_path = optarg;
+            break;
+        case O_POLICY:
+            if (ps_config_policy_find(optarg) < 0) {
+                fprintf(stderr, "pushstep: --policy: \"%s\" is not one of %s\n", optarg,
+                        PS_CONFIG_POLICY_NAMES);
+                return -EINVAL;
+            }
+            o->policy = optarg;
+            break;
+        case O_WEIGHTS:
+            o->weights = optarg;
             break;
         case O_OUT:
             o->out_dir = optarg;
@@ -719,6 +742,8 @@ int main(int argc, char **argv)
         .trace = g.opt.is_trace ? &g.trace : NULL,
         .frame_ring = g.frames.ring,
         .replay_path = g.opt.replay_path,
+        .policy = g.opt.policy,
+        .weights = g.opt.weights,
     };
     ps_trace_init(&g.trace);
     if (g.opt.is_trace && ps_trace_open(&g.trace, NULL, err, sizeof(err)) < 0) {

@@ -4,7 +4,8 @@
  * buses, wires the ports of the board's kind (the simulated plant for `sim`;
  * SocketCAN and libgpiod for `linux`, each interface checked first; with
  * replay_path, on any board, ports fed from a candump log:
- * drivers/ps_can_replay.h), the policy slot (standing controller), the
+ * drivers/ps_can_replay.h), the policy slot (standing, capture-point or
+ * trained MLP controller, from the robot file or the command line), the
  * record ring and the loop. main() and the end-to-end tests both start the
  * system through here. It is the composition root (with rt/main.c and the
  * config loader): the only application code that includes sim/
@@ -23,7 +24,10 @@
 #include "../drivers/ps_can_socket.h"
 #include "../drivers/ps_canbus.h"
 #include "../drivers/ps_gpio_gpiod.h"
+#include "../policy/ps_capture.h"
+#include "../policy/ps_mlp_policy.h"
 #include "../policy/ps_stand.h"
+#include "../policy/ps_weights.h"
 #include "../sim/ps_sim.h"
 #include "ps_config.h"
 #include "ps_config_sim.h"
@@ -45,6 +49,11 @@ typedef struct {
     /** --replay: buses fed from this candump -L log, its clock, no GPIO, no
      *  plant (any board); NULL: off */
     const char *replay_path;
+    /** The policy slot's controller: "stand", "capture" or "mlp"; NULL: the
+     *  robot file's `policy.controller`, else "stand" */
+    const char *policy;
+    /** "mlp": the policy file; NULL: the robot file's `policy.weights` */
+    const char *weights;
 } ps_app_opts_t;
 
 typedef struct {
@@ -69,6 +78,11 @@ typedef struct {
     bool is_replay;
     char notes[512]; /**< what start-up did not check (virtual CAN interfaces) */
     ps_stand_t stand;
+    ps_capture_t capture;
+    ps_weights_t weights;
+    ps_mlp_policy_t mlp;
+    char policy_name[PS_NAME_LEN];     /**< the controller in the slot */
+    char weights_path[PATH_MAX];       /**< "mlp": its policy file */
     ps_ring_t ring;
     ps_loop_rec_t ring_storage[PS_APP_RING_SLOTS];
     ps_loop_t loop;

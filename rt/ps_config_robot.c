@@ -53,6 +53,11 @@ typedef struct {
 } joint_file_t;
 
 typedef struct {
+    char controller[PS_NAME_LEN];
+    char weights[PS_PATH_LEN];
+} policy_file_t;
+
+typedef struct {
     char name[PS_NAME_LEN];
     char model[PS_PATH_LEN];
     control_file_t control;
@@ -61,6 +66,7 @@ typedef struct {
     ps_imu_cfg_t imu;
     ps_kinematics_cfg_t kin;
     ps_sim_devices_cfg_t sim;
+    policy_file_t policy;
 } robot_file_t;
 
 typedef struct {
@@ -76,6 +82,7 @@ typedef struct {
     ps_imu_cfg_t imu;
     ps_kinematics_cfg_t kin;
     ps_sim_devices_cfg_t sim;
+    policy_file_t *policy; /* optional */
     driver_raw_t *drivers;
     uint32_t n_drivers;
     joint_raw_t *joints;
@@ -236,6 +243,11 @@ static const cyaml_schema_field_t JOINT_FIELDS[] = {
 static const cyaml_schema_value_t JOINT_SCHEMA = {
     CYAML_VALUE_MAPPING(CYAML_FLAG_DEFAULT, joint_raw_t, JOINT_FIELDS),
 };
+static const cyaml_schema_field_t POLICY_FIELDS[] = {
+    CYAML_FIELD_STRING("controller", CYAML_FLAG_DEFAULT, policy_file_t, controller, 1),
+    CYAML_FIELD_STRING("weights", CYAML_FLAG_OPTIONAL, policy_file_t, weights, 1),
+    CYAML_FIELD_END,
+};
 static const cyaml_schema_field_t ROBOT_FIELDS[] = {
     CYAML_FIELD_STRING("name", CYAML_FLAG_DEFAULT, robot_raw_t, name, 1),
     CYAML_FIELD_STRING("model", CYAML_FLAG_DEFAULT, robot_raw_t, model, 1),
@@ -243,6 +255,8 @@ static const cyaml_schema_field_t ROBOT_FIELDS[] = {
     CYAML_FIELD_MAPPING("imu", CYAML_FLAG_DEFAULT, robot_raw_t, imu, IMU_FIELDS),
     CYAML_FIELD_MAPPING("kinematics", CYAML_FLAG_DEFAULT, robot_raw_t, kin, KIN_FIELDS),
     CYAML_FIELD_MAPPING("sim", CYAML_FLAG_DEFAULT, robot_raw_t, sim, SIM_FIELDS),
+    CYAML_FIELD_MAPPING_PTR("policy", CYAML_FLAG_POINTER | CYAML_FLAG_OPTIONAL, robot_raw_t,
+                            policy, POLICY_FIELDS),
     CYAML_FIELD_SEQUENCE_COUNT("drivers", CYAML_FLAG_POINTER, robot_raw_t, drivers, n_drivers,
                                &DRIVER_SCHEMA, 1, MAX_DRIVERS),
     CYAML_FIELD_SEQUENCE_COUNT("joints", CYAML_FLAG_POINTER, robot_raw_t, joints, n_joints,
@@ -638,6 +652,13 @@ static int check_robot(ps_cfg_ctx_t *c, robot_work_t *w)
     const int trc = check_timing(c, w);
     if (trc != 0)
         return trc;
+    const policy_file_t *pol = &w->cfg.policy;
+    if (pol->controller[0] != '\0' && ps_config_policy_find(pol->controller) < 0)
+        return ps_cfg_fail_field(c, "policy.controller", "\"%s\" is not one of %s",
+                                 pol->controller, PS_CONFIG_POLICY_NAMES);
+    if (strcmp(pol->controller, "mlp") == 0 && pol->weights[0] == '\0')
+        return ps_cfg_fail_field(c, "policy.weights",
+                                 "controller mlp needs a policy file (weights: PATH)");
     /* The mass model, when given, accounts for the whole mass. */
     const ps_kinematics_cfg_t *kin = &w->cfg.kin;
     const float parts = kin->trunk_mass_kg + 2.0f * (kin->hip_mass_kg + kin->thigh_mass_kg +
@@ -750,6 +771,17 @@ static void compose_robot(const robot_file_t *f, ps_robot_cfg_t *out)
     }
     out->imu = f->imu;
     out->kin = f->kin;
+    memcpy(out->policy, f->policy.controller, sizeof(out->policy));
+    memcpy(out->policy_weights, f->policy.weights, sizeof(out->policy_weights));
+}
+
+int ps_config_policy_find(const char *name)
+{
+    static const char *const NAMES[] = {"stand", "capture", "mlp"};
+    for (int i = 0; name != NULL && i < 3; i++)
+        if (strcmp(name, NAMES[i]) == 0)
+            return i;
+    return -ENOENT;
 }
 
 /* Where the fields that other files refer to are (ps_config_check_pair). */
@@ -803,6 +835,8 @@ static int load_robot_file(const char *path, ps_robot_cfg_t *out, ps_sim_devices
         r->imu = raw->imu;
         r->kin = raw->kin;
         r->sim = raw->sim;
+        if (raw->policy != NULL)
+            r->policy = *raw->policy;
         w->n_drivers = raw->n_drivers; /* libcyaml enforced the maxima */
         memcpy(w->drivers, raw->drivers, raw->n_drivers * sizeof(w->drivers[0]));
         r->n_joints = raw->n_joints;
