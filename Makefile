@@ -16,9 +16,13 @@ TOOL_PKGS  := g++ rt-tests can-utils
 # What `make test` needs beyond building: can-utils' log2long reads the
 # candump-format lines the runtime writes (tests/test_candump.c); the policy
 # tools' tests (policy/train/test_tools.py) run the ONNX importer.
-TEST_PKGS  := can-utils python3 python3-numpy python3-onnx python3-hypothesis
-# Extra packages `make bench` needs: load generator, plots, the analysis script.
-BENCH_PKGS := stress-ng gnuplot-nox python3
+TEST_PKGS  := can-utils python3 python3-numpy python3-onnx python3-hypothesis python3-torch \
+              python3-yaml python3-tqdm
+# Extra packages `make bench` needs: load generator, plots, the analysis script,
+# GNU parallel for the push-recovery grid (bench/push.py).
+BENCH_PKGS := stress-ng gnuplot-nox python3 parallel
+# What `make train` needs (policy/train/, never at run time).
+TRAIN_PKGS := python3 python3-torch python3-numpy python3-yaml python3-tqdm gnuplot-nox
 
 WARN    := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototypes
 CFLAGS  ?= -O2 -g
@@ -48,7 +52,7 @@ HW_SRCS := $(wildcard tests/hw/test_hw_*.c)
 HW_BINS := $(patsubst tests/hw/%.c,$(BUILD)/tests/hw/%,$(HW_SRCS))
 QEMU_WORK ?= $(BUILD)/qemu
 
-.PHONY: all deps deps-build deps-test deps-bench run test test-hw clean format help bench bench-hw
+.PHONY: all deps deps-build deps-test deps-bench deps-train run test test-hw clean format help bench bench-hw train
 all: $(BUILD)/pushstep
 
 help:
@@ -66,6 +70,8 @@ help:
 	@echo "             bench/results/*.json and summary.md (see docs/latency.md)"
 	@echo "make bench-hw the real drivers' figures in the test VM (e-stop reaction,"
 	@echo "             loop reaction, frames per bus): bench/results/hw.json"
+	@echo "make train   train the balance policy on the C environment (CPU, 2 cores,"
+	@echo "             seeded): policy/weights/ps1_stage1.safetensors, $(BUILD)/train/"
 	@echo "make format  clang-format every C source in place"
 	@echo "make clean   remove $(BUILD)/"
 
@@ -81,6 +87,9 @@ deps-test: deps-build
 deps-bench: deps
 	@bash tools/deps.sh $(BENCH_PKGS)
 
+deps-train: deps-build
+	@bash tools/deps.sh $(TRAIN_PKGS)
+
 $(BUILD)/obj/%.o: %.c
 	@mkdir -p $(@D)
 	$(CC) $(CFLAGS) -c $< -o $@
@@ -91,7 +100,17 @@ $(BUILD)/san/%.o: %.c
 
 # The inference engine's axpy loops vectorise at -O3; GCC 12's -O2 cost model
 # leaves them scalar (docs/policy.md): only this file.
-$(BUILD)/obj/policy/ps_mlp.o $(BUILD)/san/policy/ps_mlp.o: CFLAGS += -O3
+$(BUILD)/obj/policy/ps_mlp.o $(BUILD)/san/policy/ps_mlp.o $(BUILD)/pic/policy/ps_mlp.o: CFLAGS += -O3
+
+# The training environment (tools/psenv, docs/policy.md): the runtime's
+# sources built position-independent into one library for ctypes.
+PIC_OBJS := $(patsubst %.c,$(BUILD)/pic/%.o,$(LIB_SRCS) tools/psenv/ps_env.c)
+$(BUILD)/pic/%.o: %.c
+	@mkdir -p $(@D)
+	$(CC) $(CFLAGS) -fPIC -c $< -o $@
+
+$(BUILD)/libpsenv.so: $(PIC_OBJS)
+	$(CC) $(CFLAGS) -shared -o $@ $^ $(LDLIBS)
 
 $(BUILD)/pushstep: $(call OBJ,$(MAIN_SRC)) $(LIB_OBJS)
 	$(CC) $(CFLAGS) -o $@ $^ $(LDLIBS)
@@ -111,9 +130,10 @@ $(HW_BINS): $(BUILD)/tests/hw/%: $(BUILD)/obj/tests/hw/%.o $(LIB_OBJS) $(FAKE_OB
 run: deps-build $(BUILD)/pushstep
 	$(BUILD)/pushstep --board sim $(ARGS)
 
-test: deps-test $(BUILD)/pushstep $(TEST_BINS) $(HW_BINS)
+test: deps-test $(BUILD)/pushstep $(BUILD)/libpsenv.so $(TEST_BINS) $(HW_BINS)
 	@PUSHSTEP_BIN=$(BUILD)/pushstep QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh \
-	    tools/check-layers.sh $(TEST_BINS) policy/train/test_tools.py tools/qemu/test-hw.sh
+	    tools/check-layers.sh $(TEST_BINS) policy/train/test_tools.py tests/test_train_smoke.sh \
+	    tools/qemu/test-hw.sh
 
 test-hw: deps-test $(BUILD)/pushstep $(HW_BINS)
 	@PUSHSTEP_BIN=$(BUILD)/pushstep QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh tools/qemu/test-hw.sh
@@ -121,6 +141,13 @@ test-hw: deps-test $(BUILD)/pushstep $(HW_BINS)
 bench: deps-bench $(BUILD)/pushstep
 	@bash bench/run.sh
 	@QEMU_WORK=$(QEMU_WORK) bash bench/hw.sh
+
+# The shipped policy, reproduced (docs/policy.md): seeded, on the CPUs. The
+# command and seed are written into the policy file's contract.
+TRAIN_ARGS ?= --seed 1 --envs 16 --threads 2 --steps 64 --bc-iters 60 --ppo-iters 1500
+train: deps-train $(BUILD)/pushstep $(BUILD)/libpsenv.so
+	/usr/bin/python3 policy/train/train.py $(TRAIN_ARGS) --out policy/weights/ps1_stage1.safetensors \
+	    --log-dir $(BUILD)/train
 
 bench-hw: deps-test $(BUILD)/pushstep
 	@QEMU_WORK=$(QEMU_WORK) bash bench/hw.sh
@@ -131,4 +158,4 @@ format:
 clean:
 	rm -rf $(BUILD)
 
--include $(shell find $(BUILD)/obj $(BUILD)/san -name '*.d' -type f 2>/dev/null)
+-include $(shell find $(BUILD)/obj $(BUILD)/san $(BUILD)/pic -name '*.d' -type f 2>/dev/null)

@@ -8,7 +8,8 @@
 #include "ps_legik.h"
 #include "ps_stand.h"
 
-#define VEL_TAU_S 0.03f /* CoM velocity low-pass time constant */
+#define VEL_TAU_S       0.03f /* CoM velocity low-pass time constant */
+#define HEIGHT_RATE_M_S 0.1f  /* fastest change of the pelvis height target */
 
 static const char *const LEG[2][PS_LEG_N_JOINTS] = {
     {"l_hip_yaw", "l_hip_roll", "l_hip_pitch", "l_knee", "l_ankle_pitch", "l_ankle_roll"},
@@ -361,6 +362,13 @@ static int capture_step(void *ctx, const ps_meas_t *meas, const ps_estimate_t *e
                 feet[s][2] + c->kin.ankle_height_m + h_max + c->kin.hip_offset_z_m;
             pelvis[2] = fminf(pelvis[2], z_max);
         }
+        /* The height moves toward its target at most HEIGHT_RATE_M_S (no
+         * jump from the stance to the crouch, which would itself step). */
+        if (!(c->height_cmd_m > 0.0f))
+            c->height_cmd_m = est->pelvis_m[2];
+        const float dh = HEIGHT_RATE_M_S * c->dt_s;
+        c->height_cmd_m += clampf(pelvis[2] - c->height_cmd_m, -dh, dh);
+        pelvis[2] = c->height_cmd_m;
         if (legs_ik(c, (const float(*)[3])feet, fyaw, pelvis, heading, &t) != 0)
             stance_targets(c, &t);
         /* Ankle strategy (ps_stand's signs) on the feet that carry weight. */
@@ -395,6 +403,7 @@ static void capture_reset(void *ctx)
     c->phase = PS_CAPTURE_STAND;
     c->t_phase_s = 0.0f;
     c->has_prev = false;
+    c->height_cmd_m = 0.0f; /* from the measured height at the next step */
 }
 
 static const ps_policy_ops_t CAPTURE_OPS = {

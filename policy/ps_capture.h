@@ -80,7 +80,8 @@ typedef struct {
     float bos_margin_m;      /**< xi's signed distance to the BoS (> 0 inside) */
     float prev_com_m[3], prev_feet_m[2][3]; /**< trunk frame, for the odometry */
     bool prev_contact[2], has_prev;
-    bool was_out; /**< xi was outside the shrunk BoS at the last tick */
+    bool was_out;       /**< xi was outside the shrunk BoS at the last tick */
+    float height_cmd_m; /**< pelvis height target, rate-limited; 0: take the measured */
     uint32_t n_steps; /**< steps started since init */
 } ps_capture_t;
 
