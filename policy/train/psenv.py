@@ -35,6 +35,7 @@ class Env:
         L.ps_env_step.argtypes = [ctypes.c_void_p] + [ctypes.POINTER(ctypes.c_float)] * 3 + [
             ctypes.POINTER(ctypes.c_uint8)] + [ctypes.POINTER(ctypes.c_float)] * 2
         L.ps_env_destroy.argtypes = [ctypes.c_void_p]
+        L.ps_env_set_push_dv_max.argtypes = [ctypes.c_void_p, ctypes.c_float]
         cfg = EnvCfg(n_envs, n_threads, seed, episode_s, push_dv_max, int(dr), 1)
         err = ctypes.create_string_buffer(1024)
         h = ctypes.c_void_p()
@@ -67,6 +68,9 @@ class Env:
             raise RuntimeError("ps_env_step: %d" % rc)
         return self.obs.copy(), self.rew.copy(), self.done.astype(bool), self.expert.copy(), \
             self.info.copy()
+
+    def set_push_dv_max(self, dv):
+        self.lib.ps_env_set_push_dv_max(self.h, float(dv))
 
     def close(self):
         if self.h:

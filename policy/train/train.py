@@ -175,7 +175,10 @@ def main():
     ap.add_argument("--ppo-iters", type=int, default=300)
     ap.add_argument("--hidden", default="128,128")
     ap.add_argument("--lr", type=float, default=3e-4)
-    ap.add_argument("--push-dv-max", type=float, default=0.8)
+    ap.add_argument("--push-dv-max", type=float, default=0.8,
+                    help="largest push at the end of the curriculum (m/s)")
+    ap.add_argument("--push-dv-start", type=float, default=0.3,
+                    help="largest push at the start; grows linearly over 70 %% of the run")
     ap.add_argument("--out", default=os.path.join(HERE, "..", "weights", "ps1_stage1.safetensors"))
     ap.add_argument("--log-dir", default=os.path.join(psenv.ROOT, "build", "train"))
     ap.add_argument("--no-dr", action="store_true", help="no domain randomisation")
@@ -187,7 +190,8 @@ def main():
     rng = np.random.default_rng(a.seed)
     hidden = [int(x) for x in a.hidden.split(",")]
     doc = ct.robot()
-    env = psenv.Env(a.envs, a.threads, seed=a.seed, push_dv_max=a.push_dv_max, dr=not a.no_dr)
+    env = psenv.Env(a.envs, a.threads, seed=a.seed, push_dv_max=a.push_dv_start,
+                    dr=not a.no_dr)
     n_obs_contract = psfile.obs_size(ct.OBS_FIELDS, len(doc["joints"]), len(ct.LEGS))
     if env.n_obs != n_obs_contract or env.n_act != len(ct.LEGS):
         raise SystemExit("environment (%d obs, %d actions) and contract.py (%d, %d) disagree"
@@ -200,10 +204,12 @@ def main():
     logf = open(log_path, "w", newline="")
     log = csv.writer(logf)
     log.writerow(["iter", "env_steps", "phase", "mean_reward", "falls_per_episode",
-                  "episode_s", "r_balance", "r_quality", "loss", "wall_s"])
-    trained_by = ("make train: policy/train/train.py --seed %d --envs %d --bc-iters %d "
-                  "--ppo-iters %d --steps %d --hidden %s" % (a.seed, a.envs, a.bc_iters,
-                                                            a.ppo_iters, a.steps, a.hidden))
+                  "episode_s", "r_balance", "r_quality", "loss", "wall_s", "push_dv_max"])
+    trained_by = ("make train: policy/train/train.py --seed %d --envs %d --threads %d "
+                  "--bc-iters %d --ppo-iters %d --steps %d --hidden %s --push-dv-start %g "
+                  "--push-dv-max %g%s" % (a.seed, a.envs, a.threads, a.bc_iters, a.ppo_iters,
+                                          a.steps, a.hidden, a.push_dv_start, a.push_dv_max,
+                                          " --no-dr" if a.no_dr else ""))
     obs = env.reset()
     expert = np.zeros((env.n, env.n_act), np.float32)
     _, _, _, expert, _ = env.step(expert)  # the expert's first labels
@@ -215,6 +221,8 @@ def main():
     bar = tqdm(range(total), desc="train", unit="it", dynamic_ncols=True)
     for it in bar:
         is_bc = it < a.bc_iters
+        dv_max = a.push_dv_start + (a.push_dv_max - a.push_dv_start) * min(1.0, it / (0.7 * total))
+        env.set_push_dv_max(dv_max)
         beta = max(0.0, 1.0 - it / max(1, a.bc_iters * 0.75)) if is_bc else 0.0
         buf, obs, expert, last_v = rollout(env, net, norm, obs, a.steps, beta, expert, rng)
         n_env_steps += a.steps * env.n
@@ -272,7 +280,8 @@ def main():
         wall = time.time() - t0
         log.writerow([it, n_env_steps, "bc" if is_bc else "ppo", "%.4f" % st["rew"],
                       "%.3f" % st["falls_per_ep"], "%.2f" % st["ep_len_s"],
-                      "%.4f" % st["r_bal"], "%.4f" % st["r_q"], "%.4f" % loss_v, "%.1f" % wall])
+                      "%.4f" % st["r_bal"], "%.4f" % st["r_q"], "%.4f" % loss_v, "%.1f" % wall,
+                      "%.3f" % dv_max])
         logf.flush()
         bar.set_postfix(phase="bc" if is_bc else "ppo", rew="%.3f" % st["rew"],
                         falls="%.2f" % st["falls_per_ep"])

@@ -672,6 +672,12 @@ int ps_env_create(const char *robot_path, const ps_env_cfg_t *cfg, ps_env_t **ou
     return rc;
 }
 
+void ps_env_set_push_dv_max(ps_env_t *e, float dv_max_m_s)
+{
+    if (e != NULL && dv_max_m_s > 0.05f)
+        e->cfg.push_dv_max_m_s = dv_max_m_s;
+}
+
 void ps_env_destroy(ps_env_t *e)
 {
     if (e == NULL)

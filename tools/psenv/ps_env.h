@@ -78,6 +78,9 @@ int ps_env_reset(ps_env_t *e, float *obs);
 int ps_env_step(ps_env_t *e, const float *act, float *obs, float *rew, uint8_t *done,
                 float *expert, float *info);
 
+/** Curriculum: the largest push delta-v from the next episodes on. */
+void ps_env_set_push_dv_max(ps_env_t *e, float dv_max_m_s);
+
 void ps_env_destroy(ps_env_t *e);
 
 #endif /* PS_ENV_H */
