@@ -22,6 +22,7 @@ Timing is drawn from a seed made of the spec, so a trial is reproducible.
 import argparse
 import glob
 import json
+import math
 import os
 import random
 import subprocess
@@ -32,6 +33,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MASS_KG = 37.7  # robots/ps1.yaml kinematics.mass_kg (= the model's mass)
 SETTLE_S = 3.0  # harness released at 2.0 s; pushes from 3.0 s
 AFTER_S = 5.0   # success: no fall for this long after the push starts
+WEIGHTS = os.environ.get("PUSH_WEIGHTS",
+                         os.path.join(ROOT, "policy", "weights", "ps1_stage1.safetensors"))
 
 
 def spec_id(spec):
@@ -58,7 +61,6 @@ def scenario_text(spec):
     c, d, v, t, k = spec
     rng = random.Random(spec_id(spec))
     t_push = SETTLE_S + rng.uniform(0.0, 1.0)
-    import math
     f = v * MASS_KG / t
     fx, fy = f * math.cos(math.radians(d)), f * math.sin(math.radians(d))
     return t_push, f, (
@@ -79,6 +81,8 @@ def run_trial(spec, out_dir, binary):
         cmd = [binary, "--lockstep", "--quiet", "--scenario", scen, "--summary", summ]
         if spec[0] != "default":
             cmd += ["--policy", spec[0]]
+        if spec[0] == "mlp":
+            cmd += ["--weights", WEIGHTS]
         p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         if p.returncode != 0 or not os.path.exists(summ):
             sys.stderr.write("trial %s failed (%d):\n%s\n" % (spec_id(spec), p.returncode,
@@ -185,6 +189,34 @@ def table_md(doc):
     return "\n".join(lines) + "\n"
 
 
+def plot(doc, out_png, duration):
+    """Polar plot of dv50 per direction, one curve per controller (gnuplot)."""
+    import shutil
+    if shutil.which("gnuplot") is None:
+        return False
+    data = []
+    d50 = doc["dv50"]
+    ctls = sorted(d50)
+    for ctl in ctls:
+        pts = d50[ctl].get("%.1f" % duration, {})
+        rows = sorted((float(k), v) for k, v in pts.items())
+        rows.append(rows[0]) if rows else None  # close the curve
+        path = out_png + "." + ctl + ".dat"
+        with open(path, "w") as fh:
+            for d, v in rows:
+                fh.write("%g %g\n" % (d * math.pi / 180.0, v))
+        data.append((ctl, path))
+    plots = ", ".join("'%s' using 1:2 with linespoints title '%s'" % (p, c) for c, p in data)
+    script = ("set terminal png size 700,700; set output '%s'; set polar; set size square;"
+              "set title 'dv50 (m/s) per push direction, %.1f s pushes (0 deg = forward)';"
+              "set grid polar; unset border; unset xtics; unset ytics; set rrange [0:0.9];"
+              "plot %s" % (out_png, duration, plots))
+    ok = subprocess.run(["gnuplot", "-e", script]).returncode == 0
+    for _, p in data:
+        os.remove(p)
+    return ok
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -204,6 +236,9 @@ def main():
     m.add_argument("--out", required=True)
     tb = sub.add_parser("table")
     tb.add_argument("file")
+    pl = sub.add_parser("plot")
+    pl.add_argument("file")
+    pl.add_argument("--out", required=True, help="PNG; one per push duration: NAME_0.1s.png")
     a = ap.parse_args()
     if a.cmd == "jobs":
         for spec in grid(a.controllers.split(","), a.directions,
@@ -219,6 +254,11 @@ def main():
         return 0
     if a.cmd == "table":
         sys.stdout.write(table_md(json.load(open(a.file))))
+        return 0
+    if a.cmd == "plot":
+        doc = json.load(open(a.file))
+        for dur in sorted({c["duration_s"] for c in doc["cells"]}):
+            plot(doc, a.out.replace(".png", "_%.1fs.png" % dur), dur)
         return 0
     return 2
 

@@ -146,7 +146,16 @@ int ps_mlp_init(ps_mlp_t *m, const ps_mlp_desc_t *d, float *arena, size_t n_floa
 
 /* y += W^T x: for each input, an axpy over the outputs. restrict and the
  * unit stride let GCC vectorise the inner loop; every y[o] is summed in
- * input order, as the scalar loop would. */
+ * input order, as the scalar loop would (no FMA contraction in ISO C mode),
+ * so each clone gives the same result. On x86-64 GCC builds clones for
+ * AVX-512 and AVX2 and picks one at load time (ifunc); elsewhere (aarch64:
+ * NEON is the baseline) the one portable version. */
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__SANITIZE_ADDRESS__)
+#define PS_MLP_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
+#else
+#define PS_MLP_CLONES
+#endif
+PS_MLP_CLONES
 static void dense_acc(const ps_mlp_dense_t *l, const float *restrict x, float *restrict y)
 {
     const uint32_t n_out = l->n_out;

@@ -650,6 +650,9 @@ static void finish_summary(ps_summary_t *sum)
         sum->truth_plant_err = t.plant_err;
         sum->truth_plant_err_reason = t.plant_err_reason;
         sum->truth_plant_err_t_s = t.plant_err_t_s;
+        sum->truth_heading_dev_deg = t.heading_dev_max_rad * 180.0 / 3.14159265358979;
+        sum->truth_foot_slide_m = t.foot_slide_m;
+        sum->truth_kinetic_max_j = t.kinetic_energy_max_j;
     }
 }
 

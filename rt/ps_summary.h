@@ -45,6 +45,9 @@ typedef struct {
     int truth_plant_err;                /**< 0, or the plant's first step error */
     const char *truth_plant_err_reason; /**< why, NULL: none */
     double truth_plant_err_t_s;         /**< simulated time of it since start */
+    double truth_heading_dev_deg;       /**< largest heading change of the base */
+    double truth_foot_slide_m;          /**< feet's travel while carrying weight */
+    double truth_kinetic_max_j;         /**< largest kinetic energy */
 } ps_summary_t;
 
 /** @return 0 | -EIO (err says why)  @rt NON-RT */

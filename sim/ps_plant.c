@@ -13,6 +13,7 @@
 /* Harness gains: a gantry holding the limp 38 kg robot. 343 N of weight on
  * 20 kN/m sags 1.7 cm at worst; the damping is near critical for the whole
  * body on the translational spring (2*sqrt(k*m) = 1.7 kN s/m). */
+#define PS_PLANT_MAX_NV 4096u /* kinetic energy's scratch */
 #define HARNESS_K_N_M      20000.0
 #define HARNESS_C_N_S_M    1500.0
 #define HARNESS_K_NM_RAD   1500.0
@@ -584,8 +585,13 @@ void ps_plant_get_root(const ps_plant_t *p, double out_pos_m[3], double out_quat
 
 double ps_plant_kinetic_energy_j(ps_plant_t *p)
 {
-    mj_energyVel(p->m, p->d);
-    return p->d->energy[1];
+    /* 0.5 qvel' M qvel with the last step's inertia matrix (mj_energyVel
+     * leaves 0 unless the model enables energy). */
+    mjtNum mv[PS_PLANT_MAX_NV];
+    if (p->m->nv > (int)PS_PLANT_MAX_NV)
+        return NAN;
+    mj_mulM(p->m, p->d, mv, p->d->qvel);
+    return 0.5 * mju_dot(p->d->qvel, mv, p->m->nv);
 }
 
 void ps_plant_scale_body_mass(ps_plant_t *p, int body_idx, double factor,

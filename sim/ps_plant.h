@@ -151,8 +151,8 @@ int ps_plant_get_feet_contact(const ps_plant_t *p, double out_force_n[2],
 void ps_plant_get_root(const ps_plant_t *p, double out_pos_m[3], double out_quat[4],
                        double out_vel_m_s[3]);
 
-/** Kinetic energy of the whole model (MuJoCo's mj_energyVel).
- *  @units J  @rt RT-SAFE O(nv^2) */
+/** Kinetic energy of the whole model (crowd included), 0.5 qvel' M qvel;
+ *  NaN beyond 4096 degrees of freedom.  @units J  @rt RT-SAFE O(nv^2) */
 double ps_plant_kinetic_energy_j(ps_plant_t *p);
 
 /** Domain randomisation (training only): scale the mass and inertia of a
