@@ -20,7 +20,7 @@ TEST_PKGS  := can-utils python3 python3-numpy python3-onnx python3-hypothesis py
               python3-yaml python3-tqdm
 # Extra packages `make bench` needs: load generator, plots, the analysis script,
 # GNU parallel for the push-recovery grid (bench/push.py).
-BENCH_PKGS := stress-ng gnuplot-nox python3 parallel
+BENCH_PKGS := stress-ng gnuplot-nox python3 parallel libopenblas-dev libtorch-dev
 # What `make train` needs (policy/train/, never at run time).
 TRAIN_PKGS := python3 python3-torch python3-numpy python3-yaml python3-tqdm gnuplot-nox
 
@@ -66,7 +66,8 @@ help:
 	@echo "             (skipped with a message where qemu cannot be installed)"
 	@echo "make test-hw the real drivers (SocketCAN, libgpiod) in a Debian kernel"
 	@echo "             booted under qemu with vcan, vxcan and gpio-mockup"
-	@echo "make bench   latency beside cyclictest, tick share, bus load, allocations:"
+	@echo "make bench   latency beside cyclictest, tick share, bus load, allocations,"
+	@echo "             policy inference and the push-recovery grid (docs/policy.md):"
 	@echo "             bench/results/*.json and summary.md (see docs/latency.md)"
 	@echo "make bench-hw the real drivers' figures in the test VM (e-stop reaction,"
 	@echo "             loop reaction, frames per bus): bench/results/hw.json"
@@ -140,6 +141,7 @@ test-hw: deps-test $(BUILD)/pushstep $(HW_BINS)
 
 bench: deps-bench $(BUILD)/pushstep
 	@bash bench/run.sh
+	@bash bench/policy.sh
 	@QEMU_WORK=$(QEMU_WORK) bash bench/hw.sh
 
 # The shipped policy, reproduced (docs/policy.md): seeded, on the CPUs. The
