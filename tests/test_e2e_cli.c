@@ -340,10 +340,15 @@ static void test_cli_realtime_run_paced_in_real_time(void **state)
     if (rc != 0)
         fail_msg("exit %d:\n%s", rc, out);
     cJSON *j = read_json(path);
-    /* 2 s, then damping (at most damping_s = 2 s) at 1 kHz, in wall time */
-    double ticks = num(j, "ticks"), wall_s = num(j, "wall_s");
-    assert_true(ticks >= 2000 && ticks <= 4100);
-    assert_true(wall_s >= ticks / 1000.0 - 0.05 && wall_s <= ticks / 1000.0 + 0.5);
+    /* 2 s, then damping (at most damping_s = 2 s) at 1 kHz, in wall time.
+     * Periods a loaded host took from the loop are skipped, not run late
+     * (missed_deadlines): the schedule, ticks and skips together, is what
+     * follows the wall clock. */
+    const double ticks = num(j, "ticks"), wall_s = num(j, "wall_s");
+    const double periods = ticks + num(j, "missed_deadlines");
+    if (!(periods >= 2000 && periods <= 4100 && wall_s >= periods / 1000.0 - 0.05 &&
+          wall_s <= periods / 1000.0 + 0.5))
+        fail_msg("%.0f ticks + skipped = %.0f periods in %.3f s wall", ticks, periods, wall_s);
     assert_true(num(obj(obj(j, "latency"), "wake"), "n") == ticks);
     /* The loop thread after init, in real time: nothing allocated, freed,
      * faulted in or locked. */
@@ -653,6 +658,33 @@ typedef struct {
     const char *must_not; /**< one it must not have, or NULL */
 } sig_case_t;
 
+/* Whether process pid blocks signal sig (its SigBlk mask in /proc). */
+static bool blocks_signal(pid_t pid, int sig)
+{
+    char path[64], line[256];
+    snprintf(path, sizeof(path), "/proc/%d/status", (int)pid);
+    FILE *f = fopen(path, "r");
+    if (f == NULL)
+        return false;
+    unsigned long long mask = 0;
+    bool is_found = false;
+    while (!is_found && fgets(line, sizeof(line), f) != NULL)
+        is_found = sscanf(line, "SigBlk: %llx", &mask) == 1;
+    fclose(f);
+    return is_found && (mask & (1ull << (sig - 1))) != 0;
+}
+
+/* A start-up e-stop, or a ramp ended by a fault rather than by a stop
+ * request (the signal). */
+static bool has_startup_fault(const char *text)
+{
+    static const char ramp_end[] = "RAMP -> DAMPING (";
+    for (const char *p = strstr(text, ramp_end); p != NULL; p = strstr(p + 1, ramp_end))
+        if (strncmp(p + strlen(ramp_end), "REQ_STOP", 8) != 0)
+            return true;
+    return strstr(text, "STANDBY -> ESTOP") != NULL;
+}
+
 /* Spawn pushstep directly (no shell between: a signal to a `sh -c` wrapper
  * never reaches the program), read its line-buffered output until the
  * trigger, send sig, and wait for it to exit. Returns the exit status
@@ -681,17 +713,21 @@ static int run_signalled(const sig_case_t *c, int sig, const char *summary, doub
     const double t0 = mono_s();
     double t_sig = -1;
     bool is_eof = false;
-    if (c->trigger == NULL)
-        t_sig = t0 + c->delay_s;
     while (!is_eof && mono_s() - t0 < SIG_DURATION_S + 10) {
-        if (t_sig < 0 && strstr(out, c->trigger) != NULL)
+        /* Start-up begins when main has blocked the signal (its first
+         * step): before that the process is still being loaded (a loaded
+         * host can take longer than delay_s) and the default action, not
+         * pushstep, would handle it. Output also shows main runs. */
+        if (t_sig < 0 && c->trigger == NULL && (blocks_signal(pid, sig) || n > 0))
+            t_sig = mono_s() + c->delay_s;
+        if (t_sig < 0 && c->trigger != NULL && strstr(out, c->trigger) != NULL)
             t_sig = mono_s() + c->delay_s;
         /* A start-up e-stop (a drive fault seen in real time on a loaded
          * machine), or a ramp a VM stall ended (stale replies or IMU: RAMP
          * damps on every soft fault), is not the state under test: signal
-         * now, try again. */
-        if (t_sig < 0 &&
-            (strstr(out, "STANDBY -> ESTOP") != NULL || strstr(out, "RAMP -> DAMPING (") != NULL)) {
+         * now, try again. Checked until the signal goes: a fault between
+         * the trigger and the signal also ends the state under test. */
+        if (t_sig < 1e17 && has_startup_fault(out)) {
             *out_is_startup_estop = true;
             t_sig = mono_s();
         }
@@ -717,6 +753,10 @@ static int run_signalled(const sig_case_t *c, int sig, const char *summary, doub
         fail_msg("%s: the signal was never sent (trigger \"%s\" not seen):\n%s", c->state,
                  c->trigger, out);
     *out_exit_s = mono_s() - *out_exit_s;
+    /* The fault may have ended the state just before the signal came, its
+     * line reaching the pipe after the signal went. */
+    if (!*out_is_startup_estop && has_startup_fault(out))
+        *out_is_startup_estop = true;
     return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
@@ -738,51 +778,72 @@ static const sig_case_t SIG_CASES[] = {
 };
 
 #define SIG_REPEATS 3
+/* Tries again per state after a start-up fault: on a host loaded by other
+ * work (two cores shared with builds) stalls end a ramp in spells; each
+ * such try still checks the exit status and time. */
+#define SIG_AGAIN_MAX 10
 
 /* A `must` line names the transition and that REQ_STOP (the signal) is among
  * its causes, a '|' list in bit order (REQ_STOP before every fault): a VM
  * stall may add OVERRUN beside it (seen here: "HOLD -> DAMPING
  * (REQ_STOP|OVERRUN)"), which is not what these tests are about. */
 
+/* Whether out passed through the state path case c expects; why not in why. */
+static bool took_expected_path(const sig_case_t *c, const cJSON *j, char *why, size_t len)
+{
+    const char *final = cJSON_GetStringValue(obj(j, "final_state"));
+    if (c->must != NULL && strstr(out, c->must) == NULL)
+        snprintf(why, len, "no \"%s\"", c->must);
+    else if (c->must_not != NULL && strstr(out, c->must_not) != NULL)
+        snprintf(why, len, "\"%s\" seen", c->must_not);
+    else if (final == NULL || strcmp(final, c->final) != 0)
+        snprintf(why, len, "final state %s, want %s", final ? final : "(none)", c->final);
+    else
+        return true;
+    return false;
+}
+
+/* Every run must exit with status 0 soon after the signal. The path through
+ * the states is judged only on runs the host left alone: a run with
+ * overruns (a loaded host took the loop's CPU: seen as OVERRUN holds and
+ * drive timeouts while other builds ran beside the suite) or a start-up
+ * fault did not test the state it meant to, and is tried again. */
 static void check_signal_in_every_state(int sig, const char *sig_name)
 {
-    int n_again = 0;
     for (size_t i = 0; i < sizeof(SIG_CASES) / sizeof(SIG_CASES[0]); i++) {
         const sig_case_t *c = &SIG_CASES[i];
+        int n_again = 0; /* per state: a loaded host's stalls come in spells */
         for (int r = 0; r < SIG_REPEATS; r++) {
             char path[32];
             make_temp_file(path, sizeof(path));
             double exit_s = 0;
             bool is_startup_estop = false;
-            int rc = run_signalled(c, sig, path, &exit_s, &is_startup_estop);
-            print_message("      %s in %s, try %d: exit %d after %.2f s%s\n", sig_name, c->state,
-                          r + 1, rc, exit_s,
-                          is_startup_estop ? " (start-up fault: not this state, again)" : "");
-            if (is_startup_estop) {
-                if (rc != 0 || exit_s > SIG_EXIT_S)
-                    fail_msg("%s in start-up ESTOP: exit %d after %.1f s:\n%s", sig_name, rc,
-                             exit_s, out);
-                unlink(path);
-                if (++n_again > SIG_REPEATS)
-                    fail_msg("%s: %d start-up faults, the state under test not reached", sig_name,
-                             n_again);
-                r--;
-                continue;
-            }
+            const int rc = run_signalled(c, sig, path, &exit_s, &is_startup_estop);
             if (rc != 0)
                 fail_msg("%s in %s: exit %d, want 0:\n%s", sig_name, c->state, rc, out);
             if (exit_s > SIG_EXIT_S)
                 fail_msg("%s in %s: exited %.1f s after the signal:\n%s", sig_name, c->state,
                          exit_s, out);
-            if (c->must != NULL && strstr(out, c->must) == NULL)
-                fail_msg("%s in %s: no \"%s\" in:\n%s", sig_name, c->state, c->must, out);
-            if (c->must_not != NULL && strstr(out, c->must_not) != NULL)
-                fail_msg("%s in %s: \"%s\" in:\n%s", sig_name, c->state, c->must_not, out);
             cJSON *j = read_json(path);
-            assert_string_equal(cJSON_GetStringValue(obj(j, "final_state")), c->final);
             assert_true(num(j, "loop_s") < SIG_DURATION_S / 2);
+            const double overruns = num(j, "overruns");
+            char why[160] = "";
+            const bool is_path_ok = !is_startup_estop && took_expected_path(c, j, why, sizeof(why));
             cJSON_Delete(j);
             unlink(path);
+            const bool is_again = !is_path_ok && (is_startup_estop || overruns > 0);
+            print_message("      %s in %s, try %d: exit %d after %.2f s%s%s\n", sig_name, c->state,
+                          r + 1, rc, exit_s, is_again ? ", again: " : "",
+                          !is_again          ? ""
+                          : is_startup_estop ? "start-up fault"
+                                             : "host disturbed the run (overruns)");
+            if (!is_path_ok && !is_again)
+                fail_msg("%s in %s: %s in:\n%s", sig_name, c->state, why, out);
+            if (is_again && ++n_again > SIG_AGAIN_MAX)
+                fail_msg("%s: %d disturbed runs, %s not tested; last (%s):\n%s", sig_name, n_again,
+                         c->state, why, out);
+            if (is_again)
+                r--;
         }
     }
 }
