@@ -735,8 +735,9 @@ static void start_policy(const char *scenario, const char *policy, const char *w
 }
 
 /* A backward push (delta-v 0.30 m/s over 0.1 s) that the standing
- * controller cannot take: the capture-point controller steps and stands. */
-static void test_lockstep_capture_steps_where_stand_falls(void **state)
+ * controller cannot take: the capture-point controller (crouched, CoM over
+ * the base of support, ankle strategy) stands it. */
+static void test_lockstep_capture_stands_where_stand_falls(void **state)
 {
     (void)state;
     const char *scen = "tests/data/scenarios/push-back.yaml";
@@ -753,8 +754,34 @@ static void test_lockstep_capture_steps_where_stand_falls(void **state)
     ps_sim_get_truth(app.sim, &t);
     print_message("capture: %u step(s), fallen %d\n", app.capture.n_steps, t.is_fallen);
     assert_true(t.first_fall_t_s < 0);
-    assert_true(app.capture.n_steps >= 1);
     assert_int_equal(app.loop.state, PS_SM_ACTIVE);
+    assert_int_equal(t.n_cmd_out_of_limits, 0);
+}
+
+/* A hard push to the left (0.45 m/s): the capture-point controller steps
+ * out in the real loop: the left foot leaves the ground (the estimator sees
+ * single support on the right) and lands to the left, the commands inside
+ * their limits all along. */
+static void test_lockstep_capture_steps_out_sideways(void **state)
+{
+    (void)state;
+    start_policy("tests/data/scenarios/push-left-hard.yaml", "capture", NULL);
+    bool has_single_support = false;
+    float width_max = 0.0f;
+    while (loop_time_s() < 4.3) {
+        assert_int_equal(ps_loop_step(&app.loop), 0);
+        const ps_estimate_t *e = &app.loop.estimator.est;
+        has_single_support |= !e->is_contact[0] && e->is_contact[1];
+        if (e->is_contact[0] && e->is_contact[1])
+            width_max = fmaxf(width_max, e->foot_m[0][1] - e->foot_m[1][1]);
+    }
+    ps_sim_truth_t t;
+    ps_sim_get_truth(app.sim, &t);
+    print_message("capture: %u step(s), feet up to %.3f m apart\n", app.capture.n_steps,
+                  (double)width_max);
+    assert_true(app.capture.n_steps >= 1);
+    assert_true(has_single_support);
+    assert_true(width_max > 0.2f); /* stance width 0.16 */
     assert_int_equal(t.n_cmd_out_of_limits, 0);
 }
 
@@ -819,7 +846,8 @@ int main(void)
         cmocka_unit_test_teardown(test_lockstep_xsens_imu_robot_stands, teardown),
         cmocka_unit_test_teardown(test_lockstep_robstride_fault_report_estops, teardown),
         cmocka_unit_test_teardown(test_lockstep_subtick_estop_press_reaches_estop, teardown),
-        cmocka_unit_test_teardown(test_lockstep_capture_steps_where_stand_falls, teardown),
+        cmocka_unit_test_teardown(test_lockstep_capture_stands_where_stand_falls, teardown),
+        cmocka_unit_test_teardown(test_lockstep_capture_steps_out_sideways, teardown),
         cmocka_unit_test_teardown(test_lockstep_mlp_policy_in_charge_guarded, teardown),
         cmocka_unit_test_teardown(test_lockstep_mlp_out_of_range_falls_back_to_capture, teardown),
     };
