@@ -77,7 +77,7 @@ class Policy(torch.nn.Module):
             layers += [torch.nn.Linear(a, h), torch.nn.ELU()]
             a = h
         self.v = torch.nn.Sequential(*layers, torch.nn.Linear(a, 1))
-        self.log_std = torch.nn.Parameter(torch.full((n_act,), -1.0))
+        self.log_std = torch.nn.Parameter(torch.full((n_act,), -2.0))
         with torch.no_grad():
             self.pi[-1].weight.mul_(0.1)
 
@@ -110,11 +110,12 @@ def plot(log_csv, png):
     return subprocess.run(["gnuplot", "-e", script]).returncode == 0
 
 
-def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=True):
+def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=True,
+            explore=True):
     """n_steps of every environment. beta_expert: probability that an
     environment follows the expert this step (DAgger)."""
     n = env.n
-    buf = {k: [] for k in ("obs", "act", "logp", "rew", "done", "val", "expert", "info")}
+    buf = {k: [] for k in ("obs", "raw", "act", "logp", "rew", "done", "val", "expert", "info")}
     for _ in range(n_steps):
         if update_norm:
             norm.update(obs)
@@ -122,7 +123,9 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
         with torch.no_grad():
             t = torch.from_numpy(o)
             d = net.dist(t)
-            a = d.sample()
+            # DAgger visits the states of the learner's own (mean) actions;
+            # PPO explores around them
+            a = d.sample() if explore else d.mean
             logp = d.log_prob(a).sum(-1)
             v = net.v(t).squeeze(-1)
         a = a.numpy()
@@ -131,6 +134,7 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
             a[use] = expert[use]
         obs2, rew, done, expert2, info = env.step(a)
         buf["obs"].append(o)
+        buf["raw"].append(obs)
         buf["act"].append(a)
         buf["logp"].append(logp.numpy())
         buf["rew"].append(rew)
@@ -171,7 +175,7 @@ def main():
     ap.add_argument("--envs", type=int, default=16)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--steps", type=int, default=64, help="steps per environment per iteration")
-    ap.add_argument("--bc-iters", type=int, default=40)
+    ap.add_argument("--bc-iters", type=int, default=100)
     ap.add_argument("--ppo-iters", type=int, default=300)
     ap.add_argument("--hidden", default="128,128")
     ap.add_argument("--lr", type=float, default=3e-4)
@@ -224,16 +228,18 @@ def main():
         dv_max = a.push_dv_start + (a.push_dv_max - a.push_dv_start) * min(1.0, it / (0.7 * total))
         env.set_push_dv_max(dv_max)
         beta = max(0.0, 1.0 - it / max(1, a.bc_iters * 0.75)) if is_bc else 0.0
-        buf, obs, expert, last_v = rollout(env, net, norm, obs, a.steps, beta, expert, rng)
+        buf, obs, expert, last_v = rollout(env, net, norm, obs, a.steps, beta, expert, rng,
+                                           explore=not is_bc)
         n_env_steps += a.steps * env.n
         st = stats(buf)
         O = torch.from_numpy(buf["obs"].reshape(-1, env.n_obs))
         E = torch.from_numpy(buf["expert"].reshape(-1, env.n_act).astype(np.float32))
         if is_bc:
-            ds_o.append(O)
+            ds_o.append(buf["raw"].reshape(-1, env.n_obs))
             ds_a.append(E)
-            ds_o, ds_a = ds_o[-30:], ds_a[-30:]  # the aggregate, bounded
-            X, Y = torch.cat(ds_o), torch.cat(ds_a)
+            ds_o, ds_a = ds_o[-60:], ds_a[-60:]  # the aggregate, bounded
+            # raw observations, normalised with today's statistics
+            X, Y = torch.from_numpy(norm(np.concatenate(ds_o))), torch.cat(ds_a)
             loss_v = 0.0
             for _ in range(4):
                 perm = torch.randperm(X.shape[0])
