@@ -10,6 +10,9 @@
 #     PUSH_TRIALS trials a cell (make bench: 1; the issue's full grid: 20,
 #     bench/policy.sh --full), parallel over the cores with GNU parallel:
 #     bench/results/push.json, push.md, push_dv50_0.1s.png, push_dv50_0.3s.png
+#  3. with a trained policy, the same pushes in the training environment
+#     (policy/train/eval.py) beside the runtime's: bench/results/train_env.*
+# PUSH_DIRECTIONS=8 halves the grid (the shipped results: docs/policy.md).
 # PUSH_SSH="host1,host2" runs the grid with parallel --sshlogin on those hosts
 # (the repository and build at the same path there); bench/push-slurm.sh is a
 # Slurm job array for clusters.
@@ -20,6 +23,7 @@ mkdir -p "$RES" build/bench
 TRIALS=${PUSH_TRIALS:-1}
 [ "${1:-}" = "--full" ] && TRIALS=20
 JOBS=${PUSH_JOBS:-$(nproc)}
+DIRS=${PUSH_DIRECTIONS:-16}
 WEIGHTS=policy/weights/ps1_stage1.safetensors
 
 echo "== inference at batch 1"
@@ -50,17 +54,26 @@ print(json.dumps(c))' "$c" "$t"
 } >"$RES/inference.json"
 cat "$RES/inference.json"
 
-echo "== push-recovery grid: $TRIALS trial(s) a cell, $JOBS jobs"
+echo "== push-recovery grid: $DIRS directions, $TRIALS trial(s) a cell, $JOBS jobs"
 ctl=stand,capture
 [ -f "$WEIGHTS" ] && ctl=$ctl,mlp
 rm -rf "$RES/push_trials"
 start=$(date +%s)
 ssh_opt=()
 [ -n "${PUSH_SSH:-}" ] && ssh_opt=(--sshlogin "$PUSH_SSH" --workdir "$PWD")
-python3 bench/push.py jobs --controllers "$ctl" --trials "$TRIALS" |
+python3 bench/push.py jobs --controllers "$ctl" --trials "$TRIALS" --directions "$DIRS" |
     parallel -j "$JOBS" "${ssh_opt[@]}" --halt soon,fail=1 \
         python3 bench/push.py trial {} --out "$RES/push_trials"
 python3 bench/push.py merge "$RES/push_trials" --out "$RES/push.json" >"$RES/push.md"
 python3 bench/push.py plot "$RES/push.json" --out "$RES/push_dv50.png"
 echo "grid: $(ls "$RES/push_trials" | wc -l) trials in $(($(date +%s) - start)) s" | tee -a "$RES/push.md"
 rm -rf "$RES/push_trials"
+
+if [ -f "$WEIGHTS" ]; then
+    echo "== the same grid in the training environment (nominal robot), beside the runtime's"
+    make -s build/libpsenv.so
+    /usr/bin/python3 policy/train/eval.py --weights "$WEIGHTS" --runtime "$RES/push.json" \
+        --directions "$DIRS" \
+        --out "$RES/train_env.json" >"$RES/train_env.md"
+    cat "$RES/train_env.md"
+fi

@@ -2,7 +2,7 @@
 # Smoke test of the training pipeline (make test): a few iterations of
 # policy/train/train.py on the C environment (build/libpsenv.so), then the
 # runtime loads the policy file it wrote and runs it in lockstep. Prints
-# cmocka's summary lines for tools/run-tests.sh. About 20 s.
+# cmocka's summary lines for tools/run-tests.sh. About 30 s.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 out=$(mktemp -d)
@@ -22,6 +22,10 @@ name="same seed, same first iterations (deterministic environment and trainer)"
 check bash -c "/usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 \
     --bc-iters 3 --ppo-iters 2 --out $out/q.safetensors --log-dir $out/b >/dev/null 2>&1 \
     && cmp -s <(cut -d, -f1-8 $out/log.csv) <(cut -d, -f1-8 $out/b/log.csv)"
+name="eval.py runs the benchmark's pushes in the training environment"
+check bash -c "/usr/bin/python3 policy/train/eval.py --weights $out/p.safetensors --dv 0.15 \
+    --durations 0.1 --directions 2 --out $out/e.json >$out/eval.out 2>&1 \
+    && grep -q '\"controller\": \"mlp\"' $out/e.json"
 [ $fail -gt 0 ] && { cat "$out/train.out" "$out/run.out" 2>/dev/null | tail -20; }
 echo "[  PASSED  ] $pass test(s)."
 [ $fail -gt 0 ] && echo "[  FAILED  ] $fail test(s), listed below:"

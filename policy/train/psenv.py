@@ -36,6 +36,7 @@ class Env:
             ctypes.POINTER(ctypes.c_uint8)] + [ctypes.POINTER(ctypes.c_float)] * 2
         L.ps_env_destroy.argtypes = [ctypes.c_void_p]
         L.ps_env_set_push_dv_max.argtypes = [ctypes.c_void_p, ctypes.c_float]
+        L.ps_env_set_push.argtypes = [ctypes.c_void_p, ctypes.c_uint32] + [ctypes.c_float] * 4
         cfg = EnvCfg(n_envs, n_threads, seed, episode_s, push_dv_max, int(dr), 1)
         err = ctypes.create_string_buffer(1024)
         h = ctypes.c_void_p()
@@ -71,6 +72,11 @@ class Env:
 
     def set_push_dv_max(self, dv):
         self.lib.ps_env_set_push_dv_max(self.h, float(dv))
+
+    def set_push(self, i, t_s, dur_s, dv, dir_rad):
+        """Environment i's next episodes: this one push (dur_s <= 0: random again)."""
+        if self.lib.ps_env_set_push(self.h, i, t_s, dur_s, dv, dir_rad) != 0:
+            raise ValueError("ps_env_set_push(%d, %g, %g, %g, %g)" % (i, t_s, dur_s, dv, dir_rad))
 
     def close(self):
         if self.h:

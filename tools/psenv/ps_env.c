@@ -67,6 +67,8 @@ typedef struct {
     uint64_t tick;
     push_t push[2];
     int n_push;
+    push_t fixed; /* ps_env_set_push: this push every episode instead */
+    bool has_fixed;
     double z_rest, yaw0, prev_com[3], prev_ankle[2][3];
     bool prev_contact[2];
     pending_t pend[MAX_PENDING];
@@ -155,6 +157,11 @@ static void randomise(const ps_env_t *e, env1_t *v)
 static void plan_pushes(const ps_env_t *e, env1_t *v)
 {
     const double mass = e->robot.kin.mass_kg;
+    if (v->has_fixed) {
+        v->n_push = 1;
+        v->push[0] = v->fixed;
+        return;
+    }
     v->n_push = uni(&v->rng, 0.0, 1.0) < 0.5 ? 2 : 1;
     for (int i = 0; i < v->n_push; i++) {
         push_t *p = &v->push[i];
@@ -670,6 +677,24 @@ int ps_env_create(const char *robot_path, const ps_env_cfg_t *cfg, ps_env_t **ou
     free(e->envs);
     free(e);
     return rc;
+}
+
+int ps_env_set_push(ps_env_t *e, uint32_t env, float t_s, float dur_s, float dv_m_s,
+                    float dir_rad)
+{
+    if (e == NULL || env >= e->cfg.n_envs || !isfinite(t_s) || !isfinite(dur_s) ||
+        !isfinite(dv_m_s) || !isfinite(dir_rad))
+        return -EINVAL;
+    env1_t *v = &e->envs[env];
+    if (dur_s <= 0.0f) {
+        v->has_fixed = false;
+        return 0;
+    }
+    const double f = dv_m_s * e->robot.kin.mass_kg / dur_s;
+    v->fixed = (push_t){.t_s = t_s, .dur_s = dur_s, .dv_m_s = dv_m_s,
+                        .force_n = {f * cos(dir_rad), f * sin(dir_rad), 0.0}};
+    v->has_fixed = true;
+    return 0;
 }
 
 void ps_env_set_push_dv_max(ps_env_t *e, float dv_max_m_s)

@@ -78,6 +78,13 @@ int ps_env_reset(ps_env_t *e, float *obs);
 int ps_env_step(ps_env_t *e, const float *act, float *obs, float *rew, uint8_t *done,
                 float *expert, float *info);
 
+/** Evaluation: environment env's episodes from its next reset on get one
+ *  torso push of delta-v dv_m_s (m/s; force dv m / dur_s) over dur_s seconds
+ *  at t_s, in direction dir_rad (world frame, 0 = +x), instead of random
+ *  pushes; dur_s <= 0 goes back to random pushes.  @return 0 | -EINVAL */
+int ps_env_set_push(ps_env_t *e, uint32_t env, float t_s, float dur_s, float dv_m_s,
+                    float dir_rad);
+
 /** Curriculum: the largest push delta-v from the next episodes on. */
 void ps_env_set_push_dv_max(ps_env_t *e, float dv_max_m_s);
 
