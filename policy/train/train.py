@@ -77,7 +77,7 @@ class Policy(torch.nn.Module):
             layers += [torch.nn.Linear(a, h), torch.nn.ELU()]
             a = h
         self.v = torch.nn.Sequential(*layers, torch.nn.Linear(a, 1))
-        self.log_std = torch.nn.Parameter(torch.full((n_act,), -2.0))
+        self.log_std = torch.nn.Parameter(torch.full((n_act,), -2.3))
         with torch.no_grad():
             self.pi[-1].weight.mul_(0.1)
 
@@ -111,7 +111,7 @@ def plot(log_csv, png):
 
 
 def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=True,
-            explore=True):
+            explore=True, dart_std=0.0):
     """n_steps of every environment. beta_expert: probability that an
     environment follows the expert this step (DAgger)."""
     n = env.n
@@ -132,6 +132,12 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
         if beta_expert > 0.0:
             use = rng.random(n) < beta_expert
             a[use] = expert[use]
+        if dart_std > 0.0:
+            # DART: the executed action is perturbed (the labels are not), so
+            # the data set holds the states a noisy action leads to, the
+            # previous-action input included; without it the clone copies
+            # its previous action and integrates PPO's exploration noise
+            a = a + dart_std * rng.standard_normal(a.shape).astype(np.float32)
         obs2, rew, done, expert2, info = env.step(a)
         buf["obs"].append(o)
         buf["raw"].append(obs)
@@ -179,6 +185,8 @@ def main():
     ap.add_argument("--ppo-iters", type=int, default=300)
     ap.add_argument("--hidden", default="128,128")
     ap.add_argument("--lr", type=float, default=3e-4)
+    ap.add_argument("--dart-std", type=float, default=0.15,
+                    help="noise on the executed actions while cloning (action units)")
     ap.add_argument("--push-dv-max", type=float, default=0.8,
                     help="largest push at the end of the curriculum (m/s)")
     ap.add_argument("--push-dv-start", type=float, default=0.3,
@@ -211,8 +219,9 @@ def main():
                   "episode_s", "r_balance", "r_quality", "loss", "wall_s", "push_dv_max"])
     trained_by = ("make train: policy/train/train.py --seed %d --envs %d --threads %d "
                   "--bc-iters %d --ppo-iters %d --steps %d --hidden %s --push-dv-start %g "
-                  "--push-dv-max %g%s" % (a.seed, a.envs, a.threads, a.bc_iters, a.ppo_iters,
-                                          a.steps, a.hidden, a.push_dv_start, a.push_dv_max,
+                  "--push-dv-max %g --dart-std %g%s" % (
+                      a.seed, a.envs, a.threads, a.bc_iters, a.ppo_iters, a.steps, a.hidden,
+                      a.push_dv_start, a.push_dv_max, a.dart_std,
                                           " --no-dr" if a.no_dr else ""))
     obs = env.reset()
     expert = np.zeros((env.n, env.n_act), np.float32)
@@ -229,7 +238,8 @@ def main():
         env.set_push_dv_max(dv_max)
         beta = max(0.0, 1.0 - it / max(1, a.bc_iters * 0.75)) if is_bc else 0.0
         buf, obs, expert, last_v = rollout(env, net, norm, obs, a.steps, beta, expert, rng,
-                                           explore=not is_bc)
+                                           explore=not is_bc,
+                                           dart_std=a.dart_std if is_bc else 0.0)
         n_env_steps += a.steps * env.n
         st = stats(buf)
         O = torch.from_numpy(buf["obs"].reshape(-1, env.n_obs))
