@@ -176,7 +176,7 @@ class Property(unittest.TestCase):
 
         acts = st.sampled_from(["identity", "relu", "elu", "tanh", "sigmoid", "silu"])
 
-        @settings(max_examples=25, deadline=None)
+        @settings(max_examples=25, deadline=None, database=None)
         @given(hidden=st.lists(st.integers(1, 24), min_size=0, max_size=3),
                act_list=st.lists(acts, min_size=4, max_size=4), matmul=st.booleans(),
                seed=st.integers(0, 10000))
