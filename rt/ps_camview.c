@@ -30,12 +30,14 @@ static void on_signal(int sig)
 typedef struct {
     const char *board;
     const char *robot;
+    const char *scenario;
     const char *out_dir;
     double duration_s;
 } camview_opts_t;
 
 static const char USAGE[] =
-    "usage: pushstep camera --board NAME|FILE [--robot FILE] [--duration S] [--out DIR]\n"
+    "usage: pushstep camera --board NAME|FILE [--robot FILE] [--scenario FILE] [--duration S]\n"
+    "                       [--out DIR]\n"
     "Runs the board's camera (its camera: section: libcamera, an image folder, or\n"
     "on board sim the simulated camera looking at the robot's scene at rest)\n"
     "through the runtime's perception (AprilTags on the neighbours' shoulders)\n"
@@ -48,6 +50,9 @@ static const char USAGE[] =
     "  --board NAME|FILE   board file with a camera: section\n"
     "  --robot NAME|FILE   robot file (board sim: its model is the scene;\n"
     "                      default robots/ps1.yaml)\n"
+    "  --scenario NAME|FILE board sim: the scenario whose crowd joins the scene\n"
+    "                      (default scenarios/stand.yaml: the robot file's scene\n"
+    "                      alone)\n"
     "  --duration S        run S seconds (default 5; an image folder ends sooner\n"
     "                      only when Ctrl-C stops it)\n"
     "  --out DIR           output folder (default ./camera)\n";
@@ -55,9 +60,13 @@ static const char USAGE[] =
 static int parse(int argc, char **argv, camview_opts_t *o)
 {
     static const struct option LONG[] = {
-        {"board", required_argument, NULL, 'b'},    {"robot", required_argument, NULL, 'r'},
-        {"duration", required_argument, NULL, 'd'}, {"out", required_argument, NULL, 'o'},
-        {"help", no_argument, NULL, 'h'},           {NULL, 0, NULL, 0},
+        {"board", required_argument, NULL, 'b'},
+        {"robot", required_argument, NULL, 'r'},
+        {"scenario", required_argument, NULL, 's'},
+        {"duration", required_argument, NULL, 'd'},
+        {"out", required_argument, NULL, 'o'},
+        {"help", no_argument, NULL, 'h'},
+        {NULL, 0, NULL, 0},
     };
     *o = (camview_opts_t){.out_dir = "camera", .duration_s = 5.0};
     int c;
@@ -69,6 +78,9 @@ static int parse(int argc, char **argv, camview_opts_t *o)
             break;
         case 'r':
             o->robot = optarg;
+            break;
+        case 's':
+            o->scenario = optarg;
             break;
         case 'o':
             o->out_dir = optarg;
@@ -391,7 +403,8 @@ int ps_camview_main(int argc, char **argv, const char *data_dir)
     (void)sigaction(SIGTERM, &sa, NULL);
     static ps_app_t app; /* large */
     const ps_app_opts_t ao = {
-        .data_dir = data_dir, .board = o.board, .robot = o.robot, .is_camera_only = true};
+        .data_dir = data_dir, .board = o.board, .robot = o.robot, .scenario = o.scenario,
+        .is_camera_only = true};
     char err[PS_ERR_MSG_LEN];
     const int rc = ps_app_init(&app, &ao, err, sizeof(err));
     if (rc < 0) {
