@@ -52,13 +52,18 @@ TRAIN_PKGS := python3 python3-torch python3-numpy python3-yaml python3-tqdm gnup
 # ARCH=aarch64: the cross compiler, qemu-user to run its tests, and the arm64
 # builds of the libraries the binaries link (multiarch; tools/deps.sh adds
 # the arm64 architecture to dpkg when a package names it).
+# libapriltag-dev's amd64 and arm64 builds cannot be installed together
+# (each ships its own /usr/share/apriltag/cmake/apriltagTargets-none.cmake),
+# so the cross build takes the headers from the native -dev package and
+# links the arm64 runtime library, libapriltag3, by its soname (every build
+# links it so: the same command line for both).
 CROSS_LIBS := libc6-dev libmujoco-dev libcyaml-dev libyaml-dev libcmocka-dev libcjson-dev \
               libmnl-dev libgpiod-dev libzstd-dev liblz4-dev zlib1g-dev \
-              libapriltag-dev libpng-dev libegl-dev libcamera-dev libglfw3-dev
+              libapriltag3 libpng-dev libegl-dev libcamera-dev libglfw3-dev
 AARCH64_PKGS := gcc-aarch64-linux-gnu g++-aarch64-linux-gnu qemu-user \
                 $(addsuffix :arm64,$(CROSS_LIBS))
 ifdef IS_CROSS
-BUILD_PKGS := make pkg-config $(AARCH64_PKGS)
+BUILD_PKGS := make pkg-config libapriltag-dev $(AARCH64_PKGS)
 TEST_PKGS  :=
 else
 TEST_PKGS  += $(AARCH64_PKGS)
@@ -70,7 +75,9 @@ CFLAGS  += -std=c11 -D_GNU_SOURCE -pthread $(WARN) -MMD -MP $(IMAGE_CFLAGS)
 # Deferred (=): pkg-config runs when a rule needs it, after deps-build has
 # installed the packages on a fresh machine.
 IMAGE_CFLAGS = $(shell pkg-config --cflags libpng)
-CAMERA_LIBS  = $(shell pkg-config --libs libpng) -lapriltag -lapriltag-utils -lEGL -lglfw
+# By soname (libapriltag3), native and cross alike: see CROSS_LIBS.
+APRILTAG_LIBS := -l:libapriltag.so.3 -l:libapriltag-utils.so.3
+CAMERA_LIBS  = $(shell pkg-config --libs libpng) $(APRILTAG_LIBS) -lEGL -lglfw
 LDLIBS  = -lmujoco -lcyaml -lyaml -lcjson -lmnl -lgpiod -lzstd -llz4 -lz $(CAMERA_LIBS) -lm -pthread
 # C++ only for libcamera, in one file behind a C header, built as a module the
 # runtime loads when a board has a libcamera camera (drivers/ps_camera_libcamera.h).
@@ -240,7 +247,7 @@ aarch64-test-bins:
 	@if command -v aarch64-linux-gnu-gcc >/dev/null && command -v qemu-aarch64 >/dev/null && \
 	    [ -e /usr/lib/aarch64-linux-gnu/libmujoco.so ] && [ -e /usr/lib/aarch64-linux-gnu/libcmocka.so ] && \
 	    [ -e /usr/lib/aarch64-linux-gnu/libzstd.so ] && [ -e /usr/lib/aarch64-linux-gnu/liblz4.so ] && \
-	    [ -e /usr/lib/aarch64-linux-gnu/libapriltag.so ] && [ -e /usr/lib/aarch64-linux-gnu/libpng.so ] && \
+	    [ -e /usr/lib/aarch64-linux-gnu/libapriltag.so.3 ] && [ -e /usr/lib/aarch64-linux-gnu/libpng.so ] && \
 	    [ -e /usr/lib/aarch64-linux-gnu/libEGL.so ] && [ -e /usr/lib/aarch64-linux-gnu/libcamera.so ] && \
 	    [ -e /usr/lib/aarch64-linux-gnu/libglfw.so ]; then \
 	    $(MAKE) --no-print-directory ARCH=aarch64 BUILD=$(AARCH64_BUILD) aarch64-test-bins; \
