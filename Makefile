@@ -287,7 +287,9 @@ DATADIR  := $(PREFIX)/share/pushstep
 DOCDIR   := $(PREFIX)/share/doc/pushstep
 UNITDIR  ?= $(PREFIX)/lib/systemd/system
 UDEVDIR  ?= $(PREFIX)/lib/udev/rules.d
-DATA_DIRS := boards robots scenarios sim/models
+# Trained policy files (policy/weights/, written by make train) are data too:
+# a robot file's policy.weights names one relative to the robot file.
+DATA_DIRS := boards robots scenarios sim/models $(wildcard policy/weights)
 
 install: $(BUILD)/pushstep $(CAMERA_SO)
 	install -D -m 0755 $(BUILD)/pushstep $(DESTDIR)$(BINDIR)/pushstep

@@ -9,7 +9,9 @@
 # run under qemu-user, or (AARCH64_TESTS=quick, what the native `make test`
 # uses) it is one of the slow ones: qemu's TCG runs the MuJoCo plant about
 # 150 times slower than the host, so the simulation-heavy tests take minutes.
-# AARCH64_TESTS=all runs those too.
+# AARCH64_TESTS=all runs those too. The quick set keeps test_mlp and
+# test_weights: they run the inference engine's NEON build against the
+# PyTorch vectors of tests/data/policy (docs/policy.md), under a second each.
 #
 # Without arguments (an item of the native `make test`): the binaries of
 # $AARCH64_BUILD (default build-aarch64) that `make test` built when the
