@@ -56,10 +56,13 @@ TRAIN_PKGS := python3 python3-torch python3-numpy python3-yaml python3-tqdm gnup
 # (each ships its own /usr/share/apriltag/cmake/apriltagTargets-none.cmake),
 # so the cross build takes the headers from the native -dev package and
 # links the arm64 runtime library, libapriltag3, by its soname (every build
-# links it so: the same command line for both).
+# links it so: the same command line for both). libegl-mesa0 and
+# libgl1-mesa-dri: Mesa's EGL and software rasteriser, which the simulated
+# camera's tests render with under qemu-user (tools/test-aarch64.sh).
 CROSS_LIBS := libc6-dev libmujoco-dev libcyaml-dev libyaml-dev libcmocka-dev libcjson-dev \
               libmnl-dev libgpiod-dev libzstd-dev liblz4-dev zlib1g-dev \
-              libapriltag3 libpng-dev libegl-dev libcamera-dev libglfw3-dev
+              libapriltag3 libpng-dev libegl-dev libegl-mesa0 libgl1-mesa-dri libcamera-dev \
+              libglfw3-dev
 AARCH64_PKGS := gcc-aarch64-linux-gnu g++-aarch64-linux-gnu qemu-user \
                 $(addsuffix :arm64,$(CROSS_LIBS))
 ifdef IS_CROSS
