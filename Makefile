@@ -36,11 +36,19 @@ TOOL_PKGS  := rt-tests can-utils
 # candump-format lines the runtime writes (tests/test_candump.c); systemd's
 # systemd-analyze reads the shipped unit (tools/test-install.sh); gnuplot
 # draws `pushstep log --plot` (tests/test_e2e_recorder.c); libcamera's vimc
-# IPA module and udevd for the VM's emulated camera (test_hw_camera); and the
-# aarch64 cross tools (AARCH64_PKGS below) for the aarch64 part of the suite.
-TEST_PKGS  := can-utils systemd gnuplot-nox libcamera-ipa udev
-# Extra packages `make bench` needs: load generator, plots, the analysis script.
-BENCH_PKGS := stress-ng gnuplot-nox python3
+# IPA module and udevd for the VM's emulated camera (test_hw_camera); the
+# policy tools' tests (policy/train/test_tools.py, tests/test_train_smoke.sh)
+# run the ONNX importer and a short training; and the aarch64 cross tools
+# (AARCH64_PKGS below) for the aarch64 part of the suite.
+TEST_PKGS  := can-utils systemd gnuplot-nox libcamera-ipa udev \
+              python3 python3-numpy python3-onnx python3-hypothesis python3-torch \
+              python3-yaml python3-tqdm
+# Extra packages `make bench` needs: load generator, plots, the analysis script,
+# GNU parallel for the push-recovery grid (bench/push.py), OpenBLAS and
+# libtorch for the inference comparison (bench/policy.sh).
+BENCH_PKGS := stress-ng gnuplot-nox python3 parallel libopenblas-dev libtorch-dev
+# What `make train` needs (policy/train/, never at run time).
+TRAIN_PKGS := python3 python3-torch python3-numpy python3-yaml python3-tqdm gnuplot-nox
 # ARCH=aarch64: the cross compiler, qemu-user to run its tests, and the arm64
 # builds of the libraries the binaries link (multiarch; tools/deps.sh adds
 # the arm64 architecture to dpkg when a package names it).
@@ -48,10 +56,13 @@ BENCH_PKGS := stress-ng gnuplot-nox python3
 # (each ships its own /usr/share/apriltag/cmake/apriltagTargets-none.cmake),
 # so the cross build takes the headers from the native -dev package and
 # links the arm64 runtime library, libapriltag3, by its soname (every build
-# links it so: the same command line for both).
+# links it so: the same command line for both). libegl-mesa0 and
+# libgl1-mesa-dri: Mesa's EGL and software rasteriser, which the simulated
+# camera's tests render with under qemu-user (tools/test-aarch64.sh).
 CROSS_LIBS := libc6-dev libmujoco-dev libcyaml-dev libyaml-dev libcmocka-dev libcjson-dev \
               libmnl-dev libgpiod-dev libzstd-dev liblz4-dev zlib1g-dev \
-              libapriltag3 libpng-dev libegl-dev libcamera-dev libglfw3-dev
+              libapriltag3 libpng-dev libegl-dev libegl-mesa0 libgl1-mesa-dri libcamera-dev \
+              libglfw3-dev
 AARCH64_PKGS := gcc-aarch64-linux-gnu g++-aarch64-linux-gnu qemu-user \
                 $(addsuffix :arm64,$(CROSS_LIBS))
 ifdef IS_CROSS
@@ -109,8 +120,8 @@ HW_SRCS := $(wildcard tests/hw/test_hw_*.c)
 HW_BINS := $(patsubst tests/hw/%.c,$(BUILD)/tests/hw/%,$(HW_SRCS))
 QEMU_WORK ?= $(BUILD)/qemu
 
-.PHONY: all deps deps-build deps-test deps-npm deps-bench run test test-hw clean format help \
-        bench bench-hw install deb test-deb aarch64-test-bins
+.PHONY: all deps deps-build deps-test deps-npm deps-bench deps-train run test test-hw clean format help \
+        bench bench-hw train install deb test-deb aarch64-test-bins
 all: $(BUILD)/pushstep $(CAMERA_SO)
 
 help:
@@ -125,10 +136,13 @@ help:
 	@echo "make test-hw the real drivers (SocketCAN, libgpiod) in a Debian kernel"
 	@echo "             booted under qemu with vcan, vxcan and gpio-mockup"
 	@echo "make bench   latency beside cyclictest, tick share, bus load, allocations,"
-	@echo "             the crowd's cost, camera perception: bench/results/*.json,"
-	@echo "             summary.md, crowd.md, camera.md (docs/latency.md, docs/perception.md)"
+	@echo "             the crowd's cost, camera perception, policy inference and the"
+	@echo "             push-recovery grid: bench/results/*.json, summary.md, crowd.md,"
+	@echo "             camera.md (docs/latency.md, docs/perception.md, docs/policy.md)"
 	@echo "make bench-hw the real drivers' figures in the test VM (e-stop reaction,"
 	@echo "             loop reaction, frames per bus): bench/results/hw.json"
+	@echo "make train   train the balance policy on the C environment (CPU, 2 cores,"
+	@echo "             seeded): policy/weights/ps1_stage1.safetensors, $(BUILD)/train/"
 	@echo "make install PREFIX=/usr/local [DESTDIR=]: the binary, its data (boards, robots,"
 	@echo "             scenarios, models) in PREFIX/share/pushstep, the systemd unit"
 	@echo "             pushstep@.service and the udev rules (docs/deploy.md)"
@@ -156,6 +170,9 @@ deps-npm:
 deps-bench: deps
 	@bash tools/deps.sh $(BENCH_PKGS)
 
+deps-train: deps-build
+	@bash tools/deps.sh $(TRAIN_PKGS)
+
 $(BUILD)/obj/%.o: %.c
 	@mkdir -p $(@D)
 	$(CC) $(CFLAGS) -c $< -o $@
@@ -180,6 +197,16 @@ $(CAMERA_SO): $(BUILD)/pic/drivers/ps_camera_libcamera.o $(BUILD)/pic/drivers/ps
 $(BUILD)/tests/test_mailbox_tsan: tests/test_mailbox.c rt/ps_mailbox.c
 	@mkdir -p $(@D)
 	$(CC) $(CFLAGS) -fsanitize=thread -o $@ $^ -lcmocka
+
+# The inference engine's axpy loops vectorise at -O3; GCC 12's -O2 cost model
+# leaves them scalar (docs/policy.md): only this file.
+$(BUILD)/obj/policy/ps_mlp.o $(BUILD)/san/policy/ps_mlp.o $(BUILD)/pic/policy/ps_mlp.o: CFLAGS += -O3
+
+# The training environment (tools/psenv, docs/policy.md): the runtime's
+# sources built position-independent into one library for ctypes.
+PIC_OBJS := $(patsubst %.c,$(BUILD)/pic/%.o,$(LIB_SRCS) tools/psenv/ps_env.c)
+$(BUILD)/libpsenv.so: $(PIC_OBJS)
+	$(CC) $(CFLAGS) -shared -o $@ $^ $(LDLIBS)
 
 $(BUILD)/pushstep: $(call OBJ,$(MAIN_SRC)) $(LIB_OBJS)
 	$(CC) $(CFLAGS) $(LDFLAGS) -o $@ $^ $(LDLIBS)
@@ -208,15 +235,15 @@ else
 # The native suite, then the quick part of the aarch64 one under qemu-user
 # (tools/test-aarch64.sh) when the cross tools are installed (deps-test
 # installs them where apt can), then the VM tests.
-test: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(TEST_BINS) $(TSAN_BINS) $(HW_BINS) \
-      aarch64-test-bins
+test: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(BUILD)/libpsenv.so $(TEST_BINS) $(TSAN_BINS) \
+      $(HW_BINS) aarch64-test-bins
 	@# without the npm packages the rest of the suite still runs; the reader
 	@# check then fails (tests/test_e2e_recorder.c) and says why
 	@bash tools/npm-deps.sh $(BUILD)/npm || echo "make test: continuing without the MCAP readers"
 	@PUSHSTEP_BIN=$(BUILD)/pushstep PUSHSTEP_NPM=$(BUILD)/npm QEMU_WORK=$(QEMU_WORK) \
 	    HW_BINS="$(HW_BINS)" AARCH64_BUILD=$(AARCH64_BUILD) bash tools/run-tests.sh \
-	    tools/check-layers.sh $(TEST_BINS) $(TSAN_BINS) tools/test-install.sh tools/test-aarch64.sh \
-	    tools/qemu/test-hw.sh
+	    tools/check-layers.sh $(TEST_BINS) $(TSAN_BINS) policy/train/test_tools.py \
+	    tests/test_train_smoke.sh tools/test-install.sh tools/test-aarch64.sh tools/qemu/test-hw.sh
 
 AARCH64_BUILD := build-aarch64
 aarch64-test-bins:
@@ -237,11 +264,19 @@ bench: deps-bench $(BUILD)/pushstep $(CAMERA_SO) $(BUILD)/crowd_bench
 	@bash bench/run.sh
 	@BUILD=$(BUILD) bash bench/crowd.sh
 	@BUILD=$(BUILD) bash bench/camera.sh
+	@bash bench/policy.sh
 	@QEMU_WORK=$(QEMU_WORK) bash bench/hw.sh
 
 # The simulated crowd's cost (bench/crowd.sh): plant with N agents beside mj_step.
 $(BUILD)/crowd_bench: $(call OBJ,bench/crowd_bench.c) $(LIB_OBJS)
 	$(CC) $(CFLAGS) -o $@ $^ $(LDLIBS)
+
+# The shipped policy, reproduced (docs/policy.md): seeded, on the CPUs. The
+# command and seed are written into the policy file's contract.
+TRAIN_ARGS ?= --seed 1 --envs 16 --threads 2 --steps 64 --bc-iters 100 --ppo-iters 300
+train: deps-train $(BUILD)/pushstep $(BUILD)/libpsenv.so
+	/usr/bin/python3 policy/train/train.py $(TRAIN_ARGS) --out policy/weights/ps1_stage1.safetensors \
+	    --log-dir $(BUILD)/train
 
 bench-hw: deps-test $(BUILD)/pushstep
 	@QEMU_WORK=$(QEMU_WORK) bash bench/hw.sh
@@ -255,7 +290,9 @@ DATADIR  := $(PREFIX)/share/pushstep
 DOCDIR   := $(PREFIX)/share/doc/pushstep
 UNITDIR  ?= $(PREFIX)/lib/systemd/system
 UDEVDIR  ?= $(PREFIX)/lib/udev/rules.d
-DATA_DIRS := boards robots scenarios sim/models
+# Trained policy files (policy/weights/, written by make train) are data too:
+# a robot file's policy.weights names one relative to the robot file.
+DATA_DIRS := boards robots scenarios sim/models $(wildcard policy/weights)
 
 install: $(BUILD)/pushstep $(CAMERA_SO)
 	install -D -m 0755 $(BUILD)/pushstep $(DESTDIR)$(BINDIR)/pushstep

@@ -75,6 +75,65 @@ int ps_act_check_cfg(const ps_act_cfg_t *a, char *err, size_t err_len)
     return 0;
 }
 
+bool ps_act_motor_is_modelled(const ps_act_motor_t *m)
+{
+    return m != NULL && m->peak_torque_nm > 0.0f;
+}
+
+int ps_act_check_motor(const ps_act_motor_t *m, char *err, size_t err_len)
+{
+    if (m == NULL) {
+        ps_err_format(err, err_len, "motor: NULL");
+        return -EINVAL;
+    }
+    const ps_act_motor_t zero = {0};
+    if (memcmp(m, &zero, sizeof(zero)) == 0)
+        return 0;
+    if (!isfinite(m->peak_torque_nm) || !(m->peak_torque_nm > 0.0f)) {
+        ps_err_format(err, err_len, "peak_torque_nm: %g is not > 0", (double)m->peak_torque_nm);
+        return -EINVAL;
+    }
+    if (!isfinite(m->rated_torque_nm) || !(m->rated_torque_nm > 0.0f) ||
+        m->rated_torque_nm > m->peak_torque_nm) {
+        ps_err_format(err, err_len, "rated_torque_nm: %g is not in (0, peak_torque_nm %g]",
+                      (double)m->rated_torque_nm, (double)m->peak_torque_nm);
+        return -EINVAL;
+    }
+    if (!isfinite(m->no_load_speed_rad_s) || !isfinite(m->rated_speed_rad_s) ||
+        !(m->rated_speed_rad_s >= 0.0f) || !(m->rated_speed_rad_s < m->no_load_speed_rad_s)) {
+        ps_err_format(err, err_len,
+                      "rated_speed_rad_s: %g is not in [0, no_load_speed_rad_s %g)",
+                      (double)m->rated_speed_rad_s, (double)m->no_load_speed_rad_s);
+        return -EINVAL;
+    }
+    if (!isfinite(m->armature_kg_m2) || !(m->armature_kg_m2 >= 0.0f)) {
+        ps_err_format(err, err_len, "armature_kg_m2: %g is not >= 0", (double)m->armature_kg_m2);
+        return -EINVAL;
+    }
+    if (!isfinite(m->pd_hz) || !(m->pd_hz > 0.0f)) {
+        ps_err_format(err, err_len, "pd_hz: %g is not > 0", (double)m->pd_hz);
+        return -EINVAL;
+    }
+    return 0;
+}
+
+float ps_act_motor_limit_torque(const ps_act_motor_t *m, float tau_nm, float omega_rad_s)
+{
+    if (!ps_act_motor_is_modelled(m))
+        return tau_nm;
+    if (isnan(tau_nm) || isnan(omega_rad_s))
+        return NAN;
+    const float w0 = m->no_load_speed_rad_s;
+    const float stall = m->rated_torque_nm * w0 / (w0 - m->rated_speed_rad_s);
+    const float peak = m->peak_torque_nm;
+    /* The line tau = stall (s - w / w0) for s = +1 (upper bound) and -1 (lower). */
+    float hi = stall * (1.0f - omega_rad_s / w0);
+    float lo = stall * (-1.0f - omega_rad_s / w0);
+    hi = hi > peak ? peak : (hi < -peak ? -peak : hi);
+    lo = lo < -peak ? -peak : (lo > peak ? peak : lo);
+    return tau_nm > hi ? hi : (tau_nm < lo ? lo : tau_nm);
+}
+
 /* Order a pair after a sign flip. */
 static void ordered(float x, float y, float *lo, float *hi)
 {

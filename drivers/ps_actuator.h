@@ -100,6 +100,28 @@ typedef struct {
     float kd_max_nm_s_rad; /**< no command's kd exceeds this */
 } ps_act_limits_t;
 
+/** A drive's dynamics, drive output side like the wire ranges (the emulated
+ *  drives and the training model apply them; the runtime does not need them).
+ *  All fields 0: not modelled (torque bounded by the wire range and the
+ *  joint's torque_max only).
+ *
+ *  Torque-speed limit: the datasheet's two points, no-load speed w0 at zero
+ *  torque and the rated torque tr at the rated speed wr, give the ideal DC
+ *  motor line of a voltage-limited drive, whose stall torque is
+ *  ts = tr w0 / (w0 - wr). While motoring (torque and speed of the same sign)
+ *  |tau| <= ts (1 - |w| / w0), and never beyond the peak torque; braking
+ *  (opposite signs) the peak torque is available. Above w0 only braking
+ *  torque is left. (The same model as Isaac Lab's DC motor actuator.) */
+typedef struct {
+    float peak_torque_nm;      /**< |tau| the drive gives at low speed, > 0 */
+    float rated_torque_nm;     /**< the datasheet's rated point: this torque ... */
+    float rated_speed_rad_s;   /**< ... at this speed */
+    float no_load_speed_rad_s; /**< speed at zero torque (rated voltage) */
+    float armature_kg_m2;      /**< rotor inertia reflected to the output; the model's
+                                    joint armature is this times gear_ratio^2 */
+    float pd_hz;               /**< rate of the drive's own PD (impedance) loop */
+} ps_act_motor_t;
+
 typedef enum {
     PS_ACT_PROTO_MIT = 0,   /**< MIT mode (CubeMars AK, Damiao): drivers/ps_mit.h */
     PS_ACT_PROTO_ROBSTRIDE, /**< RobStride / Xiaomi CyberGear: drivers/ps_robstride.h */
@@ -122,6 +144,7 @@ typedef struct {
     float kt_nm_a;              /**< motor torque constant, current -> motor torque */
     float temp_max_c;           /**< fault above this temperature */
     uint32_t rate_div;          /**< command every rate_div servo ticks, 1.. */
+    ps_act_motor_t motor;       /**< the drive's dynamics (all 0: not modelled) */
 } ps_act_cfg_t;
 
 /** A protocol: pure encode/decode on the motor side. Every function is RT-SAFE,
@@ -180,6 +203,21 @@ typedef struct {
     int (*encode_reply)(const ps_act_cfg_t *a, const ps_act_meas_t *motor, ps_can_frame_t *out,
                         size_t max);
 } ps_act_proto_t;
+
+/** @return true when m models a drive (peak_torque_nm > 0)  @rt RT-SAFE */
+bool ps_act_motor_is_modelled(const ps_act_motor_t *m);
+
+/** Check a drive model: all zero, or every field finite with
+ *  0 < rated_torque <= peak_torque, 0 <= rated_speed < no_load_speed,
+ *  armature >= 0 and pd_hz > 0.
+ *  @post err holds "field: problem" on failure  @return 0 | -EINVAL  @rt INIT */
+int ps_act_check_motor(const ps_act_motor_t *m, char *err, size_t err_len);
+
+/** The torque the drive can give for a requested tau_nm at output speed
+ *  omega_rad_s (the torque-speed limit above). Not modelled: tau unchanged;
+ *  modelled and either input NaN: NaN.
+ *  @units Nm, rad/s, drive output side  @rt RT-SAFE O(1), pure */
+float ps_act_motor_limit_torque(const ps_act_motor_t *m, float tau_nm, float omega_rad_s);
 
 /** @return the ops table of a protocol, NULL outside the enum  @rt RT-SAFE */
 const ps_act_proto_t *ps_act_proto_get(ps_act_proto_id_t id);

@@ -285,6 +285,9 @@ void ps_estimate_update(ps_estimator_t *e, const ps_meas_t *m)
 
     const float origin[3] = {0.5f * (sole_h[0][0] + sole_h[1][0]),
                              0.5f * (sole_h[0][1] + sole_h[1][1]), z_ground};
+    for (int i = 0; i < 3; i++)
+        est->pelvis_m[i] = -origin[i];
+    memcpy(est->pelvis_rot, r_tilt, sizeof(r_tilt));
     for (int s = 0; s < 2; s++)
         for (int i = 0; i < 3; i++)
             est->foot_m[s][i] = sole_h[s][i] - origin[i];

@@ -40,6 +40,18 @@ typedef struct {
     float com_offset_z_m;    /**< CoM above the pelvis origin, trunk frame */
     float fall_tilt_rad;     /**< trunk tilt beyond this: fallen */
     float fall_com_height_m; /**< CoM lower than this: fallen */
+    /* Optional mass model (all 0: none) for the whole-body CoM and momentum
+     * of policy/ps_balance: the trunk (pelvis, torso, head, arms at their
+     * stance) as one point in the pelvis frame, and per leg point masses:
+     * hip links at the hip centre, thigh and shank on their segment axes,
+     * ankle link and foot together in the foot frame. Their sum is mass_kg. */
+    float trunk_mass_kg;
+    float trunk_com_x_m, trunk_com_y_m, trunk_com_z_m; /**< pelvis frame */
+    float hip_mass_kg;                                 /**< per leg, at the hip centre */
+    float thigh_mass_kg, thigh_com_m; /**< CoM this far below the hip along the thigh */
+    float shank_mass_kg, shank_com_m; /**< CoM this far below the knee along the shank */
+    float foot_mass_kg;               /**< ankle link + foot */
+    float foot_com_x_m, foot_com_z_m; /**< from the ankle centre, foot frame */
 } ps_kinematics_cfg_t;
 
 /** Leg joints in chain order, hip yaw to ankle roll. */

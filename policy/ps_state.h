@@ -41,6 +41,10 @@ typedef struct {
     float foot_m[2][3]; /**< sole centres, [0] left, [1] right */
     bool is_contact[2];
     bool is_fallen;
+    /** Pelvis pose in the ground frame: origin (the IMU) and axes (columns),
+     *  from the tilt and the legs; p_ground = pelvis_rot p_pelvis + pelvis_m. */
+    float pelvis_m[3];
+    float pelvis_rot[3][3];
 } ps_estimate_t;
 
 /** Joint targets produced by the policy slot. */

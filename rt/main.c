@@ -66,6 +66,8 @@ typedef struct {
     const char *render_dir;   /**< --render: frames, density map, MP4 */
     double render_fps;        /**< --render-fps */
     bool is_view;             /**< --view: live window */
+    const char *policy;       /**< --policy: the controller in the policy slot */
+    const char *weights;      /**< --weights: the MLP's policy file */
     unsigned hist_us;         /**< wake-up histogram buckets (cyclictest -h N) */
     const char *record_path;  /**< --record: every tick to this MCAP file */
     const char *flight_dir;   /**< --flight: triggered dumps into this folder */
@@ -122,6 +124,12 @@ static const char USAGE[] =
     "                        (default robots/ps1.yaml)\n"
     "  --scenario FILE       simulation scenario: the crowd, operator events, pushes,\n"
     "                        faults (default scenarios/crowd.yaml on board sim)\n"
+    "  --policy NAME         the controller in the policy slot: stand (ankle\n"
+    "                        strategy), capture (capture-point stepping) or mlp\n"
+    "                        (the trained policy, capture as its fallback)\n"
+    "                        (default: the robot file's policy.controller, else stand)\n"
+    "  --weights FILE        --policy mlp: the policy file (safetensors with its\n"
+    "                        contract; default: the robot file's policy.weights)\n"
     "  --duration S          run S seconds of loop time, then stop through damping\n"
     "                        (default: the scenario's duration_s; 0 = until Ctrl-C)\n"
     "  --lockstep            simulation only: no real-time pacing; loop and plant\n"
@@ -234,7 +242,9 @@ static int parse_options(int argc, char **argv, options_t *o)
         O_RECORD_RING,
         O_RENDER,
         O_RENDER_FPS,
-        O_VIEW
+        O_VIEW,
+        O_POLICY,
+        O_WEIGHTS
     };
     static const struct option LONG[] = {
         {"board", required_argument, NULL, 'b'},
@@ -262,6 +272,8 @@ static int parse_options(int argc, char **argv, options_t *o)
         {"render", required_argument, NULL, O_RENDER},
         {"render-fps", required_argument, NULL, O_RENDER_FPS},
         {"view", no_argument, NULL, O_VIEW},
+        {"policy", required_argument, NULL, O_POLICY},
+        {"weights", required_argument, NULL, O_WEIGHTS},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
@@ -370,6 +382,17 @@ static int parse_options(int argc, char **argv, options_t *o)
                         optarg);
                 return -EINVAL;
             }
+            break;
+        case O_POLICY:
+            if (ps_config_policy_find(optarg) < 0) {
+                fprintf(stderr, "pushstep: --policy: \"%s\" is not one of %s\n", optarg,
+                        PS_CONFIG_POLICY_NAMES);
+                return -EINVAL;
+            }
+            o->policy = optarg;
+            break;
+        case O_WEIGHTS:
+            o->weights = optarg;
             break;
         case O_OUT:
             o->out_dir = optarg;
@@ -999,6 +1022,9 @@ static void finish_summary(ps_summary_t *sum)
                 .part_impulse_ns = c->part_impulse_ns,
             };
         }
+        sum->truth_heading_dev_deg = t.heading_dev_max_rad * 180.0 / 3.14159265358979;
+        sum->truth_foot_slide_m = t.foot_slide_m;
+        sum->truth_kinetic_max_j = t.kinetic_energy_max_j;
     }
 }
 
@@ -1131,6 +1157,8 @@ int main(int argc, char **argv)
         .trace = g.opt.is_trace ? &g.trace : NULL,
         .frame_ring = g.frames.ring,
         .replay_path = g.opt.replay_path,
+        .policy = g.opt.policy,
+        .weights = g.opt.weights,
     };
     ps_trace_init(&g.trace);
     if (g.opt.is_trace && ps_trace_open(&g.trace, NULL, err, sizeof(err)) < 0) {

@@ -34,8 +34,10 @@ static int load_configs(ps_app_t *app, const ps_app_opts_t *o, char *err, size_t
     /* a replay has no plant for the default scenario to drive */
     const bool is_sim_run = app->board.kind == PS_BOARD_SIM && o->replay_path == NULL;
     if (rc == 0 && (o->scenario != NULL || is_sim_run)) {
-        ps_config_resolve(dd, o->scenario, "scenarios", "crowd", app->scenario_path,
-                          sizeof(app->scenario_path));
+        /* `pushstep camera` looks at the robot file's scene alone unless
+         * told otherwise; a run stands in the default crowd */
+        ps_config_resolve(dd, o->scenario, "scenarios", o->is_camera_only ? "stand" : "crowd",
+                          app->scenario_path, sizeof(app->scenario_path));
         rc = ps_config_load_scenario(app->scenario_path, &app->scenario, err, len);
     }
     if (rc == 0)
@@ -439,6 +441,89 @@ static int open_camera(ps_app_t *app, const ps_clock_t *clock, bool keep_snapsho
     return ps_perception_start(&app->perception, app->board.rt.worker_cpu, err, len);
 }
 
+/* A path in the robot file is relative to the robot file. */
+static void robot_relative(const ps_app_t *app, const char *path, char *out, size_t len)
+{
+    char dir[PATH_MAX];
+    snprintf(dir, sizeof(dir), "%s", app->robot_path);
+    if (path[0] == '/')
+        snprintf(out, len, "%s", path);
+    else
+        snprintf(out, len, "%s/%s", dirname(dir), path);
+}
+
+/* The controller in the policy slot: the command line's, else the robot
+ * file's, else the standing controller. The capture-point controller is
+ * built for every choice but "stand": it is the MLP's fallback. */
+static int wire_policy(ps_app_t *app, const ps_app_opts_t *opts, ps_loop_cfg_t *lc, char *err,
+                       size_t len)
+{
+    const ps_robot_cfg_t *r = &app->robot;
+    const char *name = opts->policy != NULL ? opts->policy : (r->policy[0] ? r->policy : "stand");
+    const int kind = ps_config_policy_find(name);
+    if (kind < 0) {
+        snprintf(err, len, "%s: \"%s\" is not one of %s",
+                 opts->policy != NULL ? "--policy" : "robot file policy.controller", name,
+                 PS_CONFIG_POLICY_NAMES);
+        return -PS_ERR_CONFIG;
+    }
+    snprintf(app->policy_name, sizeof(app->policy_name), "%s", name);
+    int rc = ps_stand_init(&app->stand, r->n_joints, r->joint_name, r->servo);
+    if (rc < 0) {
+        snprintf(err, len, "standing controller: %s", ps_strerror(rc));
+        return rc;
+    }
+    if (kind == 0) {
+        ps_stand_as_policy(&app->stand, &lc->policy);
+        return 0;
+    }
+    const float dt_s = 1.0f / (float)r->control.policy_hz;
+    rc = ps_capture_init(&app->capture, r->n_joints, r->joint_name, r->servo, &r->kin, dt_s);
+    if (rc < 0) {
+        snprintf(err, len, "capture-point controller: %s (needs the leg joints and the "
+                           "kinematics' mass model, docs/policy.md)",
+                 ps_strerror(rc));
+        return -PS_ERR_CONFIG;
+    }
+    ps_policy_t capture;
+    ps_capture_as_policy(&app->capture, &capture);
+    if (kind == 1) {
+        lc->policy = capture;
+        return 0;
+    }
+    if (opts->weights != NULL)
+        snprintf(app->weights_path, sizeof(app->weights_path), "%s", opts->weights);
+    else if (r->policy_weights[0] != '\0')
+        robot_relative(app, r->policy_weights, app->weights_path, sizeof(app->weights_path));
+    else {
+        snprintf(err, len, "--policy mlp needs a policy file: --weights FILE or the robot file's "
+                           "policy.weights");
+        return -PS_ERR_CONFIG;
+    }
+    rc = ps_weights_load(&app->weights, app->weights_path, err, len);
+    if (rc < 0)
+        return rc == -ENOMEM ? rc : -PS_ERR_CONFIG;
+    char why[PS_ERR_MSG_LEN];
+    rc = ps_weights_check_robot(&app->weights.contract, r->n_joints, r->joint_name, r->servo,
+                                r->control.policy_hz, why, sizeof(why));
+    if (rc < 0) {
+        snprintf(err, len, "%s: does not fit robot %s (%s): %s", app->weights_path, r->name,
+                 app->robot_path, why);
+        return -PS_ERR_CONFIG;
+    }
+    const ps_clock_t *late_clock = lc->deadline_clock != NULL ? lc->deadline_clock : lc->clock;
+    rc = ps_mlp_policy_init(&app->mlp, &app->weights, r->n_joints, r->joint_name, r->servo,
+                            &r->kin, dt_s, capture, late_clock,
+                            ps_s_to_ns(r->control.policy_deadline_s));
+    if (rc < 0) {
+        snprintf(err, len, "%s: the policy's observation cannot be built for robot %s: %s",
+                 app->weights_path, r->name, ps_strerror(rc));
+        return -PS_ERR_CONFIG;
+    }
+    ps_mlp_policy_as_policy(&app->mlp, &lc->policy);
+    return 0;
+}
+
 static int wire(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t len)
 {
     ps_loop_cfg_t lc = {
@@ -456,12 +541,9 @@ static int wire(ps_app_t *app, const ps_app_opts_t *opts, char *err, size_t len)
                                                : wire_linux(app, &lc, err, len);
     if (rc < 0)
         return rc;
-    rc = ps_stand_init(&app->stand, app->robot.n_joints, app->robot.joint_name, app->robot.servo);
-    if (rc < 0) {
-        snprintf(err, len, "standing controller: %s", ps_strerror(rc));
+    rc = wire_policy(app, opts, &lc, err, len);
+    if (rc < 0)
         return rc;
-    }
-    ps_stand_as_policy(&app->stand, &lc.policy);
     app->op.sim = app->sim;
     app->op.clock = lc.clock;
     atomic_init(&app->op.start_request_ns, 0);
@@ -614,6 +696,7 @@ void ps_app_deinit(ps_app_t *app)
         ps_gpio_gpiod_close(&app->gpiod);
     app->is_gpiod_open = false;
     ps_loop_deinit(&app->loop);
+    ps_weights_free(&app->weights);
     ps_can_replay_deinit(&app->replay); /* after the loop: its ports read the storage */
     free(app->replay_entries);
     free(app->replay_data);

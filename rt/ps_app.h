@@ -4,7 +4,8 @@
  * buses, wires the ports of the board's kind (the simulated plant for `sim`;
  * SocketCAN and libgpiod for `linux`, each interface checked first; with
  * replay_path, on any board, ports fed from a candump log:
- * drivers/ps_can_replay.h), the policy slot (standing controller), the
+ * drivers/ps_can_replay.h), the policy slot (standing, capture-point or
+ * trained MLP controller, from the robot file or the command line), the
  * record ring and the loop. main() and the end-to-end tests both start the
  * system through here. It is the composition root (with rt/main.c and the
  * config loader): the only application code that includes sim/
@@ -25,8 +26,11 @@
 #include "../drivers/ps_can_socket.h"
 #include "../drivers/ps_canbus.h"
 #include "../drivers/ps_gpio_gpiod.h"
+#include "../policy/ps_capture.h"
+#include "../policy/ps_mlp_policy.h"
 #include "../policy/ps_stand.h"
 #include "../sim/ps_camera_sim.h"
+#include "../policy/ps_weights.h"
 #include "../sim/ps_sim.h"
 #include "ps_config.h"
 #include "ps_config_sim.h"
@@ -54,6 +58,11 @@ typedef struct {
      *  board sim, with a plant that is not started: the scene at rest); no
      *  buses, GPIO or loop. The perception keeps its snapshot. */
     bool is_camera_only;
+    /** The policy slot's controller: "stand", "capture" or "mlp"; NULL: the
+     *  robot file's `policy.controller`, else "stand" */
+    const char *policy;
+    /** "mlp": the policy file; NULL: the robot file's `policy.weights` */
+    const char *weights;
 } ps_app_opts_t;
 
 typedef struct {
@@ -86,6 +95,11 @@ typedef struct {
     bool has_perception;
     char bus_names[PS_MAX_BUSES][PS_NAME_LEN]; /**< the board's interfaces, by bus */
     ps_stand_t stand;
+    ps_capture_t capture;
+    ps_weights_t weights;
+    ps_mlp_policy_t mlp;
+    char policy_name[PS_NAME_LEN];     /**< the controller in the slot */
+    char weights_path[PATH_MAX];       /**< "mlp": its policy file */
     ps_ring_t ring;
     ps_loop_rec_t ring_storage[PS_APP_RING_SLOTS];
     ps_loop_t loop;

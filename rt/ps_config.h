@@ -93,9 +93,21 @@ struct ps_robot_cfg {
     ps_servo_joint_cfg_t servo[PS_MAX_JOINTS];   /**< the servo layer's view */
     ps_imu_cfg_t imu;
     ps_kinematics_cfg_t kin;
+    /** The file's optional `policy:` section: the controller in the policy
+     *  slot (PS_CONFIG_POLICY_NAMES; empty: "stand") and, for "mlp", the
+     *  policy file (relative to the robot file, as written). */
+    char policy[PS_NAME_LEN];
+    char policy_weights[PS_PATH_LEN];
     ps_robot_src_t src; /**< for messages only */
     /* The file's `sim:` section: ps_config_load_robot_sim (rt/ps_config_sim.h). */
 };
+
+/** The controllers the policy slot can hold (robot file `policy.controller`,
+ *  pushstep --policy). */
+#define PS_CONFIG_POLICY_NAMES "stand, capture, mlp"
+
+/** @return 0 stand, 1 capture, 2 mlp; -ENOENT for any other name  @rt INIT */
+int ps_config_policy_find(const char *name);
 
 /* ---- loading ---------------------------------------------------------- */
 

@@ -4,6 +4,7 @@
  * machinery: ps_config_common.h. Part of the composition root: it fills
  * sim's ps_sim_devices_cfg_t, so it includes rt/ps_config_sim.h.
  */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -25,6 +26,7 @@
 typedef struct {
     char name[PS_NAME_LEN];
     ps_act_range_t r;
+    ps_act_motor_t m; /* optional dynamics; all 0: not modelled */
 } driver_raw_t;
 
 /* The robot file's own shape, flat as written; checked here, then composed
@@ -41,13 +43,19 @@ typedef struct {
     char name[PS_NAME_LEN];
     uint32_t bus_idx, can_id, reply_id;
     ps_act_proto_id_t protocol;
-    ps_act_range_t wire; /* the driver's, motor side */
+    ps_act_range_t wire;  /* the driver's, motor side */
+    ps_act_motor_t motor; /* the driver's dynamics, motor side */
     float pos_min_rad, pos_max_rad, vel_max_rad_s, torque_max_nm;
     float kp_nm_rad, kd_nm_s_rad, kp_max_nm_rad, kd_max_nm_s_rad;
     float stance_rad, kt_nm_a, temp_max_c;
     uint32_t rate_div;
     float gear_ratio, direction, zero_offset_rad; /* defaults 1, +1, 0 */
 } joint_file_t;
+
+typedef struct {
+    char controller[PS_NAME_LEN];
+    char weights[PS_PATH_LEN];
+} policy_file_t;
 
 typedef struct {
     char name[PS_NAME_LEN];
@@ -58,6 +66,7 @@ typedef struct {
     ps_imu_cfg_t imu;
     ps_kinematics_cfg_t kin;
     ps_sim_devices_cfg_t sim;
+    policy_file_t policy;
 } robot_file_t;
 
 typedef struct {
@@ -73,6 +82,7 @@ typedef struct {
     ps_imu_cfg_t imu;
     ps_kinematics_cfg_t kin;
     ps_sim_devices_cfg_t sim;
+    policy_file_t *policy; /* optional */
     driver_raw_t *drivers;
     uint32_t n_drivers;
     joint_raw_t *joints;
@@ -150,6 +160,21 @@ static const cyaml_schema_field_t KIN_FIELDS[] = {
     CYAML_FIELD_FLOAT("fall_tilt_rad", CYAML_FLAG_DEFAULT, ps_kinematics_cfg_t, fall_tilt_rad),
     CYAML_FIELD_FLOAT("fall_com_height_m", CYAML_FLAG_DEFAULT, ps_kinematics_cfg_t,
                       fall_com_height_m),
+#define KIN_OPT(key, field)                                                                        \
+    CYAML_FIELD_FLOAT(key, CYAML_FLAG_OPTIONAL, ps_kinematics_cfg_t, field)
+    KIN_OPT("trunk_mass_kg", trunk_mass_kg),
+    KIN_OPT("trunk_com_x_m", trunk_com_x_m),
+    KIN_OPT("trunk_com_y_m", trunk_com_y_m),
+    KIN_OPT("trunk_com_z_m", trunk_com_z_m),
+    KIN_OPT("hip_mass_kg", hip_mass_kg),
+    KIN_OPT("thigh_mass_kg", thigh_mass_kg),
+    KIN_OPT("thigh_com_m", thigh_com_m),
+    KIN_OPT("shank_mass_kg", shank_mass_kg),
+    KIN_OPT("shank_com_m", shank_com_m),
+    KIN_OPT("foot_mass_kg", foot_mass_kg),
+    KIN_OPT("foot_com_x_m", foot_com_x_m),
+    KIN_OPT("foot_com_z_m", foot_com_z_m),
+#undef KIN_OPT
     CYAML_FIELD_END,
 };
 static const cyaml_schema_field_t SIM_FIELDS[] = {
@@ -178,6 +203,13 @@ static const cyaml_schema_field_t DRIVER_FIELDS[] = {
     CYAML_FIELD_FLOAT("t_max_nm", CYAML_FLAG_DEFAULT, driver_raw_t, r.t_max_nm),
     CYAML_FIELD_FLOAT("i_min_a", CYAML_FLAG_DEFAULT, driver_raw_t, r.i_min_a),
     CYAML_FIELD_FLOAT("i_max_a", CYAML_FLAG_DEFAULT, driver_raw_t, r.i_max_a),
+    CYAML_FIELD_FLOAT("peak_torque_nm", CYAML_FLAG_OPTIONAL, driver_raw_t, m.peak_torque_nm),
+    CYAML_FIELD_FLOAT("rated_torque_nm", CYAML_FLAG_OPTIONAL, driver_raw_t, m.rated_torque_nm),
+    CYAML_FIELD_FLOAT("rated_speed_rad_s", CYAML_FLAG_OPTIONAL, driver_raw_t, m.rated_speed_rad_s),
+    CYAML_FIELD_FLOAT("no_load_speed_rad_s", CYAML_FLAG_OPTIONAL, driver_raw_t,
+                      m.no_load_speed_rad_s),
+    CYAML_FIELD_FLOAT("armature_kg_m2", CYAML_FLAG_OPTIONAL, driver_raw_t, m.armature_kg_m2),
+    CYAML_FIELD_FLOAT("pd_hz", CYAML_FLAG_OPTIONAL, driver_raw_t, m.pd_hz),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_value_t DRIVER_SCHEMA = {
@@ -211,6 +243,11 @@ static const cyaml_schema_field_t JOINT_FIELDS[] = {
 static const cyaml_schema_value_t JOINT_SCHEMA = {
     CYAML_VALUE_MAPPING(CYAML_FLAG_DEFAULT, joint_raw_t, JOINT_FIELDS),
 };
+static const cyaml_schema_field_t POLICY_FIELDS[] = {
+    CYAML_FIELD_STRING("controller", CYAML_FLAG_DEFAULT, policy_file_t, controller, 1),
+    CYAML_FIELD_STRING("weights", CYAML_FLAG_OPTIONAL, policy_file_t, weights, 1),
+    CYAML_FIELD_END,
+};
 static const cyaml_schema_field_t ROBOT_FIELDS[] = {
     CYAML_FIELD_STRING("name", CYAML_FLAG_DEFAULT, robot_raw_t, name, 1),
     CYAML_FIELD_STRING("model", CYAML_FLAG_DEFAULT, robot_raw_t, model, 1),
@@ -218,6 +255,8 @@ static const cyaml_schema_field_t ROBOT_FIELDS[] = {
     CYAML_FIELD_MAPPING("imu", CYAML_FLAG_DEFAULT, robot_raw_t, imu, IMU_FIELDS),
     CYAML_FIELD_MAPPING("kinematics", CYAML_FLAG_DEFAULT, robot_raw_t, kin, KIN_FIELDS),
     CYAML_FIELD_MAPPING("sim", CYAML_FLAG_DEFAULT, robot_raw_t, sim, SIM_FIELDS),
+    CYAML_FIELD_MAPPING_PTR("policy", CYAML_FLAG_POINTER | CYAML_FLAG_OPTIONAL, robot_raw_t,
+                            policy, POLICY_FIELDS),
     CYAML_FIELD_SEQUENCE_COUNT("drivers", CYAML_FLAG_POINTER, robot_raw_t, drivers, n_drivers,
                                &DRIVER_SCHEMA, 1, MAX_DRIVERS),
     CYAML_FIELD_SEQUENCE_COUNT("joints", CYAML_FLAG_POINTER, robot_raw_t, joints, n_joints,
@@ -281,6 +320,27 @@ static const ps_cfg_rule_t ROBOT_RANGES[] = {
                     cfg.kin.fall_tilt_rad, 0.0, 1.5708),
     PS_CFG_RULE_F32(0, 0, "kinematics.fall_com_height_m", robot_work_t, cfg.kin.fall_com_height_m,
                     0.0, 3.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.trunk_mass_kg", robot_work_t, cfg.kin.trunk_mass_kg, 0.0,
+                    1000.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.trunk_com_x_m", robot_work_t, cfg.kin.trunk_com_x_m, -1.0,
+                    1.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.trunk_com_y_m", robot_work_t, cfg.kin.trunk_com_y_m, -1.0,
+                    1.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.trunk_com_z_m", robot_work_t, cfg.kin.trunk_com_z_m, -1.0,
+                    2.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.hip_mass_kg", robot_work_t, cfg.kin.hip_mass_kg, 0.0, 100.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.thigh_mass_kg", robot_work_t, cfg.kin.thigh_mass_kg, 0.0,
+                    100.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.thigh_com_m", robot_work_t, cfg.kin.thigh_com_m, 0.0, 2.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.shank_mass_kg", robot_work_t, cfg.kin.shank_mass_kg, 0.0,
+                    100.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.shank_com_m", robot_work_t, cfg.kin.shank_com_m, 0.0, 2.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.foot_mass_kg", robot_work_t, cfg.kin.foot_mass_kg, 0.0,
+                    100.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.foot_com_x_m", robot_work_t, cfg.kin.foot_com_x_m, -1.0,
+                    1.0),
+    PS_CFG_RULE_F32(0, 0, "kinematics.foot_com_z_m", robot_work_t, cfg.kin.foot_com_z_m, -1.0,
+                    1.0),
     PS_CFG_RULE_F32(0, 0, "sim.gyro_noise_rad_s", robot_work_t, cfg.sim.gyro_noise_rad_s, 0.0, 1.0),
     PS_CFG_RULE_F32(0, 0, "sim.gyro_bias_rad_s", robot_work_t, cfg.sim.gyro_bias_rad_s, 0.0, 1.0),
     PS_CFG_RULE_F32(0, 0, "sim.accel_noise_m_s2", robot_work_t, cfg.sim.accel_noise_m_s2, 0.0,
@@ -306,6 +366,15 @@ static const ps_cfg_rule_t ROBOT_RANGES[] = {
     PS_CFG_RULE_F32(RA_DRIVERS, 0, "t_max_nm", driver_raw_t, r.t_max_nm, -1000.0, 1000.0),
     PS_CFG_RULE_F32(RA_DRIVERS, 0, "i_min_a", driver_raw_t, r.i_min_a, -1000.0, 1000.0),
     PS_CFG_RULE_F32(RA_DRIVERS, 0, "i_max_a", driver_raw_t, r.i_max_a, -1000.0, 1000.0),
+    PS_CFG_RULE_F32(RA_DRIVERS, 0, "peak_torque_nm", driver_raw_t, m.peak_torque_nm, 0.0, 1000.0),
+    PS_CFG_RULE_F32(RA_DRIVERS, 0, "rated_torque_nm", driver_raw_t, m.rated_torque_nm, 0.0,
+                    1000.0),
+    PS_CFG_RULE_F32(RA_DRIVERS, 0, "rated_speed_rad_s", driver_raw_t, m.rated_speed_rad_s, 0.0,
+                    10000.0),
+    PS_CFG_RULE_F32(RA_DRIVERS, 0, "no_load_speed_rad_s", driver_raw_t, m.no_load_speed_rad_s,
+                    0.0, 10000.0),
+    PS_CFG_RULE_F32(RA_DRIVERS, 0, "armature_kg_m2", driver_raw_t, m.armature_kg_m2, 0.0, 10.0),
+    PS_CFG_RULE_F32(RA_DRIVERS, 0, "pd_hz", driver_raw_t, m.pd_hz, 0.0, 1000000.0),
     PS_CFG_RULE_U32(RA_JOINTS, 0, "bus", joint_file_t, bus_idx, 0.0, PS_MAX_BUSES - 1u),
     PS_CFG_RULE_U32(RA_JOINTS, PS_CFG_RANGE_HEX, "can_id", joint_file_t, can_id, 1.0,
                     PS_CAN_EFF_MASK),
@@ -363,6 +432,23 @@ static int check_drivers(ps_cfg_ctx_t *c, const robot_work_t *w)
                                          pairs[p].min_key, (double)pairs[p].min);
             }
         }
+        /* The dynamics: all or nothing, consistent; the message starts with the key. */
+        char why[PS_ERR_MSG_LEN];
+        if (ps_act_check_motor(&d->m, why, sizeof(why)) != 0) {
+            const char *colon = strchr(why, ':');
+            const int key_len = colon != NULL ? (int)(colon - why) : (int)strlen(why);
+            (void)snprintf(field, sizeof(field), "drivers[%u].%.*s", i, key_len, why);
+            /* an absent key has no line: the driver's entry has one */
+            char entry[PS_CFG_FIELD_PATH_LEN];
+            (void)snprintf(entry, sizeof(entry), "drivers[%u].name", i);
+            const uint32_t line = ps_cfg_line_of(c, field) ? ps_cfg_line_of(c, field)
+                                                           : ps_cfg_line_of(c, entry);
+            return ps_cfg_fail_at(c, line, field,
+                                  "%s (give all six of peak_torque_nm, rated_torque_nm, "
+                                  "rated_speed_rad_s, no_load_speed_rad_s, armature_kg_m2, "
+                                  "pd_hz, or none)",
+                                  colon != NULL ? colon + 2 : why);
+        }
     }
     return 0;
 }
@@ -377,6 +463,7 @@ static int resolve_drivers(ps_cfg_ctx_t *c, robot_work_t *w)
             d++;
         if (d < w->n_drivers) {
             w->cfg.joints[i].wire = w->drivers[d].r;
+            w->cfg.joints[i].motor = w->drivers[d].m;
             continue;
         }
         char known[PS_ERR_MSG_LEN / 2] = "";
@@ -411,6 +498,7 @@ static ps_act_cfg_t act_of(const joint_file_t *j)
         .kt_nm_a = j->kt_nm_a,
         .temp_max_c = j->temp_max_c,
         .rate_div = j->rate_div,
+        .motor = j->motor,
     };
     return a;
 }
@@ -466,6 +554,12 @@ static int check_joint_limits(ps_cfg_ctx_t *c, const robot_work_t *w, uint32_t i
         return ps_cfg_fail_field(
             c, JFIELD("torque_max_nm"), "+/-%g outside driver \"%s\" wire range [%g, %g]",
             (double)j->torque_max_nm, drv, (double)r->t_min_nm, (double)r->t_max_nm);
+    /* The drive's peak torque seen from the joint (gear ratio N multiplies torque). */
+    const float peak_joint_nm = j->motor.peak_torque_nm * j->gear_ratio;
+    if (ps_act_motor_is_modelled(&j->motor) && j->torque_max_nm > peak_joint_nm * (1.0f + 1e-6f))
+        return ps_cfg_fail_field(c, JFIELD("torque_max_nm"),
+                                 "value %g above driver \"%s\" peak torque %g at the joint",
+                                 (double)j->torque_max_nm, drv, (double)peak_joint_nm);
     if (j->kp_max_nm_rad > r->kp_max_nm_rad)
         return ps_cfg_fail_field(c, JFIELD("kp_max_nm_rad"),
                                  "value %g above driver \"%s\" kp_max_nm_rad %g",
@@ -558,6 +652,25 @@ static int check_robot(ps_cfg_ctx_t *c, robot_work_t *w)
     const int trc = check_timing(c, w);
     if (trc != 0)
         return trc;
+    const policy_file_t *pol = &w->cfg.policy;
+    if (pol->controller[0] != '\0' && ps_config_policy_find(pol->controller) < 0)
+        return ps_cfg_fail_field(c, "policy.controller", "\"%s\" is not one of %s",
+                                 pol->controller, PS_CONFIG_POLICY_NAMES);
+    if (strcmp(pol->controller, "mlp") == 0 && pol->weights[0] == '\0')
+        return ps_cfg_fail_field(c, "policy.weights",
+                                 "controller mlp needs a policy file (weights: PATH)");
+    /* The mass model, when given, accounts for the whole mass. */
+    const ps_kinematics_cfg_t *kin = &w->cfg.kin;
+    const float parts = kin->trunk_mass_kg + 2.0f * (kin->hip_mass_kg + kin->thigh_mass_kg +
+                                                     kin->shank_mass_kg + kin->foot_mass_kg);
+    if (parts > 0.0f &&
+        (kin->trunk_mass_kg <= 0.0f || fabsf(parts - kin->mass_kg) > 0.01f * kin->mass_kg))
+        return ps_cfg_fail_field(c, "kinematics.trunk_mass_kg",
+                                 "the mass model (trunk %g + 2 x legs %g = %g kg) does not add up "
+                                 "to mass_kg %g within 1 %%",
+                                 (double)kin->trunk_mass_kg,
+                                 (double)(parts - kin->trunk_mass_kg) / 2.0, (double)parts,
+                                 (double)kin->mass_kg);
     /* Every device is sampled on every policy tick only if its divider
      * divides the number of servo ticks per policy tick. */
     const uint32_t ticks_per_policy = ctl->servo_hz / ctl->policy_hz;
@@ -658,6 +771,17 @@ static void compose_robot(const robot_file_t *f, ps_robot_cfg_t *out)
     }
     out->imu = f->imu;
     out->kin = f->kin;
+    memcpy(out->policy, f->policy.controller, sizeof(out->policy));
+    memcpy(out->policy_weights, f->policy.weights, sizeof(out->policy_weights));
+}
+
+int ps_config_policy_find(const char *name)
+{
+    static const char *const NAMES[] = {"stand", "capture", "mlp"};
+    for (int i = 0; name != NULL && i < 3; i++)
+        if (strcmp(name, NAMES[i]) == 0)
+            return i;
+    return -ENOENT;
 }
 
 /* Where the fields that other files refer to are (ps_config_check_pair). */
@@ -711,6 +835,8 @@ static int load_robot_file(const char *path, ps_robot_cfg_t *out, ps_sim_devices
         r->imu = raw->imu;
         r->kin = raw->kin;
         r->sim = raw->sim;
+        if (raw->policy != NULL)
+            r->policy = *raw->policy;
         w->n_drivers = raw->n_drivers; /* libcyaml enforced the maxima */
         memcpy(w->drivers, raw->drivers, raw->n_drivers * sizeof(w->drivers[0]));
         r->n_joints = raw->n_joints;

@@ -266,6 +266,9 @@ static cJSON *summary_json(const ps_summary_t *s)
         cJSON_AddNumberToObject(sim, "commands_out_of_limits", (double)s->truth_cmd_out_of_limits);
         cJSON_AddNumberToObject(sim, "plant_overruns", (double)s->truth_plant_overruns);
         cJSON_AddNumberToObject(sim, "plant_max_lag_ms", s->truth_plant_max_lag_ms);
+        cJSON_AddNumberToObject(sim, "heading_dev_deg", s->truth_heading_dev_deg);
+        cJSON_AddNumberToObject(sim, "foot_slide_m", s->truth_foot_slide_m);
+        cJSON_AddNumberToObject(sim, "kinetic_energy_j", s->truth_kinetic_max_j);
         cJSON_AddBoolToObject(sim, "fell_behind_real_time",
                               s->truth_plant_overruns > 0 || s->truth_plant_max_lag_ms > 0);
         if (s->truth_plant_err != 0) {

@@ -66,6 +66,9 @@ typedef struct {
     bool has_crowd;                     /**< crowd below is valid */
     ps_summary_crowd_t crowd;
     const ps_recorder_stats_t *recorder; /**< flight recorder's account; NULL: not recording */
+    double truth_heading_dev_deg;       /**< largest heading change of the base */
+    double truth_foot_slide_m;          /**< feet's travel while carrying weight */
+    double truth_kinetic_max_j;         /**< largest kinetic energy */
 } ps_summary_t;
 
 /** @return 0 | -EIO (err says why)  @rt NON-RT */

@@ -25,10 +25,10 @@ static double clampd(double x, double lo, double hi)
     return x < lo ? lo : (x > hi ? hi : x);
 }
 
-/* The torque the drive applies for its current command at this joint state.
- * Both limits apply: the wire t range is what the firmware can represent, the
- * joint's torque_max is the drive's configured current limit. */
-static double pd_torque(const ps_devices_actuator_t *a, double q_rad, double qd_rad_s)
+/* The torque the drive's PD asks for with its current command at this joint
+ * state. Both limits apply: the wire t range is what the firmware can
+ * represent, the joint's torque_max is the drive's configured current limit. */
+static double pd_command_torque(const ps_devices_actuator_t *a, double q_rad, double qd_rad_s)
 {
     if (!a->is_motor_mode || !a->has_cmd || !a->is_powered)
         return 0.0;
@@ -41,6 +41,24 @@ static double pd_torque(const ps_devices_actuator_t *a, double q_rad, double qd_
     tau = clampd(tau, (double)w.t_min_nm, (double)w.t_max_nm);
     tau = clampd(tau, -(double)a->lim.torque_max_nm, (double)a->lim.torque_max_nm);
     return tau;
+}
+
+/* What the motor can deliver of a joint torque at the joint speed: the
+ * drive's torque-speed limit, applied on the motor side (ps_act_motor_t). */
+static double motor_torque(const ps_devices_actuator_t *a, double tau_nm, double qd_rad_s)
+{
+    const ps_act_cfg_t *c = &a->act;
+    if (!ps_act_motor_is_modelled(&c->motor))
+        return tau_nm;
+    const double n = (double)c->gear_ratio, d = (double)c->direction;
+    const float tau_m = (float)(d * tau_nm / n);
+    const float omega_m = (float)(d * n * qd_rad_s);
+    return d * n * (double)ps_act_motor_limit_torque(&c->motor, tau_m, omega_m);
+}
+
+static double pd_torque(const ps_devices_actuator_t *a, double q_rad, double qd_rad_s)
+{
+    return motor_torque(a, pd_command_torque(a, q_rad, qd_rad_s), qd_rad_s);
 }
 
 /* One LSB of each field (the protocol's resolution, seen from the joint): the
@@ -146,7 +164,21 @@ double ps_devices_step_actuator(ps_devices_actuator_t *a, double q_rad, double q
         a->has_cmd = false;
         a->fault_bits |= PS_ACT_FAULT_COMMS_LOST;
     }
-    const double tau = pd_torque(a, q_rad, qd_rad_s);
+    /* The drive's PD runs at its own rate (pd_hz; every step when it is
+     * not modelled or faster than the physics): its torque is held in
+     * between, while the torque-speed limit acts on the speed of each step. */
+    const float pd_hz = a->act.motor.pd_hz;
+    if (!ps_act_motor_is_modelled(&a->act.motor) || !(pd_hz > 0.0f) || now_ns >= a->pd_due_ns) {
+        a->pd_tau_nm = pd_command_torque(a, q_rad, qd_rad_s);
+        if (ps_act_motor_is_modelled(&a->act.motor) && pd_hz > 0.0f) {
+            const int64_t period_ns = (int64_t)(1e9 / (double)pd_hz);
+            if (a->pd_due_ns == 0)
+                a->pd_due_ns = now_ns;
+            while (a->pd_due_ns <= now_ns)
+                a->pd_due_ns += period_ns > 0 ? period_ns : 1;
+        }
+    }
+    const double tau = motor_torque(a, a->pd_tau_nm, qd_rad_s);
 
     /* Exact discretisation of the first-order model for a power held constant
      * over the step: stable for any dt, unlike explicit Euler. The current is

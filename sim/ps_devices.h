@@ -14,10 +14,14 @@
  *  - starts with motor mode OFF, like real drives: command frames are
  *    answered but not obeyed until an enable arrives. The runtime must
  *    enable every joint before it expects torque;
- *  - runs its PD at every physics step: tau = kp (p_des - p) + kd (v_des - v)
- *    + t_ff, saturated to the wire t range and to +-torque_max_nm, 0 when not
- *    in motor mode, no command arrived since enable, or power is off. p is
- *    the joint angle minus the zero offset set by a set-zero request;
+ *  - runs its PD at its rate act.motor.pd_hz (at every physics step when the
+ *    drive's dynamics are not modelled or the rate is above the physics
+ *    rate; held in between): tau = kp (p_des - p) + kd (v_des - v) + t_ff,
+ *    saturated to the wire t range and to +-torque_max_nm, 0 when not in
+ *    motor mode, no command arrived since enable, or power is off. p is the
+ *    joint angle minus the zero offset set by a set-zero request. Then, at
+ *    every physics step, the motor's torque-speed limit at the joint's speed
+ *    (ps_act_motor_limit_torque on the motor side, when modelled);
  *  - answers every valid frame with a reply (position, velocity, torque,
  *    temperature, fault bits, converted to the motor side and encoded by the
  *    protocol) stamped t_ns = arrival + reply_latency_s, which the simulated
@@ -88,6 +92,8 @@ typedef struct {
     uint32_t fault_bits_reported;  /**< of those, sent in a fault report (read-only) */
     uint64_t n_fault_reports;      /**< fault reports produced */
     double tau_nm;                 /**< torque of the last step */
+    double pd_tau_nm;              /**< the PD's torque, held between its updates */
+    int64_t pd_due_ns;             /**< next PD update (act.motor.pd_hz); 0: at once */
     int64_t drop_replies_until_ns; /**< user may modify: fault injection */
     uint64_t n_cmd_frames;         /**< command frames decoded (obeyed or not) */
     uint64_t n_cmd_ignored;        /**< command frames received outside motor mode */

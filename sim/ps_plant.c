@@ -17,6 +17,7 @@
 /* Harness gains: a gantry holding the limp 38 kg robot. 343 N of weight on
  * 20 kN/m sags 1.7 cm at worst; the damping is near critical for the whole
  * body on the translational spring (2*sqrt(k*m) = 1.7 kN s/m). */
+#define PS_PLANT_MAX_NV 4096u /* kinetic energy's scratch */
 #define HARNESS_K_N_M      20000.0
 #define HARNESS_C_N_S_M    1500.0
 #define HARNESS_K_NM_RAD   1500.0
@@ -53,6 +54,7 @@ struct ps_plant {
     ps_crowd_t *crowd;       /**< NULL: no crowd */
     int64_t crowd_ns;        /**< time in the crowd's work, all steps */
     int64_t mujoco_ns;       /**< time in mj_step, all steps */
+    double *mass0, *inertia0, *ipos0, *friction0; /**< as loaded (nbody, 3 nbody, 3 ngeom) */
 };
 
 static int64_t mono_ns(void)
@@ -431,7 +433,12 @@ int ps_plant_create(const ps_plant_cfg_t *robot, ps_plant_t **out, char *err, si
     p->ext_force_n = calloc((size_t)p->m->nbody * 3u, sizeof(double));
     p->is_foot = calloc((size_t)p->m->nbody, 1u);
     p->is_robot = calloc((size_t)p->m->nbody, 1u);
-    if (p->d == NULL || p->ext_force_n == NULL || p->is_foot == NULL || p->is_robot == NULL) {
+    p->mass0 = calloc((size_t)p->m->nbody, sizeof(double));
+    p->inertia0 = calloc((size_t)p->m->nbody * 3u, sizeof(double));
+    p->ipos0 = calloc((size_t)p->m->nbody * 3u, sizeof(double));
+    p->friction0 = calloc((size_t)p->m->ngeom * 3u, sizeof(double));
+    if (p->d == NULL || p->ext_force_n == NULL || p->is_foot == NULL || p->is_robot == NULL ||
+        p->mass0 == NULL || p->inertia0 == NULL || p->ipos0 == NULL || p->friction0 == NULL) {
         ps_err_format(err, err_len, "%s: out of memory", model_path);
         rc = -ENOMEM;
         goto fail;
@@ -445,6 +452,10 @@ int ps_plant_create(const ps_plant_cfg_t *robot, ps_plant_t **out, char *err, si
         goto fail;
     }
 
+    memcpy(p->mass0, p->m->body_mass, (size_t)p->m->nbody * sizeof(double));
+    memcpy(p->inertia0, p->m->body_inertia, (size_t)p->m->nbody * 3u * sizeof(double));
+    memcpy(p->ipos0, p->m->body_ipos, (size_t)p->m->nbody * 3u * sizeof(double));
+    memcpy(p->friction0, p->m->geom_friction, (size_t)p->m->ngeom * 3u * sizeof(double));
     place_in_stance(p, robot);
     if (has_crowd) {
         rc = ps_crowd_create(robot->crowd, agents, n_agents, p->m, p->is_robot, p->root_body,
@@ -680,6 +691,102 @@ double ps_plant_foot_min_z_m(const ps_plant_t *p)
     return foot_min_z(p);
 }
 
+void ps_plant_get_body_pos(const ps_plant_t *p, int body_idx, double out_m[3])
+{
+    const bool is_valid = body_idx >= 0 && body_idx < p->m->nbody;
+    for (int k = 0; k < 3; k++)
+        out_m[k] = is_valid ? p->d->xpos[3 * body_idx + k] : NAN;
+}
+
+int ps_plant_get_feet_contact(const ps_plant_t *p, double out_force_n[2],
+                              double out_cop_m[2][3])
+{
+    const int feet[2] = {mj_name2id(p->m, mjOBJ_BODY, "l_foot"),
+                         mj_name2id(p->m, mjOBJ_BODY, "r_foot")};
+    if (feet[0] < 0 || feet[1] < 0)
+        return -ENOENT;
+    double f[2] = {0, 0}, c[2][3] = {{0, 0, 0}, {0, 0, 0}};
+    for (int i = 0; i < p->d->ncon; i++) {
+        const mjContact *con = &p->d->contact[i];
+        const int b1 = p->m->geom_bodyid[con->geom1], b2 = p->m->geom_bodyid[con->geom2];
+        const int other = b1 == 0 ? b2 : (b2 == 0 ? b1 : -1);
+        for (int s = 0; s < 2; s++) {
+            if (other != feet[s])
+                continue;
+            mjtNum w[6];
+            mj_contactForce(p->m, p->d, i, w);
+            const double fn = fabs(w[0]); /* normal, contact frame */
+            f[s] += fn;
+            for (int k = 0; k < 3; k++)
+                c[s][k] += fn * con->pos[k];
+        }
+    }
+    for (int s = 0; s < 2; s++) {
+        out_force_n[s] = f[s];
+        for (int k = 0; k < 3; k++)
+            out_cop_m[s][k] = f[s] > 0.0 ? c[s][k] / f[s] : NAN;
+    }
+    return 0;
+}
+
+void ps_plant_get_root(const ps_plant_t *p, double out_pos_m[3], double out_quat[4],
+                       double out_vel_m_s[3])
+{
+    for (int k = 0; k < 3; k++) {
+        out_pos_m[k] = p->d->qpos[p->root_qpos_adr + k];
+        out_vel_m_s[k] = p->d->qvel[p->root_dof_adr + k];
+    }
+    for (int k = 0; k < 4; k++)
+        out_quat[k] = p->d->qpos[p->root_qpos_adr + 3 + k];
+}
+
+double ps_plant_kinetic_energy_j(ps_plant_t *p)
+{
+    /* 0.5 qvel' M qvel with the last step's inertia matrix (mj_energyVel
+     * leaves 0 unless the model enables energy). */
+    mjtNum mv[PS_PLANT_MAX_NV];
+    if (p->m->nv > (int)PS_PLANT_MAX_NV)
+        return NAN;
+    mj_mulM(p->m, p->d, mv, p->d->qvel);
+    return 0.5 * mju_dot(p->d->qvel, mv, p->m->nv);
+}
+
+void ps_plant_scale_body_mass(ps_plant_t *p, int body_idx, double factor,
+                              const double com_offset_m[3])
+{
+    if (body_idx <= 0 || body_idx >= p->m->nbody || !(factor >= 0.1 && factor <= 10.0))
+        return;
+    p->m->body_mass[body_idx] = p->mass0[body_idx] * factor;
+    for (int k = 0; k < 3; k++) {
+        p->m->body_inertia[3 * body_idx + k] = p->inertia0[3 * body_idx + k] * factor;
+        p->m->body_ipos[3 * body_idx + k] =
+            p->ipos0[3 * body_idx + k] + (com_offset_m != NULL ? com_offset_m[k] : 0.0);
+    }
+    mj_setConst(p->m, p->d); /* subtree masses and the rest derived from them */
+}
+
+void ps_plant_scale_friction(ps_plant_t *p, double factor)
+{
+    if (!(factor >= 0.1 && factor <= 10.0))
+        return;
+    for (int g = 0; g < p->m->ngeom; g++) {
+        const int b = p->m->geom_bodyid[g];
+        if (b == 0 || p->is_foot[b])
+            p->m->geom_friction[3 * g] = p->friction0[3 * g] * factor;
+    }
+}
+
+void ps_plant_reset(ps_plant_t *p, const float *stance_rad, bool is_harness_engaged)
+{
+    const ps_plant_cfg_t cfg = {.stance_rad = stance_rad};
+    memset(p->ext_force_n, 0, (size_t)p->m->nbody * 3u * sizeof(double));
+    place_in_stance(p, &cfg);
+    p->is_harness_engaged = is_harness_engaged;
+    p->n_bad_warnings = bad_warning_count(p->d);
+    p->n_full_warnings = full_warning_count(p->d);
+    p->err_reason = NULL;
+}
+
 void ps_plant_destroy(ps_plant_t *p)
 {
     if (p == NULL)
@@ -692,6 +799,10 @@ void ps_plant_destroy(ps_plant_t *p)
     free(p->ext_force_n);
     free(p->is_foot);
     free(p->is_robot);
+    free(p->mass0);
+    free(p->inertia0);
+    free(p->ipos0);
+    free(p->friction0);
     free(p);
 }
 

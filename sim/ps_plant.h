@@ -164,6 +164,43 @@ int ps_plant_root_body(const ps_plant_t *p);
 /** @post out_qpos holds the model's nq position coordinates (for the
  *  simulated camera's scene mailbox)  @rt RT-SAFE O(nq) */
 void ps_plant_get_qpos(const ps_plant_t *p, double *out_qpos);
+/** World position of a body's frame origin (ps_plant_find_body), from the
+ *  last computed kinematics. An invalid body_idx writes NaN.
+ *  @units m  @rt RT-SAFE O(1) */
+void ps_plant_get_body_pos(const ps_plant_t *p, int body_idx, double out_m[3]);
+
+/** The feet on the floor, from the last step's contacts: per foot body
+ *  (left, right: the bodies named "l_foot" and "r_foot") the normal force of
+ *  its floor contacts and their force-weighted point (the foot's CoP, world;
+ *  NaN when out_force_n is 0), and the whole CoP of both.
+ *  @return 0 | -ENOENT the model has no l_foot/r_foot  @units N, m
+ *  @rt RT-SAFE O(ncon) */
+int ps_plant_get_feet_contact(const ps_plant_t *p, double out_force_n[2],
+                              double out_cop_m[2][3]);
+
+/** The floating base: position (world), orientation (quaternion w x y z),
+ *  linear velocity (world) of the root body's frame.  @rt RT-SAFE */
+void ps_plant_get_root(const ps_plant_t *p, double out_pos_m[3], double out_quat[4],
+                       double out_vel_m_s[3]);
+
+/** Kinetic energy of the whole model (crowd included), 0.5 qvel' M qvel;
+ *  NaN beyond 4096 degrees of freedom.  @units J  @rt RT-SAFE O(nv^2) */
+double ps_plant_kinetic_energy_j(ps_plant_t *p);
+
+/** Domain randomisation (training only): scale the mass and inertia of a
+ *  body by factor and move its centre of mass by com_offset_m (body frame;
+ *  NULL: none), the friction of every geom of the robot's feet and of the
+ *  floor by factor (relative to the model as loaded). A factor outside
+ *  [0.1, 10] is ignored. The mass change recomputes the model's constants
+ *  at its reference pose (mj_setConst), which moves the robot there: call
+ *  ps_plant_reset after it.  @rt between episodes */
+void ps_plant_scale_body_mass(ps_plant_t *p, int body_idx, double factor,
+                              const double com_offset_m[3]);
+void ps_plant_scale_friction(ps_plant_t *p, double factor);
+
+/** Put the robot back in its stance at rest, harness as given; the model's
+ *  masses and frictions stay as set.  @rt between episodes */
+void ps_plant_reset(ps_plant_t *p, const float *stance_rad, bool is_harness_engaged);
 
 /** Safe on NULL. */
 void ps_plant_destroy(ps_plant_t *p);

@@ -87,6 +87,10 @@ struct ps_sim {
 
     pthread_mutex_t truth_mu;
     double first_fall_t_s; /**< plant time of the first fall, -1: none yet */
+    double heading_dev_max_rad, foot_slide_m, kinetic_max_j; /**< motion metrics */
+    double foot_prev_m[2][3];
+    bool foot_prev_loaded[2];
+    int foot_body[2];
     bool has_mutex;
     ps_sim_truth_t truth;
 
@@ -279,8 +283,39 @@ int ps_sim_set_frame_hook(ps_sim_t *s, int64_t frame_ns,
     return 0;
 }
 
+/* Heading, foot sliding and kinetic energy over the run (the push-recovery
+ * benchmark's quality figures). */
+static void update_motion(ps_sim_t *s)
+{
+    /* while the controller is in charge (as the lowest CoM): a robot
+     * damped to the floor after the run does not count */
+    if (!s->is_started || s->hooks.is_controller_active == NULL ||
+        !s->hooks.is_controller_active(s->hooks.ctx) || s->first_fall_t_s >= 0) {
+        s->foot_prev_loaded[0] = s->foot_prev_loaded[1] = false;
+        return;
+    }
+    double pos[3], quat[4], vel[3], force[2], cop[2][3];
+    ps_plant_get_root(s->plant, pos, quat, vel);
+    const double yaw = atan2(2.0 * (quat[0] * quat[3] + quat[1] * quat[2]),
+                             1.0 - 2.0 * (quat[2] * quat[2] + quat[3] * quat[3]));
+    s->heading_dev_max_rad = fmax(s->heading_dev_max_rad, fabs(yaw));
+    s->kinetic_max_j = fmax(s->kinetic_max_j, ps_plant_kinetic_energy_j(s->plant));
+    if (s->foot_body[0] < 0 || ps_plant_get_feet_contact(s->plant, force, cop) != 0)
+        return;
+    for (int f = 0; f < 2; f++) {
+        double p[3];
+        ps_plant_get_body_pos(s->plant, s->foot_body[f], p);
+        const bool is_loaded = force[f] > 20.0;
+        if (is_loaded && s->foot_prev_loaded[f])
+            s->foot_slide_m += hypot(p[0] - s->foot_prev_m[f][0], p[1] - s->foot_prev_m[f][1]);
+        s->foot_prev_loaded[f] = is_loaded;
+        memcpy(s->foot_prev_m[f], p, sizeof(p));
+    }
+}
+
 static void update_truth(ps_sim_t *s)
 {
+    update_motion(s);
     ps_plant_truth_t pt;
     ps_plant_get_truth(s->plant, &pt);
     ps_sim_truth_t t;
@@ -315,6 +350,9 @@ static void update_truth(ps_sim_t *s)
     if (pt.is_fallen && s->first_fall_t_s < 0)
         s->first_fall_t_s = pt.t_s;
     t.first_fall_t_s = s->first_fall_t_s;
+    t.heading_dev_max_rad = s->heading_dev_max_rad;
+    t.foot_slide_m = s->foot_slide_m;
+    t.kinetic_energy_max_j = s->kinetic_max_j;
     t.plant_err = s->plant_err;
     t.is_drive_power_on = ps_gpio_sim_is_power_on(&s->gpio);
     t.n_power_cuts = s->gpio.n_power_cuts;
@@ -601,6 +639,10 @@ int ps_sim_create(const ps_sim_cfg_t *cfg, ps_sim_t **out_sim, char *err, size_t
         goto fail;
     s->dt_s = ps_plant_timestep_s(s->plant);
     s->dt_ns = ps_s_to_ns(s->dt_s);
+    s->foot_body[0] = ps_plant_find_body(s->plant, "l_foot"); /* motion metrics */
+    s->foot_body[1] = ps_plant_find_body(s->plant, "r_foot");
+    if (s->foot_body[1] < 0)
+        s->foot_body[0] = -1;
     if (s->dt_ns <= 0 || s->period_ns % s->dt_ns != 0) {
         ps_err_format(err, err_len,
                       "sim: model timestep %g s does not divide the servo period %lld ns", s->dt_s,

@@ -176,6 +176,12 @@ typedef struct {
     uint64_t n_power_cuts;          /**< times the relay dropped the drives' power */
     double tau_abs_sum_nm;          /**< sum of |torque| applied to the plant at the
                                          last physics step (0 with power off) */
+    double heading_dev_max_rad;     /**< largest |yaw| of the floating base since
+                                         start (it starts facing +x) */
+    double foot_slide_m;            /**< horizontal travel of the feet while they
+                                         carry weight (> 20 N at both ends of a
+                                         servo period), summed over both */
+    double kinetic_energy_max_j;    /**< largest kinetic energy of the model */
     double min_com_height_active_m; /**< lowest CoM z at the end of a servo period
                                          while hooks.is_controller_active said so,
                                          on simulated time (deterministic in

@@ -336,6 +336,72 @@ static void test_ps_act_check_cfg_rejects_each_bad_field(void **state)
     assert_int_equal(ps_act_check_cfg(NULL, NULL, 0), -EINVAL);
 }
 
+/* ---- drive dynamics: the torque-speed limit --------------------------- */
+
+/* RobStride 04's datasheet points (robots/ps1.yaml): 120 Nm peak, 40 Nm at
+ * 167 rpm, 200 rpm no-load: stall torque 40 * 20.944 / (20.944 - 17.488)
+ * = 242.41 Nm on the line. */
+static const ps_act_motor_t RS04_MOTOR = {120.0f, 40.0f, 17.488f, 20.944f, 0.04f, 10000.0f};
+
+static void test_ps_act_motor_limit_torque_rs04_by_hand(void **state)
+{
+    (void)state;
+    const ps_act_motor_t *m = &RS04_MOTOR;
+    const float stall = 40.0f * 20.944f / (20.944f - 17.488f);
+    assert_float_equal(stall, 242.41f, 0.01f);
+    /* at rest: the peak, either sign */
+    assert_float_equal(ps_act_motor_limit_torque(m, 500.0f, 0.0f), 120.0f, 1e-4);
+    assert_float_equal(ps_act_motor_limit_torque(m, -500.0f, 0.0f), -120.0f, 1e-4);
+    assert_float_equal(ps_act_motor_limit_torque(m, 50.0f, 0.0f), 50.0f, 1e-6);
+    /* the rated point lies on the line */
+    assert_float_equal(ps_act_motor_limit_torque(m, 500.0f, 17.488f), 40.0f, 1e-3);
+    /* motoring at 15 rad/s: 242.41 (1 - 15 / 20.944) = 68.80 Nm */
+    assert_float_equal(ps_act_motor_limit_torque(m, 500.0f, 15.0f), 68.80f, 0.01f);
+    assert_float_equal(ps_act_motor_limit_torque(m, -500.0f, -15.0f), -68.80f, 0.01f);
+    /* braking at 15 rad/s: the peak */
+    assert_float_equal(ps_act_motor_limit_torque(m, -500.0f, 15.0f), -120.0f, 1e-4);
+    /* the line reaches the peak at 20.944 (1 - 120 / 242.41) = 10.577 rad/s */
+    assert_float_equal(ps_act_motor_limit_torque(m, 500.0f, 10.0f), 120.0f, 1e-4);
+    assert_true(ps_act_motor_limit_torque(m, 500.0f, 11.0f) < 120.0f);
+    /* above no-load speed only braking is left */
+    assert_true(ps_act_motor_limit_torque(m, 10.0f, 25.0f) < 0.0f);
+    assert_true(isnan(ps_act_motor_limit_torque(m, NAN, 0.0f)));
+    assert_true(isnan(ps_act_motor_limit_torque(m, 1.0f, NAN)));
+    /* not modelled: unchanged */
+    const ps_act_motor_t none = {0};
+    assert_float_equal(ps_act_motor_limit_torque(&none, 500.0f, 15.0f), 500.0f, 0.0);
+    assert_false(ps_act_motor_is_modelled(&none));
+    assert_true(ps_act_motor_is_modelled(m));
+}
+
+static void test_ps_act_check_motor_rejects_each_bad_field(void **state)
+{
+    (void)state;
+    char err[128];
+    const ps_act_motor_t none = {0};
+    assert_int_equal(ps_act_check_motor(&none, err, sizeof(err)), 0);
+    assert_int_equal(ps_act_check_motor(&RS04_MOTOR, err, sizeof(err)), 0);
+    static const struct {
+        size_t off;
+        float value;
+        const char *key;
+    } BAD[] = {
+        {offsetof(ps_act_motor_t, peak_torque_nm), 0.0f, "peak_torque_nm:"},
+        {offsetof(ps_act_motor_t, rated_torque_nm), 130.0f, "rated_torque_nm:"},
+        {offsetof(ps_act_motor_t, rated_speed_rad_s), 21.0f, "rated_speed_rad_s:"},
+        {offsetof(ps_act_motor_t, no_load_speed_rad_s), NAN, "rated_speed_rad_s:"},
+        {offsetof(ps_act_motor_t, armature_kg_m2), -0.1f, "armature_kg_m2:"},
+        {offsetof(ps_act_motor_t, pd_hz), 0.0f, "pd_hz:"},
+    };
+    for (size_t i = 0; i < sizeof(BAD) / sizeof(BAD[0]); i++) {
+        ps_act_motor_t m = RS04_MOTOR;
+        memcpy((char *)&m + BAD[i].off, &BAD[i].value, sizeof(float));
+        assert_int_equal(ps_act_check_motor(&m, err, sizeof(err)), -EINVAL);
+        assert_ptr_equal(strstr(err, BAD[i].key), err);
+    }
+    assert_int_equal(ps_act_check_motor(NULL, err, sizeof(err)), -EINVAL);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -350,6 +416,8 @@ int main(void)
         cmocka_unit_test(test_ps_act_joint_range_gear_direction_zero),
         cmocka_unit_test(test_ps_act_encode_command_joint_range_corners_encode),
         cmocka_unit_test(test_ps_act_check_cfg_rejects_each_bad_field),
+        cmocka_unit_test(test_ps_act_motor_limit_torque_rs04_by_hand),
+        cmocka_unit_test(test_ps_act_check_motor_rejects_each_bad_field),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

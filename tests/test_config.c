@@ -1187,6 +1187,48 @@ static void test_load_robot_duplicate_names_rejected(void **state)
     expect_robot_error(f);
 }
 
+/* The optional drive dynamics: all six or none, consistent, and no joint's
+ * torque_max above its drive's peak. */
+static void test_load_robot_driver_dynamics_checked(void **state)
+{
+    fx_t *f = *state;
+    const char *dyn = "i_min_a: -30, i_max_a: 30, peak_torque_nm: 18, rated_torque_nm: 6, "
+                      "rated_speed_rad_s: 30, no_load_speed_rad_s: 40, armature_kg_m2: 0.02, "
+                      "pd_hz: 10000}";
+    edit(f, ROBOT_OK, "i_min_a: -30, i_max_a: 30}", dyn);
+    assert_int_equal(ps_config_load_robot(f->path, &f->robot, f->err, sizeof(f->err)), 0);
+    assert_true(f->robot.act[0].motor.peak_torque_nm == 18.0f);
+    assert_true(f->robot.act[0].motor.pd_hz == 10000.0f);
+
+    edit(f, ROBOT_OK, "i_min_a: -30, i_max_a: 30}",
+         "i_min_a: -30, i_max_a: 30, peak_torque_nm: 18, rated_torque_nm: 20, "
+         "rated_speed_rad_s: 30, no_load_speed_rad_s: 40, armature_kg_m2: 0.02, pd_hz: 10000}");
+    want(f,
+         "%s:%d: drivers[0].rated_torque_nm: 20 is not in (0, peak_torque_nm 18] (give all six "
+         "of peak_torque_nm, rated_torque_nm, rated_speed_rad_s, no_load_speed_rad_s, "
+         "armature_kg_m2, pd_hz, or none)",
+         f->path, line_of(f, "rated_torque_nm: 20"));
+    expect_robot_error(f);
+
+    edit(f, ROBOT_OK, "i_min_a: -30, i_max_a: 30}",
+         "i_min_a: -30, i_max_a: 30, peak_torque_nm: 18}");
+    want(f,
+         "%s:%d: drivers[0].rated_torque_nm: 0 is not in (0, peak_torque_nm 18] (give all six "
+         "of peak_torque_nm, rated_torque_nm, rated_speed_rad_s, no_load_speed_rad_s, "
+         "armature_kg_m2, pd_hz, or none)",
+         f->path, line_of(f, "{name: ak80-9"));
+    expect_robot_error(f);
+
+    /* a joint on ak80-9 asking for more than a 12 Nm peak */
+    edit(f, ROBOT_OK, "i_min_a: -30, i_max_a: 30}",
+         "i_min_a: -30, i_max_a: 30, peak_torque_nm: 12, rated_torque_nm: 6, "
+         "rated_speed_rad_s: 30, no_load_speed_rad_s: 40, armature_kg_m2: 0.02, pd_hz: 10000}");
+    assert_int_equal(ps_config_load_robot(f->path, &f->robot, f->err, sizeof(f->err)),
+                     -PS_ERR_CONFIG);
+    assert_non_null(strstr(f->err, ".torque_max_nm: value "));
+    assert_non_null(strstr(f->err, "above driver \"ak80-9\" peak torque 12 at the joint"));
+}
+
 static void test_load_robot_driver_min_not_below_max_rejected(void **state)
 {
     fx_t *f = *state;
@@ -1735,6 +1777,7 @@ int main(void)
         T(test_load_robot_torque_outside_driver_rejected),
         T(test_load_robot_duplicate_names_rejected),
         T(test_load_robot_driver_min_not_below_max_rejected),
+        T(test_load_robot_driver_dynamics_checked),
         T(test_load_robot_rate_div_not_dividing_rejected),
         T(test_load_robot_unknown_protocol_rejected),
         T(test_load_robot_mass_zero_rejected),

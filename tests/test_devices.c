@@ -629,6 +629,48 @@ static void test_step_actuator_geared_copper_loss_quarter(void **state)
     assert_float_equal(want, 0.25, 0.02);
 }
 
+/* ---- drive dynamics: PD rate and torque-speed limit ------------------- */
+
+/* A drive at 1 kHz PD under a 0.5 ms physics step: the torque of one PD
+ * update holds for two steps, then follows the new state. */
+static void test_step_actuator_pd_rate_holds_torque_between_updates(void **state)
+{
+    fixture_t *fx = *state;
+    fx->j.motor = (ps_act_motor_t){100.0f, 40.0f, 17.0f, 20.0f, 0.04f, 1000.0f};
+    ps_devices_init_actuator(&fx->a, &fx->j, &fx->lim, &fx->sim);
+    enter(fx, 0);
+    const ps_mit_cmd_t c = {.p_rad = 0.5f, .kp_nm_rad = 10.0f};
+    ps_can_frame_t rep;
+    send_cmd(fx, &c, 0.0, 0.0, 1000, &rep);
+    const int64_t t0 = 2000000;
+    const double tau0 = ps_devices_step_actuator(&fx->a, 0.0, 0.0, t0, 5e-4);
+    const double tau1 = ps_devices_step_actuator(&fx->a, 0.2, 0.0, t0 + 500000, 5e-4);
+    const double tau2 = ps_devices_step_actuator(&fx->a, 0.2, 0.0, t0 + 1000000, 5e-4);
+    assert_true(tau0 > 4.9);
+    assert_true(tau1 == tau0);       /* held: the PD has not run since */
+    assert_true(fabs(tau2 - (tau0 - 10.0 * 0.2)) < 0.01); /* the next PD update */
+}
+
+/* The torque-speed limit acts on the torque the drive delivers at the
+ * joint's speed, after the PD, on every step. */
+static void test_step_actuator_torque_speed_limit_at_speed(void **state)
+{
+    fixture_t *fx = *state;
+    /* stall = 10 * 20 / (20 - 15) = 40 Nm; peak 12, so at 18 rad/s the line
+     * gives 40 (1 - 18 / 20) = 4 Nm while motoring. */
+    fx->j.motor = (ps_act_motor_t){12.0f, 10.0f, 15.0f, 20.0f, 0.01f, 1e6f};
+    fx->lim.vel_max_rad_s = 20.0f;
+    ps_devices_init_actuator(&fx->a, &fx->j, &fx->lim, &fx->sim);
+    enter(fx, 0);
+    const ps_mit_cmd_t c = {.p_rad = 1.5f, .kp_nm_rad = 200.0f};
+    ps_can_frame_t rep;
+    send_cmd(fx, &c, 0.0, 0.0, 1000, &rep);
+    assert_true(fabs(ps_devices_step_actuator(&fx->a, 0.0, 0.0, 2000, 5e-4) - 12.0) < 1e-6);
+    assert_true(fabs(ps_devices_step_actuator(&fx->a, 0.0, 18.0, 3000, 5e-4) - 4.0) < 1e-4);
+    /* braking (moving the other way) the peak is available */
+    assert_true(fabs(ps_devices_step_actuator(&fx->a, 0.0, -18.0, 4000, 5e-4) - 12.0) < 1e-6);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -649,6 +691,8 @@ int main(void)
         cmocka_unit_test_setup(test_handle_frame_geared_reversed_joint_obeys_joint_units, setup),
         cmocka_unit_test_setup(test_handle_frame_set_zero_with_zero_offset_reads_offset, setup),
         cmocka_unit_test_setup(test_step_actuator_geared_copper_loss_quarter, setup),
+        cmocka_unit_test_setup(test_step_actuator_pd_rate_holds_torque_between_updates, setup),
+        cmocka_unit_test_setup(test_step_actuator_torque_speed_limit_at_speed, setup),
         cmocka_unit_test(test_tick_imu_rate_div_frames_ids_and_seq),
         cmocka_unit_test(test_tick_imu_noise_statistics_match_sigma_and_bias),
         cmocka_unit_test(test_tick_imu_same_seed_identical_other_seed_differs),

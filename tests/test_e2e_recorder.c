@@ -604,8 +604,10 @@ static void test_e2e_rec_cli_power_cut_file_readable_up_to_last_chunk(void **sta
 
 /* SIGUSR1: a dump of 1 s before and 0.5 s after. In lockstep (until
  * SIGTERM) so that no overrun or watchdog of a loaded machine starts a dump
- * of its own; lockstep runs several times faster than real time, so the
- * post window is long over when SIGTERM comes. */
+ * of its own. The signal goes once the loop has run 1.2 s of its time (the
+ * RAMP -> ACTIVE line), so the pre window is full however fast lockstep
+ * runs on a loaded machine; SIGTERM then brakes through 2 s of DAMPING, in
+ * which the post window ends. */
 static void test_e2e_rec_cli_sigusr1_dumps_the_window_around_it(void **state)
 {
     (void)state;
@@ -625,11 +627,10 @@ static void test_e2e_rec_cli_sigusr1_dumps_the_window_around_it(void **state)
     char log[128];
     snprintf(log, sizeof(log), "%s/run.log", dir);
     pid_t pid = spawn_bg(argv, log);
-    /* the loop runs once "running lockstep" is printed (the model is loaded,
-     * the recorder ready); then some loop time for the pre window */
-    for (int i = 0; i < 600 && sh("grep -q 'running lockstep' %s", log) != 0; i++)
+    /* the pre window's 1 s of loop time has passed once RAMP -> ACTIVE
+     * (t = 1.2 s) is printed */
+    for (int i = 0; i < 1500 && sh("grep -q 'RAMP -> ACTIVE' %s", log) != 0; i++)
         sleep_s(0.02);
-    sleep_s(1.0);
     kill(pid, SIGUSR1);
     sleep_s(1.5);
     kill(pid, SIGTERM);

@@ -466,10 +466,12 @@ static void assert_holding(uint32_t j, float q_rad)
     ps_mit_cmd_t cmd;
     assert_true(next_command(j, &cmd));
     const ps_servo_joint_cfg_t *sj = &fx->robot.servo[j];
-    assert_float_equal(cmd.kp_nm_rad, sj->kp_nm_rad, fx->robot.act[j].wire.kp_max_nm_rad / 4095.0f);
-    assert_float_equal(cmd.kd_nm_s_rad, sj->kd_nm_s_rad, 0.01);
+    float lsb[5]; /* one step of each field on the wire: q, qd, kp, kd, tau */
+    ps_act_joint_lsb(&fx->robot.act[j], lsb);
+    assert_float_equal(cmd.kp_nm_rad, sj->kp_nm_rad, lsb[2]);
+    assert_float_equal(cmd.kd_nm_s_rad, sj->kd_nm_s_rad, lsb[3]);
     assert_float_equal(cmd.p_rad, q_rad, 0.001);
-    assert_float_equal(cmd.t_ff_nm, 0.0f, 0.01);
+    assert_float_equal(cmd.t_ff_nm, 0.0f, lsb[4]);
 }
 
 static void assert_damping_limp(uint32_t j)

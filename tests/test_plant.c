@@ -20,6 +20,8 @@
 
 #include "../rt/ps_config.h"
 #include "../rt/ps_err.h"
+#include "../policy/ps_balance.h"
+#include "../policy/ps_legik.h"
 #include "../sim/ps_plant.h"
 
 #define MODEL_PATH "sim/models/ps1.xml"
@@ -35,36 +37,36 @@ typedef struct {
     uint32_t rate_div;
 } joint_row_t;
 
-static const ps_act_range_t AK80_9 = {-12.5f, 12.5f,  -50.0f, 50.0f,  500.0f,
-                                      5.0f,   -18.0f, 18.0f,  -30.0f, 30.0f};
-static const ps_act_range_t AK70_10 = {-12.5f, 12.5f,  -50.0f, 50.0f,  500.0f,
-                                       5.0f,   -25.0f, 25.0f,  -30.0f, 30.0f};
-static const ps_act_range_t AK60_6 = {-12.5f, 12.5f,  -45.0f, 45.0f,  500.0f,
-                                      5.0f,   -15.0f, 15.0f,  -25.0f, 25.0f};
+static const ps_act_range_t RS04 = {-12.566371f, 12.566371f, -15.0f, 15.0f, 5000.0f,
+                                   100.0f,      -120.0f,    120.0f, -90.0f, 90.0f};
+static const ps_act_range_t RS03 = {-12.566371f, 12.566371f, -50.0f, 50.0f, 5000.0f,
+                                   100.0f,      -60.0f,     60.0f,  -45.0f, 45.0f};
+static const ps_act_range_t RS02 = {-12.566371f, 12.566371f, -44.0f, 44.0f, 500.0f,
+                                   5.0f,        -17.0f,     17.0f,  -25.0f, 25.0f};
 
 /* name bus id driver  pos_min pos_max tau_max  kp kd kp_max kd_max stance kt div */
 static const joint_row_t JOINTS[] = {
-    {"l_hip_yaw", 0, 1, &AK80_9, -0.6f, 0.6f, 16, 100, 3, 400, 5, 0.0f, 0.8f, 2},
-    {"l_hip_roll", 0, 2, &AK70_10, -0.35f, 0.6f, 24, 150, 4, 400, 5, 0.0f, 1.0f, 2},
-    {"l_hip_pitch", 0, 3, &AK70_10, -2.0f, 0.8f, 24, 200, 4, 400, 5, -0.28f, 1.0f, 2},
-    {"l_knee", 0, 4, &AK70_10, -0.05f, 2.4f, 24, 300, 4, 400, 5, 0.5f, 1.0f, 2},
-    {"r_hip_yaw", 1, 1, &AK80_9, -0.6f, 0.6f, 16, 100, 3, 400, 5, 0.0f, 0.8f, 2},
-    {"r_hip_roll", 1, 2, &AK70_10, -0.6f, 0.35f, 24, 150, 4, 400, 5, 0.0f, 1.0f, 2},
-    {"r_hip_pitch", 1, 3, &AK70_10, -2.0f, 0.8f, 24, 200, 4, 400, 5, -0.28f, 1.0f, 2},
-    {"r_knee", 1, 4, &AK70_10, -0.05f, 2.4f, 24, 300, 4, 400, 5, 0.5f, 1.0f, 2},
-    {"l_ankle_pitch", 2, 1, &AK70_10, -0.9f, 0.6f, 24, 300, 4, 400, 5, -0.25f, 1.0f, 2},
-    {"l_ankle_roll", 2, 2, &AK80_9, -0.4f, 0.4f, 16, 100, 2, 400, 5, 0.0f, 0.8f, 2},
-    {"r_ankle_pitch", 2, 3, &AK70_10, -0.9f, 0.6f, 24, 300, 4, 400, 5, -0.25f, 1.0f, 2},
-    {"r_ankle_roll", 2, 4, &AK80_9, -0.4f, 0.4f, 16, 100, 2, 400, 5, 0.0f, 0.8f, 2},
-    {"waist_yaw", 3, 1, &AK80_9, -1.0f, 1.0f, 16, 80, 2, 300, 5, 0.0f, 0.8f, 10},
-    {"l_shoulder_pitch", 3, 2, &AK60_6, -3.0f, 1.0f, 9, 30, 1, 100, 3, 0.0f, 0.6f, 10},
-    {"l_shoulder_roll", 3, 3, &AK60_6, -0.3f, 2.5f, 9, 30, 1, 100, 3, 0.15f, 0.6f, 10},
-    {"l_shoulder_yaw", 3, 4, &AK60_6, -1.5f, 1.5f, 9, 30, 1, 100, 3, 0.0f, 0.6f, 10},
-    {"l_elbow", 3, 5, &AK60_6, -2.5f, 0.05f, 9, 30, 1, 100, 3, -0.3f, 0.6f, 10},
-    {"r_shoulder_pitch", 3, 6, &AK60_6, -3.0f, 1.0f, 9, 30, 1, 100, 3, 0.0f, 0.6f, 10},
-    {"r_shoulder_roll", 3, 7, &AK60_6, -2.5f, 0.3f, 9, 30, 1, 100, 3, -0.15f, 0.6f, 10},
-    {"r_shoulder_yaw", 3, 8, &AK60_6, -1.5f, 1.5f, 9, 30, 1, 100, 3, 0.0f, 0.6f, 10},
-    {"r_elbow", 3, 9, &AK60_6, -2.5f, 0.05f, 9, 30, 1, 100, 3, -0.3f, 0.6f, 10},
+    {"l_hip_yaw", 0, 1, &RS03, -0.6f, 0.6f, 60, 100, 3, 1000, 20, 0.0f, 1.4f, 2},
+    {"l_hip_roll", 0, 2, &RS03, -0.35f, 0.6f, 60, 150, 4, 1000, 20, 0.0f, 1.4f, 2},
+    {"l_hip_pitch", 0, 3, &RS04, -2.0f, 0.8f, 120, 200, 4, 1000, 20, -0.28f, 1.4f, 2},
+    {"l_knee", 0, 4, &RS04, -0.05f, 2.4f, 120, 300, 4, 1000, 20, 0.5f, 1.4f, 2},
+    {"r_hip_yaw", 1, 1, &RS03, -0.6f, 0.6f, 60, 100, 3, 1000, 20, 0.0f, 1.4f, 2},
+    {"r_hip_roll", 1, 2, &RS03, -0.6f, 0.35f, 60, 150, 4, 1000, 20, 0.0f, 1.4f, 2},
+    {"r_hip_pitch", 1, 3, &RS04, -2.0f, 0.8f, 120, 200, 4, 1000, 20, -0.28f, 1.4f, 2},
+    {"r_knee", 1, 4, &RS04, -0.05f, 2.4f, 120, 300, 4, 1000, 20, 0.5f, 1.4f, 2},
+    {"l_ankle_pitch", 2, 1, &RS03, -0.9f, 0.6f, 60, 300, 4, 1000, 20, -0.25f, 1.4f, 2},
+    {"l_ankle_roll", 2, 2, &RS03, -0.4f, 0.4f, 60, 100, 2, 1000, 20, 0.0f, 1.4f, 2},
+    {"r_ankle_pitch", 2, 3, &RS03, -0.9f, 0.6f, 60, 300, 4, 1000, 20, -0.25f, 1.4f, 2},
+    {"r_ankle_roll", 2, 4, &RS03, -0.4f, 0.4f, 60, 100, 2, 1000, 20, 0.0f, 1.4f, 2},
+    {"waist_yaw", 3, 1, &RS03, -1.0f, 1.0f, 60, 80, 2, 1000, 20, 0.0f, 1.4f, 10},
+    {"l_shoulder_pitch", 3, 2, &RS02, -3.0f, 1.0f, 17, 30, 1, 100, 3, 0.0f, 0.75f, 10},
+    {"l_shoulder_roll", 3, 3, &RS02, -0.3f, 2.5f, 17, 30, 1, 100, 3, 0.15f, 0.75f, 10},
+    {"l_shoulder_yaw", 3, 4, &RS02, -1.5f, 1.5f, 17, 30, 1, 100, 3, 0.0f, 0.75f, 10},
+    {"l_elbow", 3, 5, &RS02, -2.5f, 0.05f, 17, 30, 1, 100, 3, -0.3f, 0.75f, 10},
+    {"r_shoulder_pitch", 3, 6, &RS02, -3.0f, 1.0f, 17, 30, 1, 100, 3, 0.0f, 0.75f, 10},
+    {"r_shoulder_roll", 3, 7, &RS02, -2.5f, 0.3f, 17, 30, 1, 100, 3, -0.15f, 0.75f, 10},
+    {"r_shoulder_yaw", 3, 8, &RS02, -1.5f, 1.5f, 17, 30, 1, 100, 3, 0.0f, 0.75f, 10},
+    {"r_elbow", 3, 9, &RS02, -2.5f, 0.05f, 17, 30, 1, 100, 3, -0.3f, 0.75f, 10},
 };
 #define N_JOINTS ((int)(sizeof(JOINTS) / sizeof(JOINTS[0])))
 
@@ -117,7 +119,7 @@ static void build_robot(ps_robot_cfg_t *r)
         j->direction = 1.0f;
         j_s->lim.pos_min_rad = row->pos_min;
         j_s->lim.pos_max_rad = row->pos_max;
-        j_s->lim.vel_max_rad_s = 25.0f;
+        j_s->lim.vel_max_rad_s = row->wire == &RS04 ? 15.0f : (row->wire == &RS03 ? 20.0f : 25.0f);
         j_s->lim.torque_max_nm = row->torque_max;
         j_s->kp_nm_rad = row->kp;
         j_s->kd_nm_s_rad = row->kd;
@@ -811,11 +813,64 @@ static void test_model_kinematics_match_convention(void **st)
     mj_deleteModel(m);
 }
 
+
+/* The mass model of robots/ps1.yaml (policy/ps_balance) against MuJoCo's
+ * whole-body CoM (subtree_com of the pelvis) in the pelvis frame, both legs
+ * moved, arms at their stance (the model lumps them into the trunk): within
+ * 2 mm in every pose. */
+static void test_ps1_mass_model_com_matches_mujoco(void **st)
+{
+    (void)st;
+    ps_robot_cfg_t r;
+    char err[PS_ERR_MSG_LEN] = "";
+    if (ps_config_load_robot(ROBOT_PATH, &r, err, sizeof(err)) != 0)
+        fail_msg("%s", err);
+    assert_true(ps_balance_has_mass_model(&r.kin));
+    mjModel *m = mj_loadXML(MODEL_PATH, NULL, err, (int)sizeof(err));
+    assert_non_null(m);
+    mjData *d = mj_makeData(m);
+    static const char *const LEG[2][6] = {
+        {"l_hip_yaw", "l_hip_roll", "l_hip_pitch", "l_knee", "l_ankle_pitch", "l_ankle_roll"},
+        {"r_hip_yaw", "r_hip_roll", "r_hip_pitch", "r_knee", "r_ankle_pitch", "r_ankle_roll"}};
+    const float POSES[][2][6] = {
+        {{0, 0, -0.28f, 0.5f, -0.25f, 0}, {0, 0, -0.28f, 0.5f, -0.25f, 0}},
+        {{0, 0, 0, 0, 0, 0}, {0, 0, 0, 0, 0, 0}},
+        {{0.3f, 0.2f, -0.7f, 1.1f, -0.3f, 0.15f}, {-0.2f, -0.3f, 0.4f, 0.2f, 0.3f, -0.2f}},
+        {{-0.4f, -0.3f, 0.5f, 0.2f, 0.4f, -0.35f}, {0, 0.3f, -1.5f, 2.0f, -0.5f, 0.1f}},
+    };
+    const int pelvis = mj_name2id(m, mjOBJ_BODY, "pelvis");
+    for (size_t n = 0; n < sizeof(POSES) / sizeof(POSES[0]); n++) {
+        mj_resetData(m, d);
+        d->qpos[2] = 1.0;
+        for (uint32_t i = 0; i < r.n_joints; i++) /* arms and waist at the stance */
+            d->qpos[m->jnt_qposadr[mj_name2id(m, mjOBJ_JOINT, r.joint_name[i])]] =
+                r.servo[i].stance_rad;
+        for (int s = 0; s < 2; s++)
+            for (int j = 0; j < 6; j++)
+                d->qpos[m->jnt_qposadr[mj_name2id(m, mjOBJ_JOINT, LEG[s][j])]] = POSES[n][s][j];
+        mj_forward(m, d);
+        ps_balance_point_t pts[PS_BALANCE_N_POINTS];
+        float com[3];
+        assert_int_equal(ps_balance_points(&r.kin, POSES[n], pts), (int)PS_BALANCE_N_POINTS);
+        assert_int_equal(ps_balance_com(pts, PS_BALANCE_N_POINTS, com), 0);
+        for (int k = 0; k < 3; k++) {
+            const double want = d->subtree_com[3 * pelvis + k] - d->xpos[3 * pelvis + k];
+            if (fabs(com[k] - want) > 0.002)
+                fail_msg("pose %zu axis %d: mass model %.4f, MuJoCo %.4f", n, k, (double)com[k],
+                         want);
+        }
+    }
+    mj_deleteData(d);
+    mj_deleteModel(m);
+}
+
 /* ---- the robot file -------------------------------------------------------- */
 
 /* The robot file against the MJCF it names, read with MuJoCo itself: every
  * joint is a limited hinge whose range is the file's [pos_min, pos_max], its
- * motor's ctrlrange is +-torque_max (gear 1), and the stance lies inside. */
+ * motor's ctrlrange is +-torque_max (gear 1), the stance lies inside, its
+ * armature is its drive's armature_kg_m2 x gear_ratio^2 and torque_max is
+ * within the drive's peak torque. */
 static void test_ps_config_load_robot_ps1_matches_model(void **st)
 {
     (void)st;
@@ -861,6 +916,16 @@ static void test_ps_config_load_robot_ps1_matches_model(void **st)
                      m->actuator_ctrlrange[2 * aid], m->actuator_ctrlrange[2 * aid + 1],
                      (double)sj->lim.torque_max_nm);
         assert_true(sj->stance_rad >= sj->lim.pos_min_rad && sj->stance_rad <= sj->lim.pos_max_rad);
+        /* the drive's rotor, reflected through the gear, is the joint's armature */
+        const ps_act_cfg_t *a = &loaded.act[i];
+        assert_true(ps_act_motor_is_modelled(&a->motor));
+        const double armature = (double)a->motor.armature_kg_m2 * a->gear_ratio * a->gear_ratio;
+        if (fabs(m->dof_armature[m->jnt_dofadr[jid]] - armature) > 1e-6)
+            fail_msg("joint %s: model armature %g, robot file's drive %g x gear^2 = %g", name,
+                     m->dof_armature[m->jnt_dofadr[jid]], (double)a->motor.armature_kg_m2,
+                     armature);
+        /* torque_max fits the drive's peak at the joint */
+        assert_true(sj->lim.torque_max_nm <= a->motor.peak_torque_nm * a->gear_ratio + 1e-4f);
     }
     /* the kinematics block's mass is the model's floating subtree's */
     ps_plant_t *p = NULL;
@@ -868,6 +933,136 @@ static void test_ps_config_load_robot_ps1_matches_model(void **st)
     assert_float_equal(ps_plant_total_mass_kg(p), loaded.kin.mass_kg, 0.05);
     ps_plant_destroy(p);
     mj_deleteModel(m);
+}
+
+
+/* ---- the robot can step: one leg for 2 s -------------------------------- */
+
+static double smooth01(double x)
+{
+    x = x < 0.0 ? 0.0 : (x > 1.0 ? 1.0 : x);
+    return x * x * (3.0 - 2.0 * x);
+}
+
+/* robots/ps1.yaml as loaded, on its model, with no harness: shift the pelvis
+ * over the left foot, lift the right foot 8 cm, hold it up 2 s. Joint
+ * targets come from the analytic leg IK (feet flat, pelvis level); the
+ * torques are an ideal joint PD at the joints' configured kp_max / kd_max
+ * (the stiffest the robot file allows) plus a CoM-over-foot correction of
+ * the pelvis shift from the plant's ground truth. Every torque the PD asks
+ * for must lie inside the joint's torque_max and the drive's torque-speed
+ * limit at that instant (nothing is clamped). */
+#define K_ANKLE   1.5 /* rad of ankle per m of CoM offset from the sole */
+#define K_ANKLE_V 0.3 /* rad of ankle per m/s of CoM velocity */
+
+static void test_ps1_stands_on_one_leg_2s_within_torque_limits(void **st)
+{
+    (void)st;
+    ps_robot_cfg_t r;
+    char err[PS_ERR_MSG_LEN] = "";
+    if (ps_config_load_robot(ROBOT_PATH, &r, err, sizeof(err)) != 0)
+        fail_msg("%s", err);
+    ps_plant_t *p = NULL;
+    if (plant_create(MODEL_PATH, &r, &p, err, sizeof(err)) != 0)
+        fail_msg("%s", err);
+    ps_plant_set_harness(p, false);
+    static const char *const LEG[2][PS_LEG_N_JOINTS] = {
+        {"l_hip_yaw", "l_hip_roll", "l_hip_pitch", "l_knee", "l_ankle_pitch", "l_ankle_roll"},
+        {"r_hip_yaw", "r_hip_roll", "r_hip_pitch", "r_knee", "r_ankle_pitch", "r_ankle_roll"}};
+    int idx[2][PS_LEG_N_JOINTS];
+    float sole0[2][3];
+    for (int side = 0; side < 2; side++) {
+        float q[PS_LEG_N_JOINTS];
+        for (int j = 0; j < PS_LEG_N_JOINTS; j++) {
+            idx[side][j] = ps_config_find_joint(&r, LEG[side][j]);
+            assert_true(idx[side][j] >= 0);
+            q[j] = r.servo[idx[side][j]].stance_rad;
+        }
+        ps_estimate_leg_fk(&r.kin, side, q, sole0[side]);
+    }
+    const int l_foot = ps_plant_find_body(p, "l_foot"), r_foot = ps_plant_find_body(p, "r_foot");
+    float q_tgt[PS_MAX_JOINTS];
+    for (uint32_t i = 0; i < r.n_joints; i++)
+        q_tgt[i] = r.servo[i].stance_rad;
+    const double dt = ps_plant_timestep_s(p);
+    const double t_shift = 1.5, t_lift = 0.5, t_hold = 2.0, lift_m = 0.08;
+    const int n = (int)lround((t_shift + t_lift + t_hold) / dt);
+    double tau[PS_MAX_JOINTS], q[PS_MAX_JOINTS], qd[PS_MAX_JOINTS];
+    double shift_fb_m = 0.0, min_lift_m = 1.0, max_ratio = 0.0, com_prev[3] = {0};
+    for (int k = 0; k < n; k++) {
+        const double t = k * dt;
+        ps_plant_truth_t tr;
+        ps_plant_get_truth(p, &tr);
+        assert_false(tr.is_fallen);
+        double lf[3], rf[3];
+        ps_plant_get_body_pos(p, l_foot, lf);
+        ps_plant_get_body_pos(p, r_foot, rf);
+        /* CoM over the left sole centre (its frame origin is the ankle's x
+         * and y less the foot's 3 cm offset): integrate the error into the
+         * pelvis shift, slowly. */
+        double vel[3] = {0};
+        for (int a = 0; a < 3 && k > 0; a++)
+            vel[a] = (tr.com_m[a] - com_prev[a]) / dt;
+        memcpy(com_prev, tr.com_m, sizeof(com_prev));
+        if (t > 0.5 * t_shift)
+            shift_fb_m += dt * 2.0 * (lf[1] - tr.com_m[1]);
+        /* Ankle strategy on the left foot (signs as policy/ps_stand.c):
+         * CoM right of the sole or moving right: roll the ankle target up. */
+        const double sole_x = lf[0] + r.kin.foot_offset_x_m;
+        const double on = smooth01((t - t_shift) / t_lift); /* single support */
+        const double d_roll = on * (-K_ANKLE * (tr.com_m[1] - lf[1]) - K_ANKLE_V * vel[1]);
+        const double d_pitch = on * (K_ANKLE * (tr.com_m[0] - sole_x) + K_ANKLE_V * vel[0]);
+        const double shift = 0.08 * smooth01(t / t_shift) + shift_fb_m;
+        const double up = lift_m * smooth01((t - t_shift) / t_lift);
+        if (k % 2 == 0) { /* targets at 1 kHz, as the servo layer would */
+            for (int side = 0; side < 2; side++) {
+                const float eye[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+                float sole[3] = {sole0[side][0], sole0[side][1] - (float)shift, sole0[side][2]};
+                if (side == 1)
+                    sole[2] += (float)up;
+                float ql[PS_LEG_N_JOINTS];
+                assert_true(ps_legik_solve(&r.kin, side, sole, eye, ql) >= 0);
+                for (int j = 0; j < PS_LEG_N_JOINTS; j++)
+                    q_tgt[idx[side][j]] = ql[j];
+            }
+            q_tgt[idx[0][PS_LEG_ANKLE_ROLL]] += (float)d_roll;
+            q_tgt[idx[0][PS_LEG_ANKLE_PITCH]] += (float)d_pitch;
+        }
+        ps_plant_get_joints(p, q, qd);
+        for (uint32_t i = 0; i < r.n_joints; i++) {
+            const ps_servo_joint_cfg_t *j = &r.servo[i];
+            const float qt = q_tgt[i] < j->lim.pos_min_rad   ? j->lim.pos_min_rad
+                             : q_tgt[i] > j->lim.pos_max_rad ? j->lim.pos_max_rad
+                                                             : q_tgt[i];
+            const bool is_leg = r.act[i].motor.peak_torque_nm > 20.0f;
+            const double kp = is_leg ? j->lim.kp_max_nm_rad : j->kp_nm_rad;
+            const double kd = is_leg ? j->lim.kd_max_nm_s_rad : j->kd_nm_s_rad;
+            tau[i] = kp * (qt - q[i]) - kd * qd[i];
+            const float deliverable =
+                ps_act_motor_limit_torque(&r.act[i].motor, (float)tau[i], (float)qd[i]);
+            if (fabs(tau[i]) > j->lim.torque_max_nm || fabs(deliverable - tau[i]) > 1e-3)
+                fail_msg("t=%.3f s %s: PD torque %.1f Nm at %.2f rad/s, limit %.1f / deliverable "
+                         "%.1f",
+                         t, r.joint_name[i], tau[i], qd[i], (double)j->lim.torque_max_nm,
+                         (double)deliverable);
+            const double ratio = fabs(tau[i]) / j->lim.torque_max_nm;
+            max_ratio = ratio > max_ratio ? ratio : max_ratio;
+        }
+        ps_plant_set_torques(p, tau);
+        assert_int_equal(ps_plant_step(p), 0);
+        if (t >= t_shift + t_lift) {
+            const double lifted = rf[2] - lf[2];
+            min_lift_m = lifted < min_lift_m ? lifted : min_lift_m;
+        }
+    }
+    ps_plant_truth_t tr;
+    ps_plant_get_truth(p, &tr);
+    printf("  one leg: right foot at least %.3f m above the left over %.1f s, largest torque "
+           "%.0f%% of its limit, pelvis height %.3f m\n",
+           min_lift_m, t_hold, 100.0 * max_ratio, tr.pelvis_m[2]);
+    assert_false(tr.is_fallen);
+    assert_true(min_lift_m > 0.5 * lift_m); /* the right foot stayed up, off the floor */
+    ps_plant_destroy(p);
 }
 
 int main(void)
@@ -907,6 +1102,8 @@ int main(void)
         cmocka_unit_test(test_ps_plant_step_model_sizes_enough_no_error),
         cmocka_unit_test(test_model_kinematics_match_convention),
         cmocka_unit_test(test_ps_config_load_robot_ps1_matches_model),
+        cmocka_unit_test(test_ps1_stands_on_one_leg_2s_within_torque_limits),
+        cmocka_unit_test(test_ps1_mass_model_com_matches_mujoco),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

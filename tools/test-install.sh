@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # `make install` into a temporary DESTDIR, then the installed binary run from
 # a folder with no data in it and without $PUSHSTEP_DATA_DIR: it must find
-# its boards, robots, scenarios and model in PREFIX/share/pushstep. Prints
+# its boards, robots, scenarios, model (and trained policies, when
+# policy/weights/ exists) in PREFIX/share/pushstep. Prints
 # cmocka-style lines for tools/run-tests.sh. Takes about 3 s.
 set -uo pipefail
 BIN=${PUSHSTEP_BIN:-build/pushstep}
@@ -28,6 +29,13 @@ for d in boards robots scenarios; do
     n_src=$(find "$d" -maxdepth 1 -name '*.yaml' | wc -l); n_dst=$(find "$R/share/pushstep/$d" -name '*.yaml' | wc -l)
     if [ "$n_src" -eq "$n_dst" ]; then ok "install_all_$d"; else bad "install_all_$d" "$n_dst of $n_src files"; fi
 done
+# Trained policy files (make train writes policy/weights/; none shipped yet)
+if [ -d policy/weights ]; then
+    n_src=$(find policy/weights -name '*.safetensors' | wc -l)
+    n_dst=$(find "$R/share/pushstep/policy/weights" -name '*.safetensors' 2>/dev/null | wc -l)
+    if [ "$n_src" -eq "$n_dst" ]; then ok install_all_policy_weights
+    else bad install_all_policy_weights "$n_dst of $n_src files"; fi
+fi
 unit=$R/lib/systemd/system/pushstep@.service
 if grep -q '^ExecStart=/usr/bin/pushstep --board %i' "$unit" && grep -q '^User=pushstep' "$unit" &&
    grep -q '^LimitRTPRIO=95' "$unit" && grep -q '^LimitMEMLOCK=infinity' "$unit" &&

@@ -1,0 +1,267 @@
+#!/usr/bin/env python3
+"""Push-recovery benchmark: chest pushes on the simulated robot, in the real
+runtime (build/pushstep --lockstep: CAN frames, quantisation, servo layer).
+
+One trial = one scenario file (start, harness release, one push on the torso
+at a randomised time) run to push + 5 s; success = no fall (the plant's
+ground truth: a robot body other than the feet touched the floor while the
+controller was in charge). The push is given as delta-v = impulse / robot
+mass, in a direction (0 deg = forward, +x; 90 deg = to the robot's left)
+over a duration: force = delta_v * mass / duration.
+
+Subcommands (so that GNU parallel, a Slurm array or parallel --sshlogin can
+run the trials; nothing here schedules them):
+  jobs  [grid options]          print one trial spec per line
+  trial SPEC --out DIR          run one trial, write DIR/<id>.json
+  merge DIR --out FILE.json     merge the per-trial results into one table
+  table FILE.json               print the readable summary (markdown)
+
+A trial spec is "controller,direction_deg,dv_m_s,duration_s,trial_idx".
+Timing is drawn from a seed made of the spec, so a trial is reproducible.
+"""
+import argparse
+import glob
+import json
+import math
+import os
+import random
+import subprocess
+import sys
+import tempfile
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+MASS_KG = 37.7  # robots/ps1.yaml kinematics.mass_kg (= the model's mass)
+SETTLE_S = 3.0  # harness released at 2.0 s; pushes from 3.0 s
+AFTER_S = 5.0   # success: no fall for this long after the push starts
+WEIGHTS = os.environ.get("PUSH_WEIGHTS",
+                         os.path.join(ROOT, "policy", "weights", "ps1_stage1.safetensors"))
+
+
+def spec_id(spec):
+    c, d, v, t, k = spec
+    return "%s_d%03d_v%.2f_t%.1f_k%02d" % (c, int(round(d)), v, t, k)
+
+
+def parse_spec(text):
+    c, d, v, t, k = text.strip().split(",")
+    return (c, float(d), float(v), float(t), int(k))
+
+
+def grid(controllers, n_dir, dvs, durations, trials):
+    for c in controllers:
+        for i in range(n_dir):
+            d = 360.0 * i / n_dir
+            for v in dvs:
+                for t in durations:
+                    for k in range(trials):
+                        yield (c, d, v, t, k)
+
+
+def scenario_text(spec):
+    c, d, v, t, k = spec
+    rng = random.Random(spec_id(spec))
+    t_push = SETTLE_S + rng.uniform(0.0, 1.0)
+    f = v * MASS_KG / t
+    fx, fy = f * math.cos(math.radians(d)), f * math.sin(math.radians(d))
+    return t_push, f, (
+        "name: push\nduration_s: %.3f\nseed: %d\nevents:\n"
+        "  - {t_s: 0.2, kind: start}\n  - {t_s: 2.0, kind: harness_release}\n"
+        "pushes:\n  - {t_s: %.3f, duration_s: %.3f, body: torso, force_n: [%.3f, %.3f, 0]}\n"
+        % (t_push + AFTER_S, 1 + rng.randrange(1 << 30), t_push, t, fx, fy))
+
+
+def run_trial(spec, out_dir, binary):
+    t_push, f, text = scenario_text(spec)
+    os.makedirs(out_dir, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        scen = os.path.join(tmp, "s.yaml")
+        summ = os.path.join(tmp, "s.json")
+        with open(scen, "w") as fh:
+            fh.write(text)
+        cmd = [binary, "--lockstep", "--quiet", "--scenario", scen, "--summary", summ]
+        if spec[0] != "default":
+            cmd += ["--policy", spec[0]]
+        if spec[0] == "mlp":
+            cmd += ["--weights", WEIGHTS]
+        p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        if p.returncode != 0 or not os.path.exists(summ):
+            sys.stderr.write("trial %s failed (%d):\n%s\n" % (spec_id(spec), p.returncode,
+                                                              p.stdout[-2000:]))
+            return 1
+        s = json.load(open(summ))
+    truth = s.get("sim_truth", {})
+    res = {
+        "id": spec_id(spec), "controller": spec[0], "direction_deg": spec[1],
+        "dv_m_s": spec[2], "duration_s": spec[3], "trial": spec[4],
+        "t_push_s": t_push, "force_n": f, "impulse_n_s": f * spec[3],
+        "fell": bool(truth.get("fell_while_active", True)),
+        "first_fall_t_s": truth.get("first_fall_t_s"),
+    }
+    for key in ("heading_dev_deg", "foot_slide_m", "kinetic_energy_j"):
+        if key in truth:
+            res[key] = truth[key]
+    with open(os.path.join(out_dir, spec_id(spec) + ".json"), "w") as fh:
+        json.dump(res, fh)
+    return 0
+
+
+def merge(in_dir, out):
+    rows = [json.load(open(p)) for p in sorted(glob.glob(os.path.join(in_dir, "*.json")))]
+    cells = {}
+    for r in rows:
+        key = (r["controller"], r["direction_deg"], r["dv_m_s"], r["duration_s"])
+        cells.setdefault(key, []).append(r)
+    table = []
+    for key in sorted(cells):
+        rs = cells[key]
+        ok = [r for r in rs if not r["fell"]]
+        table.append({"controller": key[0], "direction_deg": key[1], "dv_m_s": key[2],
+                      "duration_s": key[3], "n": len(rs), "n_success": len(ok),
+                      "success_rate": len(ok) / len(rs), "force_n": rs[0]["force_n"]})
+    doc = {"mass_kg": MASS_KG, "after_s": AFTER_S, "trials": rows, "cells": table,
+           "dv50": dv50(table)}
+    with open(out, "w") as fh:
+        json.dump(doc, fh, indent=1)
+    return doc
+
+
+def dv50(cells):
+    """Per controller, duration and direction: the delta-v where the success
+    rate crosses 50 %, linearly interpolated between grid points (the largest
+    grid point if it never drops below, 0 if the smallest already fails)."""
+    out = {}
+    by = {}
+    for c in cells:
+        by.setdefault((c["controller"], c["duration_s"], c["direction_deg"]), []).append(c)
+    for (ctl, dur, d), cs in sorted(by.items()):
+        cs.sort(key=lambda c: c["dv_m_s"])
+        val = cs[-1]["dv_m_s"]
+        prev = None
+        for c in cs:
+            if c["success_rate"] < 0.5:
+                if prev is None:
+                    val = 0.0
+                else:
+                    r0, r1 = prev["success_rate"], c["success_rate"]
+                    v0, v1 = prev["dv_m_s"], c["dv_m_s"]
+                    val = v0 + (r0 - 0.5) / (r0 - r1) * (v1 - v0)
+                break
+            prev = c
+        out.setdefault(ctl, {}).setdefault("%.1f" % dur, {})["%g" % d] = val
+    return out
+
+
+def table_md(doc):
+    lines = []
+    ctls = sorted({c["controller"] for c in doc["cells"]})
+    durs = sorted({c["duration_s"] for c in doc["cells"]})
+    dvs = sorted({c["dv_m_s"] for c in doc["cells"]})
+    dirs = sorted({c["direction_deg"] for c in doc["cells"]})
+    for dur in durs:
+        lines.append("\n### %.1f s push: success rate (no fall for %g s)\n" % (dur, AFTER_S))
+        lines.append("| controller | " + " | ".join("dv %.2f m/s (%.0f N)" % (
+            v, v * MASS_KG / dur) for v in dvs) + " |")
+        lines.append("|---" * (len(dvs) + 1) + "|")
+        for ctl in ctls:
+            row = []
+            for v in dvs:
+                cs = [c for c in doc["cells"] if c["controller"] == ctl and
+                      c["duration_s"] == dur and c["dv_m_s"] == v]
+                n = sum(c["n"] for c in cs)
+                k = sum(c["n_success"] for c in cs)
+                row.append("%d/%d" % (k, n) if n else "-")
+            lines.append("| %s | %s |" % (ctl, " | ".join(row)))
+        lines.append("\nPer direction (success / trials at each dv), %.1f s:\n" % dur)
+        lines.append("| controller | direction | " + " | ".join("%.2f" % v for v in dvs) +
+                     " | dv50 |")
+        lines.append("|---" * (len(dvs) + 3) + "|")
+        for ctl in ctls:
+            for d in dirs:
+                row = []
+                for v in dvs:
+                    cs = [c for c in doc["cells"] if c["controller"] == ctl and
+                          c["duration_s"] == dur and c["dv_m_s"] == v and
+                          c["direction_deg"] == d]
+                    row.append("%d/%d" % (cs[0]["n_success"], cs[0]["n"]) if cs else "-")
+                d50 = doc["dv50"].get(ctl, {}).get("%.1f" % dur, {}).get("%g" % d)
+                lines.append("| %s | %g | %s | %s |" % (ctl, d, " | ".join(row),
+                                                         "%.2f" % d50 if d50 is not None else "-"))
+    return "\n".join(lines) + "\n"
+
+
+def plot(doc, out_png, duration):
+    """Polar plot of dv50 per direction, one curve per controller (gnuplot)."""
+    import shutil
+    if shutil.which("gnuplot") is None:
+        return False
+    data = []
+    d50 = doc["dv50"]
+    ctls = sorted(d50)
+    for ctl in ctls:
+        pts = d50[ctl].get("%.1f" % duration, {})
+        rows = sorted((float(k), v) for k, v in pts.items())
+        rows.append(rows[0]) if rows else None  # close the curve
+        path = out_png + "." + ctl + ".dat"
+        with open(path, "w") as fh:
+            for d, v in rows:
+                fh.write("%g %g\n" % (d * math.pi / 180.0, v))
+        data.append((ctl, path))
+    plots = ", ".join("'%s' using 1:2 with linespoints title '%s'" % (p, c) for c, p in data)
+    script = ("set terminal png size 700,700; set output '%s'; set polar; set size square;"
+              "set title 'dv50 (m/s) per push direction, %.1f s pushes (0 deg = forward)';"
+              "set grid polar; unset border; unset xtics; unset ytics; set rrange [0:0.9];"
+              "plot %s" % (out_png, duration, plots))
+    ok = subprocess.run(["gnuplot", "-e", script]).returncode == 0
+    for _, p in data:
+        os.remove(p)
+    return ok
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    j = sub.add_parser("jobs")
+    j.add_argument("--controllers", default="stand")
+    j.add_argument("--directions", type=int, default=16)
+    j.add_argument("--dv", default="0.15,0.30,0.45,0.60,0.80")
+    j.add_argument("--durations", default="0.1,0.3")
+    j.add_argument("--trials", type=int, default=20)
+    t = sub.add_parser("trial")
+    t.add_argument("spec")
+    t.add_argument("--out", required=True)
+    t.add_argument("--bin", default=os.path.join(ROOT, "build", "pushstep"))
+    m = sub.add_parser("merge")
+    m.add_argument("dir")
+    m.add_argument("--out", required=True)
+    tb = sub.add_parser("table")
+    tb.add_argument("file")
+    pl = sub.add_parser("plot")
+    pl.add_argument("file")
+    pl.add_argument("--out", required=True, help="PNG; one per push duration: NAME_0.1s.png")
+    a = ap.parse_args()
+    if a.cmd == "jobs":
+        for spec in grid(a.controllers.split(","), a.directions,
+                         [float(x) for x in a.dv.split(",")],
+                         [float(x) for x in a.durations.split(",")], a.trials):
+            print("%s,%g,%g,%g,%d" % spec)
+        return 0
+    if a.cmd == "trial":
+        return run_trial(parse_spec(a.spec), a.out, a.bin)
+    if a.cmd == "merge":
+        doc = merge(a.dir, a.out)
+        sys.stdout.write(table_md(doc))
+        return 0
+    if a.cmd == "table":
+        sys.stdout.write(table_md(json.load(open(a.file))))
+        return 0
+    if a.cmd == "plot":
+        doc = json.load(open(a.file))
+        for dur in sorted({c["duration_s"] for c in doc["cells"]}):
+            plot(doc, a.out.replace(".png", "_%.1fs.png" % dur), dur)
+        return 0
+    return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

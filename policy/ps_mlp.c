@@ -1,0 +1,247 @@
+#include "ps_mlp.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdbool.h>
+#include <string.h>
+
+static const char *const ACT_NAMES[PS_MLP_ACT_COUNT] = {
+    [PS_MLP_ACT_IDENTITY] = "identity", [PS_MLP_ACT_RELU] = "relu",
+    [PS_MLP_ACT_ELU] = "elu",           [PS_MLP_ACT_TANH] = "tanh",
+    [PS_MLP_ACT_SIGMOID] = "sigmoid",   [PS_MLP_ACT_SILU] = "silu",
+};
+
+const char *ps_mlp_act_name(ps_mlp_act_t a)
+{
+    return (unsigned)a < PS_MLP_ACT_COUNT ? ACT_NAMES[a] : NULL;
+}
+
+int ps_mlp_act_find(const char *name)
+{
+    for (int i = 0; name != NULL && i < (int)PS_MLP_ACT_COUNT; i++)
+        if (strcmp(name, ACT_NAMES[i]) == 0)
+            return i;
+    return -ENOENT;
+}
+
+static bool is_dense_ok(const ps_mlp_dense_desc_t *l)
+{
+    return l->w != NULL && l->n_in >= 1u && l->n_out >= 1u && l->n_in <= PS_MLP_MAX_WIDTH &&
+           l->n_out <= PS_MLP_MAX_WIDTH;
+}
+
+static bool is_desc_ok(const ps_mlp_desc_t *d)
+{
+    if (d == NULL || d->n_layers < 1u || d->n_layers > PS_MLP_MAX_LAYERS ||
+        d->n_embed > PS_MLP_MAX_EMBED)
+        return false;
+    for (uint32_t k = 0; k < d->n_layers; k++) {
+        const ps_mlp_dense_desc_t *l = &d->base[k];
+        if (!is_dense_ok(l) || (unsigned)d->act[k] >= PS_MLP_ACT_COUNT)
+            return false;
+        if (k > 0 && l->n_in != d->base[k - 1].n_out)
+            return false;
+        const ps_mlp_dense_desc_t *a = &d->adapt[k];
+        if (a->w != NULL && (a->n_in != l->n_in || a->n_out != l->n_out))
+            return false;
+    }
+    if (d->n_embed > 0) {
+        if (d->inject_layer >= d->n_layers)
+            return false;
+        for (uint32_t j = 0; j < d->n_embed; j++) {
+            if (!is_dense_ok(&d->embed[j]) || (unsigned)d->embed_act[j] >= PS_MLP_ACT_COUNT)
+                return false;
+            if (j > 0 && d->embed[j].n_in != d->embed[j - 1].n_out)
+                return false;
+        }
+        if (d->embed[d->n_embed - 1].n_out != d->base[d->inject_layer].n_out)
+            return false;
+    }
+    return true;
+}
+
+static size_t dense_floats(const ps_mlp_dense_desc_t *l)
+{
+    return l->w != NULL ? (size_t)l->n_in * l->n_out + l->n_out : 0u;
+}
+
+static uint32_t max_width(const ps_mlp_desc_t *d)
+{
+    uint32_t w = d->base[0].n_in;
+    for (uint32_t k = 0; k < d->n_layers; k++)
+        w = d->base[k].n_out > w ? d->base[k].n_out : w;
+    for (uint32_t j = 0; j < d->n_embed; j++) {
+        w = d->embed[j].n_in > w ? d->embed[j].n_in : w;
+        w = d->embed[j].n_out > w ? d->embed[j].n_out : w;
+    }
+    return w;
+}
+
+size_t ps_mlp_arena_floats(const ps_mlp_desc_t *d)
+{
+    if (!is_desc_ok(d))
+        return 0u;
+    size_t n = 4u * (size_t)max_width(d); /* h0, h1, e0, e1 */
+    for (uint32_t k = 0; k < d->n_layers; k++)
+        n += dense_floats(&d->base[k]) + dense_floats(&d->adapt[k]);
+    for (uint32_t j = 0; j < d->n_embed; j++)
+        n += dense_floats(&d->embed[j]);
+    return n;
+}
+
+/* Copy one layer, transposed, from *cursor on. */
+static void take_dense(const ps_mlp_dense_desc_t *src, ps_mlp_dense_t *dst, float **cursor)
+{
+    dst->n_in = src->n_in;
+    dst->n_out = src->n_out;
+    if (src->w == NULL) {
+        dst->w_t = NULL;
+        dst->b = NULL;
+        return;
+    }
+    dst->w_t = *cursor;
+    *cursor += (size_t)src->n_in * src->n_out;
+    dst->b = *cursor;
+    *cursor += src->n_out;
+    for (uint32_t o = 0; o < src->n_out; o++)
+        for (uint32_t i = 0; i < src->n_in; i++)
+            dst->w_t[(size_t)i * src->n_out + o] = src->w[(size_t)o * src->n_in + i];
+    if (src->b != NULL)
+        memcpy(dst->b, src->b, src->n_out * sizeof(float));
+    else
+        memset(dst->b, 0, src->n_out * sizeof(float));
+}
+
+int ps_mlp_init(ps_mlp_t *m, const ps_mlp_desc_t *d, float *arena, size_t n_floats)
+{
+    if (m == NULL || arena == NULL || !is_desc_ok(d))
+        return -EINVAL;
+    if (n_floats < ps_mlp_arena_floats(d))
+        return -ENOSPC;
+    memset(m, 0, sizeof(*m));
+    float *cur = arena;
+    m->max_width = max_width(d);
+    m->h0 = cur;
+    m->h1 = cur + m->max_width;
+    m->e0 = cur + 2u * m->max_width;
+    m->e1 = cur + 3u * m->max_width;
+    cur += 4u * (size_t)m->max_width;
+    m->n_layers = d->n_layers;
+    for (uint32_t k = 0; k < d->n_layers; k++) {
+        take_dense(&d->base[k], &m->base[k], &cur);
+        take_dense(&d->adapt[k], &m->adapt[k], &cur);
+        m->act[k] = d->act[k];
+    }
+    m->n_embed = d->n_embed;
+    m->inject_layer = d->inject_layer;
+    for (uint32_t j = 0; j < d->n_embed; j++) {
+        take_dense(&d->embed[j], &m->embed[j], &cur);
+        m->embed_act[j] = d->embed_act[j];
+    }
+    m->n_in = d->base[0].n_in;
+    m->n_out = d->base[d->n_layers - 1].n_out;
+    m->n_extra = d->n_embed > 0 ? d->embed[0].n_in : 0u;
+    return 0;
+}
+
+/* y += W^T x: for each input, an axpy over the outputs. restrict and the
+ * unit stride let GCC vectorise the inner loop; every y[o] is summed in
+ * input order, as the scalar loop would (no FMA contraction in ISO C mode),
+ * so each clone gives the same result. On x86-64 GCC builds clones for
+ * AVX-512 and AVX2 and picks one at load time (ifunc); elsewhere (aarch64:
+ * NEON is the baseline) the one portable version. */
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__SANITIZE_ADDRESS__)
+#define PS_MLP_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
+#else
+#define PS_MLP_CLONES
+#endif
+PS_MLP_CLONES
+static void dense_acc(const ps_mlp_dense_t *l, const float *restrict x, float *restrict y)
+{
+    const uint32_t n_out = l->n_out;
+    for (uint32_t i = 0; i < l->n_in; i++) {
+        const float xi = x[i];
+        const float *restrict row = l->w_t + (size_t)i * n_out;
+        for (uint32_t o = 0; o < n_out; o++)
+            y[o] += row[o] * xi;
+    }
+}
+
+static void add_vec(float *restrict y, const float *restrict b, uint32_t n)
+{
+    for (uint32_t o = 0; o < n; o++)
+        y[o] += b[o];
+}
+
+static void activate(ps_mlp_act_t a, float *y, uint32_t n)
+{
+    switch (a) {
+    case PS_MLP_ACT_RELU:
+        for (uint32_t o = 0; o < n; o++)
+            y[o] = y[o] > 0.0f ? y[o] : 0.0f;
+        break;
+    case PS_MLP_ACT_ELU:
+        for (uint32_t o = 0; o < n; o++)
+            y[o] = y[o] > 0.0f ? y[o] : expm1f(y[o]);
+        break;
+    case PS_MLP_ACT_TANH:
+        for (uint32_t o = 0; o < n; o++)
+            y[o] = tanhf(y[o]);
+        break;
+    case PS_MLP_ACT_SIGMOID:
+        for (uint32_t o = 0; o < n; o++)
+            y[o] = 1.0f / (1.0f + expf(-y[o]));
+        break;
+    case PS_MLP_ACT_SILU:
+        for (uint32_t o = 0; o < n; o++)
+            y[o] = y[o] / (1.0f + expf(-y[o]));
+        break;
+    case PS_MLP_ACT_IDENTITY:
+    case PS_MLP_ACT_COUNT:
+    default:
+        break;
+    }
+}
+
+/* y = b (+ W x) of one layer, into y. */
+static void dense(const ps_mlp_dense_t *l, const float *restrict x, float *restrict y)
+{
+    memcpy(y, l->b, l->n_out * sizeof(float));
+    dense_acc(l, x, y);
+}
+
+int ps_mlp_forward(ps_mlp_t *m, const float *in, const float *extra, float *out)
+{
+    if (m == NULL || in == NULL || out == NULL || m->n_layers == 0)
+        return -EINVAL;
+    /* The latent injection's embedding, first: it ends in e (n_out of the
+     * layer it is added to). */
+    const float *inj = NULL;
+    if (m->n_embed > 0 && extra != NULL) {
+        const float *x = extra;
+        float *bufs[2] = {m->e0, m->e1};
+        for (uint32_t j = 0; j < m->n_embed; j++) {
+            float *y = bufs[j & 1u];
+            dense(&m->embed[j], x, y);
+            activate(m->embed_act[j], y, m->embed[j].n_out);
+            x = y;
+        }
+        inj = x;
+    }
+    const float *x = in;
+    float *bufs[2] = {m->h0, m->h1};
+    for (uint32_t k = 0; k < m->n_layers; k++) {
+        const ps_mlp_dense_t *l = &m->base[k];
+        float *y = k + 1 == m->n_layers ? out : bufs[k & 1u];
+        dense(l, x, y);
+        if (m->adapt[k].w_t != NULL) {
+            add_vec(y, m->adapt[k].b, l->n_out);
+            dense_acc(&m->adapt[k], x, y);
+        }
+        if (inj != NULL && k == m->inject_layer)
+            add_vec(y, inj, l->n_out);
+        activate(m->act[k], y, l->n_out);
+        x = y;
+    }
+    return 0;
+}

@@ -1,0 +1,139 @@
+#!/usr/bin/env python3
+"""The benchmark's pushes in the training environment (tools/psenv, nominal
+robot: no domain randomisation), for a policy file and for the capture-point
+expert, so that the runtime's grid (bench/results/push.json, made by
+`pushstep --lockstep`) and the environment the policy was trained in can be
+compared cell by cell.
+
+One trial: released at once (the environment has no harness), a torso push
+of delta-v dv (impulse / mass) over the push's duration at a random time in
+[1, 2] s, success = no fall before the push's start + 5 s. The directions of a
+cell's trials are the 16 of the grid, one environment each.
+
+  policy/train/eval.py --weights policy/weights/ps1_stage1.safetensors \\
+      --runtime bench/results/push.json --out bench/results/train_env.json
+"""
+import argparse
+import json
+import math
+import os
+import sys
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+import psenv  # noqa: E402
+import psfile  # noqa: E402
+
+
+class Mlp:
+    def __init__(self, path):
+        self.t, meta = psfile.read_safetensors(path)
+        self.c = json.loads(meta[psfile.CONTRACT_KEY])
+        o = self.c["observation"]
+        self.mean = np.asarray(o["mean"])
+        self.std = np.asarray(o["std"])
+        self.clip = float(o["clip"])
+        self.act_clip = float(self.c["action"]["clip"])
+
+    def __call__(self, obs, expert):
+        x = np.clip((obs - self.mean) / self.std, -self.clip, self.clip)
+        a = psfile.forward(self.t, x, contract=self.c)
+        return np.clip(a, -self.act_clip, self.act_clip).astype(np.float32)
+
+
+def expert_ctl(obs, expert):
+    return expert
+
+
+def run_cell(env, ctl, dv, dur, dirs, rng, policy_hz):
+    """One trial per direction; returns the list of successes (bools)."""
+    n = len(dirs)
+    t_push = rng.uniform(1.0, 2.0, n)
+    for i in range(n):
+        env.set_push(i, float(t_push[i]), dur, dv, dirs[i])
+    obs = env.reset()
+    _, _, _, expert, _ = env.step(np.zeros((env.n, env.n_act), np.float32))
+    obs = env.obs.copy()
+    ok = [None] * n
+    t_end = t_push + 5.0
+    for _ in range(int((float(t_end.max()) + 0.5) * policy_hz)):
+        obs, _, _, expert, info = env.step(ctl(obs, expert))
+        for i in range(n):
+            if ok[i] is not None:
+                continue
+            if info[i, 0] > 0:  # fell
+                ok[i] = False
+            elif info[i, 2] >= t_end[i] or info[i, 1] > 0:
+                ok[i] = True
+        if all(x is not None for x in ok):
+            break
+    return [bool(x) for x in ok]
+
+
+def runtime_rates(path):
+    """(controller, dur, dv) -> success rate from bench/push.py merge's JSON."""
+    with open(path) as f:
+        doc = json.load(f)
+    acc = {}
+    for t in doc.get("trials", []):
+        k = (t["controller"], round(float(t["duration_s"]), 3), round(float(t["dv_m_s"]), 3))
+        s = acc.setdefault(k, [0, 0])
+        s[0] += 0 if t["fell"] else 1
+        s[1] += 1
+    return acc
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--weights", help="policy file (without it, the expert only)")
+    ap.add_argument("--dv", default="0.15,0.30,0.45,0.60,0.80")
+    ap.add_argument("--durations", default="0.1,0.3")
+    ap.add_argument("--directions", type=int, default=16)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--runtime", help="bench/results/push.json to compare with")
+    ap.add_argument("--out", help="JSON results")
+    ap.add_argument("--lib", help="the environment library (default build/libpsenv.so)")
+    a = ap.parse_args()
+    dvs = [float(x) for x in a.dv.split(",")]
+    durs = [float(x) for x in a.durations.split(",")]
+    dirs = [2 * math.pi * k / a.directions for k in range(a.directions)]
+    rng = np.random.default_rng(a.seed)
+    env = psenv.Env(a.directions, a.threads, seed=a.seed, episode_s=8.0, dr=False,
+                     lib=a.lib)
+    doc = psfile.read_safetensors(a.weights)[1] if a.weights else {}
+    policy_hz = json.loads(doc[psfile.CONTRACT_KEY])["policy_hz"] if doc else 50
+    ctls = [("capture", expert_ctl)] + ([("mlp", Mlp(a.weights))] if a.weights else [])
+    cells = []
+    for name, ctl in ctls:
+        for dur in durs:
+            for dv in dvs:
+                ok = run_cell(env, ctl, dv, dur, dirs, rng, policy_hz)
+                cells.append({"controller": name, "dur_s": dur, "dv_m_s": dv,
+                              "success": sum(ok), "trials": len(ok),
+                              "by_direction_deg": {str(round(math.degrees(d))): o
+                                                   for d, o in zip(dirs, ok)}})
+                print("env %-8s %.1f s dv %.2f: %2d/%d" % (name, dur, dv, sum(ok), len(ok)),
+                      file=sys.stderr)
+    env.close()
+    rt = runtime_rates(a.runtime) if a.runtime and os.path.exists(a.runtime) else {}
+    print("| controller | push | dv (m/s) | training env | runtime (pushstep --lockstep) |")
+    print("|---|---|---|---|---|")
+    for c in cells:
+        r = rt.get((c["controller"], round(c["dur_s"], 3), round(c["dv_m_s"], 3)))
+        c["runtime"] = {"success": r[0], "trials": r[1]} if r else None
+        print("| %s | %.1f s | %.2f | %d/%d | %s |" % (
+            c["controller"], c["dur_s"], c["dv_m_s"], c["success"], c["trials"],
+            "%d/%d" % tuple(r) if r else "-"))
+    if a.out:
+        with open(a.out, "w") as f:
+            json.dump({"what": "training environment (nominal) vs runtime, same push grid",
+                       "seed": a.seed, "cells": cells}, f, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,317 @@
+#!/usr/bin/python3
+"""Train ps1's stage-1 balance/stepping policy (docs/policy.md).
+
+The environment is the C one (tools/psenv, build/libpsenv.so: the MuJoCo
+plant, the emulated drives, the estimator and the observation builder of
+the runtime, batched over --threads cores). Two phases, seeded:
+
+  1. behaviour cloning of the capture-point controller (policy/ps_capture,
+     computed inside the environment) with DAgger: the student acts with
+     probability growing from 0 to 1, the expert labels every state it
+     visits. Push-and-Step imitates motion capture, which we do not have;
+     the expert plays that role (a starting point that already steps).
+  2. PPO on Push-and-Step's reward (balance + quality, tools/psenv/ps_env.h)
+     from the cloned policy, with a behaviour-cloning term that decays.
+
+Observations are normalised by running mean and standard deviation, which
+go into the policy file's contract, so the runtime's observation builder
+normalises exactly as here. One torch thread (a measured probe found two
+slower than one here: docs/policy.md).
+
+Writes --out (safetensors with the contract), --log-dir/log.csv (one line
+per iteration), --log-dir/curves.png (gnuplot, when installed).
+"""
+import argparse
+import csv
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+import contract as ct  # noqa: E402
+import psenv  # noqa: E402
+import psfile  # noqa: E402
+
+OBS_CLIP = 10.0
+
+
+class RunningNorm:
+    def __init__(self, n):
+        self.n = 0
+        self.mean = np.zeros(n)
+        self.m2 = np.zeros(n)
+
+    def update(self, x):
+        for row in np.asarray(x, np.float64).reshape(-1, self.mean.size):
+            self.n += 1
+            d = row - self.mean
+            self.mean += d / self.n
+            self.m2 += d * (row - self.mean)
+
+    def std(self):
+        s = np.sqrt(self.m2 / max(self.n - 1, 1))
+        return np.maximum(s, 1e-2)  # a constant input (contact, ...) keeps a sane scale
+
+    def __call__(self, x):
+        return np.clip((x - self.mean) / self.std(), -OBS_CLIP, OBS_CLIP).astype(np.float32)
+
+
+class Policy(torch.nn.Module):
+    def __init__(self, n_obs, n_act, hidden):
+        super().__init__()
+        layers, a = [], n_obs
+        for h in hidden:
+            layers += [torch.nn.Linear(a, h), torch.nn.ELU()]
+            a = h
+        self.pi = torch.nn.Sequential(*layers, torch.nn.Linear(a, n_act))
+        layers, a = [], n_obs
+        for h in hidden:
+            layers += [torch.nn.Linear(a, h), torch.nn.ELU()]
+            a = h
+        self.v = torch.nn.Sequential(*layers, torch.nn.Linear(a, 1))
+        self.log_std = torch.nn.Parameter(torch.full((n_act,), -2.3))
+        with torch.no_grad():
+            self.pi[-1].weight.mul_(0.1)
+
+    def dist(self, obs):
+        return torch.distributions.Normal(self.pi(obs), self.log_std.exp())
+
+    def linears(self):
+        return [m for m in self.pi if isinstance(m, torch.nn.Linear)]
+
+
+def save(path, net, norm, doc, hidden, trained_by):
+    c = ct.contract(doc, mean=norm.mean, std=norm.std(), trained_by=trained_by)
+    c["observation"]["clip"] = OBS_CLIP
+    c["activations"] = ["elu"] * len(hidden) + ["identity"]
+    layers = [(m.weight.detach().numpy(), m.bias.detach().numpy()) for m in net.linears()]
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    psfile.write_policy(path, layers, c)
+
+
+def plot(log_csv, png):
+    if shutil.which("gnuplot") is None:
+        return False
+    script = ("set terminal png size 900,600; set output '%s'; set datafile separator ',';"
+              "set key autotitle columnhead; set xlabel 'environment steps';"
+              "set multiplot layout 2,1;"
+              "plot '%s' using 2:4 with lines title 'mean reward per step';"
+              "plot '%s' using 2:5 with lines title 'falls per episode', "
+              "'' using 2:7 with lines title 'r_balance';"
+              "unset multiplot" % (png, log_csv, log_csv))
+    return subprocess.run(["gnuplot", "-e", script]).returncode == 0
+
+
+def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=True,
+            explore=True, dart_std=0.0):
+    """n_steps of every environment. beta_expert: probability that an
+    environment follows the expert this step (DAgger)."""
+    n = env.n
+    buf = {k: [] for k in ("obs", "raw", "act", "logp", "rew", "done", "val", "expert", "info")}
+    for _ in range(n_steps):
+        if update_norm:
+            norm.update(obs)
+        o = norm(obs)
+        with torch.no_grad():
+            t = torch.from_numpy(o)
+            d = net.dist(t)
+            # DAgger visits the states of the learner's own (mean) actions;
+            # PPO explores around them
+            a = d.sample() if explore else d.mean
+            logp = d.log_prob(a).sum(-1)
+            v = net.v(t).squeeze(-1)
+        a = a.numpy()
+        if beta_expert > 0.0:
+            use = rng.random(n) < beta_expert
+            a[use] = expert[use]
+        if dart_std > 0.0:
+            # DART: the executed action is perturbed (the labels are not), so
+            # the data set holds the states a noisy action leads to, the
+            # previous-action input included; without it the clone copies
+            # its previous action and integrates PPO's exploration noise
+            a = a + dart_std * rng.standard_normal(a.shape).astype(np.float32)
+        obs2, rew, done, expert2, info = env.step(a)
+        buf["obs"].append(o)
+        buf["raw"].append(obs)
+        buf["act"].append(a)
+        buf["logp"].append(logp.numpy())
+        buf["rew"].append(rew)
+        buf["done"].append(done)
+        buf["val"].append(v.numpy())
+        buf["expert"].append(expert)
+        buf["info"].append(info)
+        obs, expert = obs2, expert2
+    with torch.no_grad():
+        last_v = net.v(torch.from_numpy(norm(obs))).squeeze(-1).numpy()
+    return {k: np.asarray(v) for k, v in buf.items()}, obs, expert, last_v
+
+
+def gae(buf, last_v, gamma, lam):
+    rew, done, val = buf["rew"], buf["done"].astype(np.float32), buf["val"]
+    adv = np.zeros_like(rew)
+    g = np.zeros(rew.shape[1], np.float32)
+    for t in reversed(range(rew.shape[0])):
+        nv = last_v if t == rew.shape[0] - 1 else val[t + 1]
+        delta = rew[t] + gamma * nv * (1 - done[t]) - val[t]
+        g = delta + gamma * lam * (1 - done[t]) * g
+        adv[t] = g
+    return adv, adv + val
+
+
+def stats(buf):
+    info = buf["info"]
+    ended = info[..., 1].sum()
+    return {"rew": float(buf["rew"].mean()), "falls_per_ep": float(info[..., 0].sum() / max(ended, 1)),
+            "ep_len_s": float(info[..., 2][info[..., 1] > 0].mean()) if ended else 0.0,
+            "r_bal": float(info[..., 4].mean()), "r_q": float(info[..., 5].mean())}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--envs", type=int, default=16)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--steps", type=int, default=64, help="steps per environment per iteration")
+    ap.add_argument("--bc-iters", type=int, default=100)
+    ap.add_argument("--ppo-iters", type=int, default=300)
+    ap.add_argument("--hidden", default="128,128")
+    ap.add_argument("--lr", type=float, default=3e-4)
+    ap.add_argument("--dart-std", type=float, default=0.15,
+                    help="noise on the executed actions while cloning (action units)")
+    ap.add_argument("--push-dv-max", type=float, default=0.8,
+                    help="largest push at the end of the curriculum (m/s)")
+    ap.add_argument("--push-dv-start", type=float, default=0.3,
+                    help="largest push at the start; grows linearly over 70 %% of the run")
+    ap.add_argument("--out", default=os.path.join(HERE, "..", "weights", "ps1_stage1.safetensors"))
+    ap.add_argument("--log-dir", default=os.path.join(psenv.ROOT, "build", "train"))
+    ap.add_argument("--no-dr", action="store_true", help="no domain randomisation")
+    a = ap.parse_args()
+
+    torch.set_num_threads(1)
+    torch.manual_seed(a.seed)
+    np.random.seed(a.seed)
+    rng = np.random.default_rng(a.seed)
+    hidden = [int(x) for x in a.hidden.split(",")]
+    doc = ct.robot()
+    env = psenv.Env(a.envs, a.threads, seed=a.seed, push_dv_max=a.push_dv_start,
+                    dr=not a.no_dr)
+    n_obs_contract = psfile.obs_size(ct.OBS_FIELDS, len(doc["joints"]), len(ct.LEGS))
+    if env.n_obs != n_obs_contract or env.n_act != len(ct.LEGS):
+        raise SystemExit("environment (%d obs, %d actions) and contract.py (%d, %d) disagree"
+                         % (env.n_obs, env.n_act, n_obs_contract, len(ct.LEGS)))
+    net = Policy(env.n_obs, env.n_act, hidden)
+    opt = torch.optim.Adam(net.parameters(), lr=a.lr)
+    norm = RunningNorm(env.n_obs)
+    os.makedirs(a.log_dir, exist_ok=True)
+    log_path = os.path.join(a.log_dir, "log.csv")
+    logf = open(log_path, "w", newline="")
+    log = csv.writer(logf)
+    log.writerow(["iter", "env_steps", "phase", "mean_reward", "falls_per_episode",
+                  "episode_s", "r_balance", "r_quality", "loss", "wall_s", "push_dv_max"])
+    trained_by = ("make train: policy/train/train.py --seed %d --envs %d --threads %d "
+                  "--bc-iters %d --ppo-iters %d --steps %d --hidden %s --push-dv-start %g "
+                  "--push-dv-max %g --dart-std %g%s" % (
+                      a.seed, a.envs, a.threads, a.bc_iters, a.ppo_iters, a.steps, a.hidden,
+                      a.push_dv_start, a.push_dv_max, a.dart_std,
+                                          " --no-dr" if a.no_dr else ""))
+    obs = env.reset()
+    expert = np.zeros((env.n, env.n_act), np.float32)
+    _, _, _, expert, _ = env.step(expert)  # the expert's first labels
+    obs = env.obs.copy()
+    t0 = time.time()
+    n_env_steps = 0
+    ds_o, ds_a = [], []
+    total = a.bc_iters + a.ppo_iters
+    bar = tqdm(range(total), desc="train", unit="it", dynamic_ncols=True)
+    for it in bar:
+        is_bc = it < a.bc_iters
+        dv_max = a.push_dv_start + (a.push_dv_max - a.push_dv_start) * min(1.0, it / (0.7 * total))
+        env.set_push_dv_max(dv_max)
+        beta = max(0.0, 1.0 - it / max(1, a.bc_iters * 0.75)) if is_bc else 0.0
+        buf, obs, expert, last_v = rollout(env, net, norm, obs, a.steps, beta, expert, rng,
+                                           explore=not is_bc,
+                                           dart_std=a.dart_std if is_bc else 0.0)
+        n_env_steps += a.steps * env.n
+        st = stats(buf)
+        O = torch.from_numpy(buf["obs"].reshape(-1, env.n_obs))
+        E = torch.from_numpy(buf["expert"].reshape(-1, env.n_act).astype(np.float32))
+        if is_bc:
+            ds_o.append(buf["raw"].reshape(-1, env.n_obs))
+            ds_a.append(E)
+            ds_o, ds_a = ds_o[-60:], ds_a[-60:]  # the aggregate, bounded
+            # raw observations, normalised with today's statistics
+            X, Y = torch.from_numpy(norm(np.concatenate(ds_o))), torch.cat(ds_a)
+            loss_v = 0.0
+            for _ in range(4):
+                perm = torch.randperm(X.shape[0])
+                for i in range(0, X.shape[0], 1024):
+                    idx = perm[i:i + 1024]
+                    loss = ((net.pi(X[idx]) - Y[idx]) ** 2).mean()
+                    opt.zero_grad()
+                    loss.backward()
+                    opt.step()
+                    loss_v = float(loss)
+            # the critic learns the expert's returns meanwhile
+            adv, ret = gae(buf, last_v, 0.99, 0.95)
+            R = torch.from_numpy(ret.reshape(-1).astype(np.float32))
+            for _ in range(4):
+                vl = ((net.v(O).squeeze(-1) - R) ** 2).mean()
+                opt.zero_grad()
+                vl.backward()
+                opt.step()
+        else:
+            adv, ret = gae(buf, last_v, 0.99, 0.95)
+            A = torch.from_numpy(buf["act"].reshape(-1, env.n_act).astype(np.float32))
+            LP = torch.from_numpy(buf["logp"].reshape(-1).astype(np.float32))
+            ADV = torch.from_numpy(adv.reshape(-1).astype(np.float32))
+            ADV = (ADV - ADV.mean()) / (ADV.std() + 1e-8)
+            R = torch.from_numpy(ret.reshape(-1).astype(np.float32))
+            w_bc = 0.5 * max(0.0, 1.0 - (it - a.bc_iters) / max(1, 0.5 * a.ppo_iters))
+            loss_v = 0.0
+            for _ in range(5):
+                perm = torch.randperm(O.shape[0])
+                for i in range(0, O.shape[0], 2048):
+                    idx = perm[i:i + 2048]
+                    d = net.dist(O[idx])
+                    ratio = (d.log_prob(A[idx]).sum(-1) - LP[idx]).exp()
+                    pg = -torch.min(ratio * ADV[idx],
+                                    ratio.clamp(0.8, 1.2) * ADV[idx]).mean()
+                    vl = ((net.v(O[idx]).squeeze(-1) - R[idx]) ** 2).mean()
+                    bc = ((net.pi(O[idx]) - E[idx]) ** 2).mean()
+                    loss = pg + 0.5 * vl + w_bc * bc
+                    opt.zero_grad()
+                    loss.backward()
+                    torch.nn.utils.clip_grad_norm_(net.parameters(), 1.0)
+                    opt.step()
+                    loss_v = float(loss)
+        wall = time.time() - t0
+        log.writerow([it, n_env_steps, "bc" if is_bc else "ppo", "%.4f" % st["rew"],
+                      "%.3f" % st["falls_per_ep"], "%.2f" % st["ep_len_s"],
+                      "%.4f" % st["r_bal"], "%.4f" % st["r_q"], "%.4f" % loss_v, "%.1f" % wall,
+                      "%.3f" % dv_max])
+        logf.flush()
+        bar.set_postfix(phase="bc" if is_bc else "ppo", rew="%.3f" % st["rew"],
+                        falls="%.2f" % st["falls_per_ep"])
+        if (it + 1) % 20 == 0 or it + 1 == total:
+            save(a.out, net, norm, doc, hidden, trained_by)
+    logf.close()
+    env.close()
+    save(a.out, net, norm, doc, hidden, trained_by)
+    png = os.path.join(a.log_dir, "curves.png")
+    print("wrote %s (%d env steps, %.0f s); log %s%s" % (
+        a.out, n_env_steps, time.time() - t0, log_path,
+        ", curves " + png if plot(log_path, png) else ""))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,276 @@
+/*
+ * Tests of policy/ps_safetensors.c and policy/ps_weights.c: every check of
+ * the file format (each malformed file made here, byte by byte), the
+ * contract, and the contract against a robot, each refusal naming what is
+ * wrong.
+ */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "../policy/ps_safetensors.h"
+#include "../policy/ps_weights.h"
+#include "../rt/ps_err.h"
+
+#define GOLDEN "tests/data/policy/golden_base.safetensors"
+
+/* A safetensors image: 8-byte length, header, data. */
+static size_t image(uint8_t *buf, const char *header, const void *data, size_t data_len)
+{
+    const uint64_t n = strlen(header);
+    for (int i = 0; i < 8; i++)
+        buf[i] = (uint8_t)(n >> (8 * i));
+    memcpy(buf + 8, header, n);
+    if (data_len)
+        memcpy(buf + 8 + n, data, data_len);
+    return 8 + n + data_len;
+}
+
+static void expect_refused(const char *header, const void *data, size_t len, int want_rc,
+                           const char *want_text)
+{
+    static uint8_t buf[4096];
+    const size_t n = image(buf, header, data, len);
+    ps_st_file_t st;
+    char err[512] = "";
+    const int rc = ps_st_parse(&st, buf, n, err, sizeof(err));
+    if (rc == 0)
+        ps_st_free(&st);
+    if (rc != want_rc || strstr(err, want_text) == NULL)
+        fail_msg("header %s: rc %d '%s', want %d with '%s'", header, rc, err, want_rc, want_text);
+}
+
+static void test_ps_st_parse_refuses_each_malformation(void **st)
+{
+    (void)st;
+    const float two[2] = {1.0f, 2.0f};
+    expect_refused("{\"a\":{\"dtype\":\"F32\",\"shape\":[2],\"data_offsets\":[0,8]}}", two, 8, 0,
+                   "");
+    expect_refused("{\"a\":{\"dtype\":\"F16\",\"shape\":[4],\"data_offsets\":[0,8]}}", two, 8,
+                   -ENOTSUP, "dtype F16, only F32");
+    expect_refused("{\"a\":{\"dtype\":\"F32\",\"shape\":[3],\"data_offsets\":[0,8]}}", two, 8,
+                   -EINVAL, "8 bytes for 3 F32 elements");
+    expect_refused("{\"a\":{\"dtype\":\"F32\",\"shape\":[2],\"data_offsets\":[0,16]}}", two, 8,
+                   -EINVAL, "beyond the data section");
+    expect_refused("{\"a\":{\"dtype\":\"F32\",\"shape\":[2],\"data_offsets\":[0,8]},"
+                   "\"b\":{\"dtype\":\"F32\",\"shape\":[1],\"data_offsets\":[4,8]}}",
+                   two, 8, -EINVAL, "overlap");
+    expect_refused("{\"a\":{\"dtype\":\"F32\",\"shape\":[1],\"data_offsets\":[4,8]}}", two, 8,
+                   -EINVAL, "bytes [0, 4) of the data section belong to no tensor");
+    expect_refused("{\"a\":{\"dtype\":\"F32\",\"shape\":[1],\"data_offsets\":[0,4]}}", two, 8,
+                   -EINVAL, "bytes [4, 8) of the data section belong to no tensor");
+    expect_refused("{\"a\":{\"dtype\":\"F32\",\"shape\":[2],\"data_offsets\":[0,8],\"x\":1}}", two,
+                   8, -EINVAL, "unknown key 'x'");
+    expect_refused("{\"a\":{\"dtype\":\"F32\",\"shape\":[2]}}", two, 8, -EINVAL, "needs dtype");
+    expect_refused("{\"a\":{\"dtype\":\"F32\",\"shape\":[-2],\"data_offsets\":[0,8]}}", two, 8,
+                   -EINVAL, "shape[0] is not a size");
+    expect_refused("{\"a\":{\"dtype\":\"F32\",\"shape\":[2],\"data_offsets\":[8,0]}}", two, 8,
+                   -EINVAL, "begin <= end");
+    expect_refused("{\"__metadata__\":{\"k\":1},"
+                   "\"a\":{\"dtype\":\"F32\",\"shape\":[2],\"data_offsets\":[0,8]}}",
+                   two, 8, -EINVAL, "__metadata__.k: value is not a string");
+    expect_refused("not json", two, 8, -EINVAL, "not a JSON object");
+    /* a header length beyond the file */
+    uint8_t b[16] = {0xff, 0xff, 0, 0, 0, 0, 0, 0, '{', '}'};
+    ps_st_file_t f;
+    char err[512] = "";
+    assert_int_equal(ps_st_parse(&f, b, 10, err, sizeof(err)), -EINVAL);
+    assert_non_null(strstr(err, "header length 65535: beyond the file"));
+    assert_int_equal(ps_st_parse(&f, b, 4, err, sizeof(err)), -EINVAL);
+    assert_non_null(strstr(err, "shorter than the 8-byte header length"));
+}
+
+static void test_ps_st_copy_f32_refuses_nan_and_inf(void **st)
+{
+    (void)st;
+    static uint8_t buf[512];
+    const float v[3] = {1.0f, NAN, INFINITY};
+    const size_t n =
+        image(buf, "{\"w\":{\"dtype\":\"F32\",\"shape\":[3],\"data_offsets\":[0,12]}}", v, 12);
+    ps_st_file_t f;
+    char err[512] = "";
+    assert_int_equal(ps_st_parse(&f, buf, n, err, sizeof(err)), 0);
+    float out[3];
+    assert_int_equal(ps_st_copy_f32(&f, ps_st_find(&f, "w"), out, 3, err, sizeof(err)), -ERANGE);
+    assert_string_equal(err, "tensor w: element 1 is NaN");
+    assert_int_equal(ps_st_copy_f32(&f, ps_st_find(&f, "w"), out, 2, err, sizeof(err)), -ENOSPC);
+    ps_st_free(&f);
+    ps_st_free(&f); /* twice is safe */
+    assert_int_equal(ps_st_load(&f, "tests/data/policy/nope.safetensors", err, sizeof(err)),
+                     -ENOENT);
+}
+
+/* ---- policy files: the golden base, then edited copies ------------------ */
+
+static char g_dir[64];
+
+static int setup(void **st)
+{
+    (void)st;
+    snprintf(g_dir, sizeof(g_dir), "/tmp/ps_test_weights.XXXXXX");
+    return mkdtemp(g_dir) != NULL ? 0 : -1;
+}
+
+static int teardown(void **st)
+{
+    (void)st;
+    char cmd[128];
+    snprintf(cmd, sizeof(cmd), "rm -rf %s", g_dir);
+    return system(cmd) == 0 ? 0 : -1;
+}
+
+/* The golden base file with its contract's text edited: "from" -> "to". */
+static void edited(const char *from, const char *to, char *path, size_t len)
+{
+    FILE *f = fopen(GOLDEN, "rb");
+    assert_non_null(f);
+    static uint8_t raw[1 << 16];
+    const size_t n = fread(raw, 1, sizeof(raw), f);
+    fclose(f);
+    uint64_t h = 0;
+    for (int i = 7; i >= 0; i--)
+        h = (h << 8) | raw[i];
+    static char header[1 << 14];
+    memcpy(header, raw + 8, h);
+    header[h] = '\0';
+    char *at = strstr(header, from);
+    if (at == NULL)
+        fail_msg("'%s' not in the header", from);
+    static char out_h[1 << 14];
+    snprintf(out_h, sizeof(out_h), "%.*s%s%s", (int)(at - header), header, to, at + strlen(from));
+    snprintf(path, len, "%s/edited.safetensors", g_dir);
+    static uint8_t img[1 << 16];
+    const size_t m = image(img, out_h, raw + 8 + h, n - 8 - h);
+    f = fopen(path, "wb");
+    assert_non_null(f);
+    assert_int_equal(fwrite(img, 1, m, f), m);
+    fclose(f);
+}
+
+static void expect_load_refused(const char *from, const char *to, int want_rc, const char *text)
+{
+    char path[128], err[512] = "";
+    edited(from, to, path, sizeof(path));
+    ps_weights_t w;
+    const int rc = ps_weights_load(&w, path, err, sizeof(err));
+    if (rc != want_rc || strstr(err, text) == NULL || strstr(err, path) != err)
+        fail_msg("'%s' -> '%s': rc %d '%s', want %d with '%s'", from, to, rc, err, want_rc, text);
+}
+
+static void test_ps_weights_load_golden_contract(void **st)
+{
+    (void)st;
+    ps_weights_t w;
+    char err[512];
+    if (ps_weights_load(&w, GOLDEN, err, sizeof(err)) != 0)
+        fail_msg("%s", err);
+    const ps_weights_contract_t *c = &w.contract;
+    assert_int_equal(c->version, 1);
+    assert_int_equal(c->policy_hz, 50);
+    assert_int_equal(c->n_joints, 4);
+    assert_string_equal(c->joint_name[2], "j2");
+    assert_int_equal(c->n_obs, 15);
+    assert_int_equal(c->n_act, 4);
+    assert_int_equal(c->fields[1], PS_OBS_JOINT_POS);
+    assert_float_equal(c->stance_rad[3], 0.2f, 1e-7);
+    assert_float_equal(c->act_scale[0], 0.5f, 0.0);
+    assert_int_equal(w.mlp.n_layers, 3);
+    ps_weights_free(&w);
+    ps_weights_free(&w);
+}
+
+static void test_ps_weights_load_refuses_bad_contracts(void **st)
+{
+    (void)st;
+    expect_load_refused("\\\"version\\\": 1", "\\\"version\\\": 2", -EINVAL,
+                        "version 2, this runtime reads version 1");
+    expect_load_refused("\\\"gravity_body\\\"", "\\\"gravity\\\"", -EINVAL,
+                        "observation.fields[0] 'gravity' is not a field");
+    expect_load_refused("\\\"prev_action\\\"", "\\\"com_vel\\\"", -EINVAL,
+                        "observation.mean has 15 entries, want 14");
+    expect_load_refused("\\\"elu\\\", \\\"elu\\\", ", "\\\"elu\\\", \\\"gelu\\\", ", -EINVAL,
+                        "activations[1] 'gelu' is not an activation");
+    expect_load_refused("\\\"elu\\\", \\\"elu\\\", ", "\\\"elu\\\", ", -EINVAL,
+                        "2 activations for 3 base layers");
+    expect_load_refused("\\\"kp\\\": [100.0, 100.0, 100.0, 100.0]", "\\\"kp\\\": [100.0]",
+                        -EINVAL, "kp has 1 entries, want 4");
+    expect_load_refused("\\\"j3\\\"], \\\"scale\\\"", "\\\"jx\\\"], \\\"scale\\\"",
+                        -EINVAL, "action.joints[3] 'jx' is not in joints");
+    expect_load_refused("pushstep.contract", "other.key", -EINVAL,
+                        "no metadata pushstep.contract: not a pushstep policy file");
+    expect_load_refused("\"base.1.bias\"", "\"extra.1.bias\"", -EINVAL,
+                        "tensor extra.1.bias: not a layer of a policy file");
+    expect_load_refused("\"base.1.weight\"", "\"adapt.1.weight\"", -EINVAL,
+                        "tensor base.1.weight is missing");
+}
+
+static void servo_of(const ps_weights_contract_t *c, ps_servo_joint_cfg_t *s,
+                     char (*names)[PS_NAME_LEN])
+{
+    for (uint32_t j = 0; j < c->n_joints; j++) {
+        memset(&s[j], 0, sizeof(s[j]));
+        s[j].kp_nm_rad = c->kp_nm_rad[j];
+        s[j].kd_nm_s_rad = c->kd_nm_s_rad[j];
+        s[j].stance_rad = c->stance_rad[j];
+        snprintf(names[j], PS_NAME_LEN, "%s", c->joint_name[j]);
+    }
+}
+
+static void test_ps_weights_check_robot_names_each_difference(void **st)
+{
+    (void)st;
+    ps_weights_t w;
+    char err[512];
+    assert_int_equal(ps_weights_load(&w, GOLDEN, err, sizeof(err)), 0);
+    const ps_weights_contract_t *c = &w.contract;
+    ps_servo_joint_cfg_t s[PS_MAX_JOINTS];
+    char names[PS_MAX_JOINTS][PS_NAME_LEN];
+    servo_of(c, s, names);
+    assert_int_equal(ps_weights_check_robot(c, 4, names, s, 50, err, sizeof(err)), 0);
+    /* another joint order: never moves the robot */
+    snprintf(names[1], PS_NAME_LEN, "j2");
+    snprintf(names[2], PS_NAME_LEN, "j1");
+    assert_int_equal(ps_weights_check_robot(c, 4, names, s, 50, err, sizeof(err)),
+                     -PS_ERR_CONFIG);
+    assert_string_equal(err, "joints[1]: policy has j1, robot file has j2 (trained for another "
+                             "joint order or robot)");
+    servo_of(c, s, names);
+    assert_int_equal(ps_weights_check_robot(c, 3, names, s, 50, err, sizeof(err)),
+                     -PS_ERR_CONFIG);
+    assert_string_equal(err, "joints: policy has 4 joints, robot file 3");
+    s[2].kp_nm_rad = 150.0f;
+    assert_int_equal(ps_weights_check_robot(c, 4, names, s, 50, err, sizeof(err)),
+                     -PS_ERR_CONFIG);
+    assert_string_equal(err, "joints[2] j2: kp_nm_rad: policy trained with 100, robot file has 150");
+    servo_of(c, s, names);
+    s[3].stance_rad = 0.25f;
+    assert_int_equal(ps_weights_check_robot(c, 4, names, s, 50, err, sizeof(err)),
+                     -PS_ERR_CONFIG);
+    assert_non_null(strstr(err, "stance_rad: policy trained with 0.2, robot file has 0.25"));
+    servo_of(c, s, names);
+    assert_int_equal(ps_weights_check_robot(c, 4, names, s, 100, err, sizeof(err)),
+                     -PS_ERR_CONFIG);
+    assert_string_equal(err, "policy_hz: policy trained at 50 Hz, robot file runs 100 Hz");
+    ps_weights_free(&w);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_ps_st_parse_refuses_each_malformation),
+        cmocka_unit_test(test_ps_st_copy_f32_refuses_nan_and_inf),
+        cmocka_unit_test(test_ps_weights_load_golden_contract),
+        cmocka_unit_test(test_ps_weights_load_refuses_bad_contracts),
+        cmocka_unit_test(test_ps_weights_check_robot_names_each_difference),
+    };
+    return cmocka_run_group_tests(tests, setup, teardown);
+}

@@ -1,0 +1,93 @@
+/*
+ * ps_env: the training environment, batched, for policy/train/ (Python via
+ * ctypes: build/libpsenv.so). Not part of the runtime: it lives in tools/
+ * because it composes sim/ (the MuJoCo plant, the emulated drives) with
+ * policy/ (estimator, observation builder, servo layer, the capture-point
+ * controller as expert), which no layer of the runtime may do.
+ *
+ * One environment is the runtime's chain without the wire timing: every
+ * servo tick (1 ms) the joints and the IMU (with noise and bias) are read
+ * into a ps_meas_t, the estimator (policy/ps_estimate) updates, the servo
+ * layer (policy/ps_servo, TRACK with the robot file's gains) turns the
+ * policy's targets into commands for the joints due that tick (legs every
+ * 2 ms: the 500 Hz leg command rate), each command is encoded in the
+ * joint's protocol and decoded by its emulated drive (sim/ps_devices:
+ * quantisation, the drive's PD at its rate, its torque-speed limit),
+ * delayed by the episode's command latency; two physics steps per tick.
+ * Every policy step (policy_hz) the observation is ps_obs_build's.
+ *
+ * Episodes (episode_s): the robot starts in its stance, free; one or two
+ * pushes on the torso at random times, directions, delta-v in
+ * [0.05, push_dv_max] m/s and durations 0.1 or 0.3 s. Domain randomisation
+ * (is_dr) per episode: torso and pelvis mass x [0.9, 1.1] and the torso's
+ * CoM moved up to 2 cm, friction x [0.6, 1.4], motor strength (peak and
+ * torque_max) x [0.85, 1.15], command latency 0..2 ms, IMU noise x [0.5, 2]
+ * and new biases. An episode ends at a fall (a robot body other than the
+ * feet on the floor) or at episode_s; the environment then resets itself.
+ *
+ * Reward (docs/policy.md): Push-and-Step's balance term
+ * 0.5 (e^{-k|CoM - CoM_target|} + e^{-k|CoP - CoP_target|}) with
+ * CoM_target the centre of the base of support at the resting CoM height,
+ * CoP_target the capture point clipped into the base of support (the CoP
+ * that stops the CoM in the linear inverted pendulum), k = 10 /m; plus its
+ * quality terms (foot sliding, heading, effort), 0.7 balance + 0.3
+ * quality; a fall gives -1 and ends the episode. All from the plant's
+ * ground truth.
+ *
+ * Threads: n_threads workers (pthreads) step disjoint slices of the
+ * environments; the API is called from one thread. Allocation: at create.
+ */
+#ifndef PS_ENV_H
+#define PS_ENV_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+typedef struct ps_env ps_env_t;
+
+typedef struct {
+    uint32_t n_envs;
+    uint32_t n_threads;
+    uint64_t seed;
+    float episode_s;
+    float push_dv_max_m_s;
+    int is_dr;     /**< domain randomisation */
+    int is_expert; /**< compute the capture-point controller's actions */
+} ps_env_cfg_t;
+
+#define PS_ENV_INFO 8 /**< floats of info per environment and step: */
+/* [0] fell this step, [1] episode ended, [2] episode time s, [3] last push
+ * delta-v m/s, [4] r_balance, [5] r_quality, [6] CoM height m, [7] pushes so far */
+
+/** @return 0 | -errno; err holds the reason  @rt INIT */
+int ps_env_create(const char *robot_path, const ps_env_cfg_t *cfg, ps_env_t **out, char *err,
+                  size_t err_len);
+uint32_t ps_env_obs_size(const ps_env_t *e);
+uint32_t ps_env_act_size(const ps_env_t *e);
+
+/** Reset every environment. @post obs: n_envs x obs_size  @return 0 | -errno */
+int ps_env_reset(ps_env_t *e, float *obs);
+
+/** One policy step of every environment with actions act (n_envs x
+ *  act_size, the contract's scale applies: target = stance + scale a).
+ *  @post obs (the next observation, after an automatic reset where an
+ *  episode ended), rew, done (1: the episode ended with this step), expert
+ *  (n_envs x act_size, the capture-point controller's actions for the new
+ *  observation's state; may be NULL), info (n_envs x PS_ENV_INFO; may be
+ *  NULL)  @return 0 | -errno */
+int ps_env_step(ps_env_t *e, const float *act, float *obs, float *rew, uint8_t *done,
+                float *expert, float *info);
+
+/** Evaluation: environment env's episodes from its next reset on get one
+ *  torso push of delta-v dv_m_s (m/s; force dv m / dur_s) over dur_s seconds
+ *  at t_s, in direction dir_rad (world frame, 0 = +x), instead of random
+ *  pushes; dur_s <= 0 goes back to random pushes.  @return 0 | -EINVAL */
+int ps_env_set_push(ps_env_t *e, uint32_t env, float t_s, float dur_s, float dv_m_s,
+                    float dir_rad);
+
+/** Curriculum: the largest push delta-v from the next episodes on. */
+void ps_env_set_push_dv_max(ps_env_t *e, float dv_max_m_s);
+
+void ps_env_destroy(ps_env_t *e);
+
+#endif /* PS_ENV_H */
