@@ -20,8 +20,8 @@
 /* Capsule gating (gate_capsules): a capsule is on while anything it can
  * touch is within its reach plus GATE_MARGIN_M plus what GATE_SPEED_M_S
  * closes in one crowd update and one step (the geoms' places lag a step). */
-#define GATE_MARGIN_M   0.05
-#define GATE_SPEED_M_S  10.0 /* a falling head, 1.5 m at 5 rad/s, plus the robot's */
+#define GATE_MARGIN_M  0.05
+#define GATE_SPEED_M_S 10.0 /* a falling head, 1.5 m at 5 rad/s, plus the robot's */
 
 typedef struct {
     int qx, qy, qtx, qty; /* qpos addresses */
@@ -77,11 +77,11 @@ struct ps_crowd {
      * capsules' own bits, the geoms that can touch a capsule */
     int *geom_contype, *geom_conaffinity;
     int cap_contype, cap_conaffinity;
-    bool is_gated;    /* false: capsules stay on (off in cfg, or a plane can touch them) */
-    int *toucher;     /* geoms (not the robot's) that can touch a capsule */
+    bool is_gated; /* false: capsules stay on (off in cfg, or a plane can touch them) */
+    int *toucher;  /* geoms (not the robot's) that can touch a capsule */
     int n_touchers;
     double *toucher_circle; /* per toucher: x, y, reach (this update) */
-    int *robot_geom;  /* the robot's geoms that can touch a capsule: one circle */
+    int *robot_geom;        /* the robot's geoms that can touch a capsule: one circle */
     int n_robot_geoms;
     double gate_margin_m;
     ps_crowd_stats_t st;
@@ -432,8 +432,8 @@ static void neighbour_acts(const ps_crowd_t *c, agent_t *a, const double xi[2], 
 static void neighbour_pass(ps_crowd_t *c)
 {
     const ps_social_params_t *sp = &c->cfg.social;
-    const double reach = sp->range_m > sp->evasive_range_m ? (double)sp->range_m
-                                                           : (double)sp->evasive_range_m;
+    const double reach =
+        sp->range_m > sp->evasive_range_m ? (double)sp->range_m : (double)sp->evasive_range_m;
     const double reach2 = reach * reach, range2 = (double)sp->range_m * sp->range_m;
     for (uint32_t i = 0; i < c->n; i++) {
         agent_t *a = &c->a[i];
@@ -469,8 +469,8 @@ static void neighbour_pass(ps_crowd_t *c)
                         agent_t *a = &c->a[i], *b = &c->a[j];
                         double fa[2] = {0.0, 0.0}, fb[2] = {0.0, 0.0};
                         if (d2 <= range2)
-                            ps_social_pair_repulsion(sp, xi, a->radius, a->e, xj, b->radius,
-                                                     b->e, fa, fb);
+                            ps_social_pair_repulsion(sp, xi, a->radius, a->e, xj, b->radius, b->e,
+                                                     fa, fb);
                         if (!a->is_fallen)
                             neighbour_acts(c, a, xi, b, xj, fa);
                         if (!b->is_fallen)
@@ -780,8 +780,9 @@ static void gate_capsules(ps_crowd_t *c, const mjModel *m, const mjData *d)
     for (int k = 0; k < c->n_robot_geoms; k++) {
         double q[3];
         geom_circle(m, d, c->robot_geom[k], q);
-        const double r = sqrt((q[0] - robot[0]) * (q[0] - robot[0]) +
-                              (q[1] - robot[1]) * (q[1] - robot[1])) + q[2];
+        const double r =
+            sqrt((q[0] - robot[0]) * (q[0] - robot[0]) + (q[1] - robot[1]) * (q[1] - robot[1])) +
+            q[2];
         robot[2] = r > robot[2] ? r : robot[2];
     }
     for (int k = 0; k < c->n_touchers; k++)
@@ -912,8 +913,8 @@ static double arena_contact(ps_crowd_t *c, const agent_t *a, mjData *d)
     const mjtNum *p0 = d->xpos + 3 * a->body, *R = d->xmat + 9 * a->body;
     /* nothing of the capsule reaches a side: most agents, most steps */
     const double reach = a->len + a->radius;
-    const bool is_far_x = c->cfg.is_periodic_x ||
-                          (p0[0] - ar->x_min_m > reach && ar->x_max_m - p0[0] > reach);
+    const bool is_far_x =
+        c->cfg.is_periodic_x || (p0[0] - ar->x_min_m > reach && ar->x_max_m - p0[0] > reach);
     if (is_far_x && p0[1] - ar->y_min_m > reach && ar->y_max_m - p0[1] > reach)
         return 0.0;
     const double p1[3] = {p0[0] + a->len * R[2], p0[1] + a->len * R[5], p0[2] + a->len * R[8]};
