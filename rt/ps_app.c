@@ -34,10 +34,8 @@ static int load_configs(ps_app_t *app, const ps_app_opts_t *o, char *err, size_t
     /* a replay has no plant for the default scenario to drive */
     const bool is_sim_run = app->board.kind == PS_BOARD_SIM && o->replay_path == NULL;
     if (rc == 0 && (o->scenario != NULL || is_sim_run)) {
-        /* `pushstep camera` looks at the robot file's scene alone unless
-         * told otherwise; a run stands in the default crowd */
-        ps_config_resolve(dd, o->scenario, "scenarios", o->is_camera_only ? "stand" : "crowd",
-                          app->scenario_path, sizeof(app->scenario_path));
+        ps_config_resolve(dd, o->scenario, "scenarios", "crowd", app->scenario_path,
+                          sizeof(app->scenario_path));
         rc = ps_config_load_scenario(app->scenario_path, &app->scenario, err, len);
     }
     if (rc == 0)

@@ -315,8 +315,7 @@ static void test_e2e_camera_tool_board_without_camera_exit_2(void **state)
     assert_int_equal(run("camera --duration 1"), 2); /* no board */
     assert_non_null(strstr(out, "usage: pushstep camera"));
     assert_int_equal(run("camera --board boards/sim.yaml --duration -1"), 2);
-    /* --scenario reaches the loader (default: stand, the tagged scene alone,
-     * which test_e2e_camera_tool_sim_png_json_all_tags sees whole) */
+    /* --scenario reaches the loader */
     assert_int_equal(run("camera --board " BOARD " --robot " ROBOT
                          " --scenario tests/data/nope.yaml --duration 1 --out /tmp"),
                      2);
