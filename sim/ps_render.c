@@ -17,6 +17,7 @@
 
 #include "../rt/ps_err.h"
 #include "ps_gl.h"
+#include "ps_scene.h"
 
 #define N_SLOTS        4u
 #define ARROW_M_PER_N  0.002  /* 1 m per 500 N */
@@ -130,6 +131,12 @@ int ps_render_create(const ps_render_cfg_t *cfg, const mjModel *m, ps_render_t *
     }
     if (!(cfg->area_m[2] > cfg->area_m[0] && cfg->area_m[3] > cfg->area_m[1])) {
         ps_err_format(err, err_len, "render: empty density area");
+        return -EINVAL;
+    }
+    if ((uint32_t)m->ntex > PS_SCENE_MAX_TEXTURES) { /* would overrun mjrContext */
+        ps_err_format(err, err_len,
+                      "render: the scene has %d textures, MuJoCo 2.2.2's renderer holds %u",
+                      m->ntex, PS_SCENE_MAX_TEXTURES);
         return -EINVAL;
     }
     ps_render_t *r = calloc(1, sizeof(*r));

@@ -28,6 +28,7 @@
 #include "../rt/ps_err.h"
 #include "../sim/ps_plant.h"
 #include "../sim/ps_render.h"
+#include "../sim/ps_scene.h"
 
 static ps_robot_cfg_t robot;
 static float stance[PS_MAX_JOINTS];
@@ -249,6 +250,15 @@ static void test_render_create_bad_size_rejected(void **state)
     rc.fps = 25.0;
     rc.robot_root = "nobody";
     assert_int_equal(ps_render_create(&rc, ps_plant_model(p), &r, err, sizeof(err)), -ENOENT);
+    /* more textures than MuJoCo 2.2.2's renderer has slots for: refused
+     * before anything is drawn (only the count is read) */
+    rc.robot_root = "pelvis";
+    mjModel *many = mj_copyModel(NULL, ps_plant_model(p));
+    assert_non_null(many);
+    many->ntex = (int)PS_SCENE_MAX_TEXTURES + 1;
+    assert_int_equal(ps_render_create(&rc, many, &r, err, sizeof(err)), -EINVAL);
+    assert_non_null(strstr(err, "101 textures"));
+    mj_deleteModel(many);
     ps_plant_destroy(p);
 }
 
