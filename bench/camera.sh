@@ -28,6 +28,9 @@ BIN=$BUILD/pushstep
 CAM_BOARD=tests/data/boards/sim-camera.yaml
 PLAIN_BOARD=boards/sim.yaml
 ROBOT=tests/data/robots/ps1-tags.yaml
+# The robot file's scene alone (its six tagged people): the default crowd
+# would stand between them and the camera, and load the plant beside the loop
+SCENARIO=scenarios/stand.yaml
 RESULTS=bench/results
 OUT=$BUILD/bench-camera
 PY=/usr/bin/python3
@@ -42,7 +45,8 @@ rm -rf "$OUT"
 mkdir -p "$OUT" "$RESULTS"
 t0=$(date +%s)
 
-det_cmd=("$BIN" camera --board "$CAM_BOARD" --robot "$ROBOT" --duration "$CAM_S" --out "$OUT/detect")
+det_cmd=("$BIN" camera --board "$CAM_BOARD" --robot "$ROBOT" --scenario "$SCENARIO" --duration "$CAM_S"
+    --out "$OUT/detect")
 log "detection: ${det_cmd[*]}"
 "${det_cmd[@]}" >"$OUT/detect.log" 2>&1 || {
     cat "$OUT/detect.log" >&2
@@ -54,7 +58,8 @@ block() { # side n
     local side=$1 n=$2 board=$PLAIN_BOARD
     [ "$side" = camera ] && board=$CAM_BOARD
     local dir=$OUT/$side-$n
-    local cmd=("$BIN" profile --board "$board" --robot "$ROBOT" --duration "$BLOCK_S" --quiet --out "$dir")
+    local cmd=("$BIN" profile --board "$board" --robot "$ROBOT" --scenario "$SCENARIO"
+        --duration "$BLOCK_S" --quiet --out "$dir")
     "${cmd[@]}" >"$dir.log" 2>&1 || {
         cat "$dir.log" >&2
         die "pushstep profile failed: ${cmd[*]}"
