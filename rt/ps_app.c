@@ -614,6 +614,25 @@ void ps_app_recorder_cfg(const ps_app_t *app, ps_recorder_cfg_t *out)
 }
 
 /* The plant's truth for the recorder, on the loop thread: no lock. */
+/* The crowd's contacts on the robot into the record (walls and obstacles
+ * as agent UINT16_MAX). */
+static void copy_crowd_contacts(const ps_crowd_stats_t *st, ps_rec_truth_t *out)
+{
+    uint32_t n = st->n_robot_contacts;
+    n = n < PS_REC_MAX_CONTACTS ? n : PS_REC_MAX_CONTACTS;
+    for (uint32_t i = 0; i < n; i++) {
+        const ps_crowd_robot_contact_t *c = &st->robot_contact[i];
+        out->contact_agent[i] = c->agent >= 0 ? (uint16_t)c->agent : UINT16_MAX;
+        out->contact_fx_n[i] = (float)c->force_n[0];
+        out->contact_fy_n[i] = (float)c->force_n[1];
+        out->contact_fz_n[i] = (float)c->force_n[2];
+        out->contact_x_m[i] = (float)c->pos_m[0];
+        out->contact_y_m[i] = (float)c->pos_m[1];
+        out->contact_z_m[i] = (float)c->pos_m[2];
+    }
+    out->n_contacts = (uint16_t)n;
+}
+
 static bool read_sim_truth(void *ctx, ps_rec_truth_t *out)
 {
     ps_app_t *app = ctx;
@@ -631,6 +650,8 @@ static bool read_sim_truth(void *ctx, ps_rec_truth_t *out)
     out->tau_abs_sum_nm = (float)t.tau_abs_sum_nm;
     out->is_fallen = t.is_fallen;
     out->is_drive_power_on = t.is_drive_power_on;
+    if (t.has_crowd)
+        copy_crowd_contacts(&t.crowd, out);
     return true;
 }
 

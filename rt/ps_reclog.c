@@ -98,7 +98,6 @@ typedef struct {
     uint32_t n_timing;
     /* decode scratch */
     int cur_ch;
-    bool is_first;
     char kind[32], text[256];
     /* export */
     bool is_export;
@@ -209,13 +208,24 @@ static void series_add(series_t *s, double v)
     s->v[s->n++] = v;
 }
 
+/* A schema with a sequence: its length varies, so every message is read
+ * for the longest (the columns a CSV gets). */
+static bool has_sequence(const ps_rosmsg_parsed_t *def)
+{
+    for (uint32_t f = 0; def != NULL && f < def->n_fields; f++)
+        if (def->fields[f].kind == PS_ROSMSG_SEQUENCE)
+            return true;
+    return false;
+}
+
 static void summary_value(void *ctx, const ps_rosmsg_value_t *v)
 {
     log_t *lg = ctx;
     chan_t *c = &lg->chans[lg->cur_ch];
     const ps_rosmsg_parsed_t *def = def_of(lg, c->schema);
     const char *field = def->fields[v->field_idx].name;
-    if (lg->is_first && v->elem_idx + 1u > c->n_elems[v->field_idx])
+    /* every message: a sequence (the crowd's contacts) varies in length */
+    if (v->elem_idx + 1u > c->n_elems[v->field_idx])
         c->n_elems[v->field_idx] = v->elem_idx + 1u;
     if (strcmp(c->topic, "/events") == 0 && v->is_string) {
         char *dst = strcmp(field, "kind") == 0 ? lg->kind : lg->text;
@@ -262,11 +272,11 @@ static int on_message_summary(void *ctx, uint16_t id, uint32_t seq, uint64_t t, 
     c->n++;
     const ps_rosmsg_parsed_t *def = def_of(lg, c->schema);
     const bool is_wanted = !c->has_first || strcmp(c->topic, "/events") == 0 ||
-                           strcmp(c->topic, "/state") == 0 || strcmp(c->topic, "/timing") == 0;
+                           strcmp(c->topic, "/state") == 0 || strcmp(c->topic, "/timing") == 0 ||
+                           has_sequence(def);
     if (def == NULL || !is_wanted)
         return 0;
     lg->cur_ch = idx;
-    lg->is_first = !c->has_first;
     lg->kind[0] = lg->text[0] = '\0';
     if (ps_rosmsg_decode(def, data, len, summary_value, lg) < 0)
         return 0; /* a message its schema does not describe: counted, not decoded */
@@ -506,7 +516,10 @@ static void emit_row(log_t *lg)
             continue;
         fprintf(f, "%.6f", t_s);
         for (uint32_t i = 0; i < lg->n_cols; i++)
-            fprintf(f, k == 0 ? ",%.9g" : "\t%.9g", lg->row[i]);
+            if (isnan(lg->row[i])) /* no value: empty in CSV, gnuplot's missing */
+                fputs(k == 0 ? "," : "\tNaN", f);
+            else
+                fprintf(f, k == 0 ? ",%.9g" : "\t%.9g", lg->row[i]);
         fputc('\n', f);
     }
     lg->n_rows++;
@@ -538,6 +551,12 @@ static int on_message_export(void *ctx, uint16_t id, uint32_t seq, uint64_t t, c
     lg->row_t = t;
     lg->has_row = true;
     lg->cur_ch = idx;
+    /* a sequence's elements past this message's length are empty, not the
+     * last value of a longer one */
+    for (uint32_t i = 0; i < lg->n_cols; i++)
+        if (lg->cols[i].ch == idx &&
+            def_of(lg, c->schema)->fields[lg->cols[i].field].kind == PS_ROSMSG_SEQUENCE)
+            lg->row[i] = NAN;
     (void)ps_rosmsg_decode(def_of(lg, c->schema), data, len, export_value, lg);
     return 0;
 }

@@ -77,7 +77,8 @@ typedef struct {
     float tau_abs_sum_nm;  /**< sum of |joint torque| applied */
     uint8_t is_fallen;
     uint8_t is_drive_power_on;
-    uint16_t n_contacts; /**< crowd contacts below (0 until the crowd exists) */
+    uint16_t n_contacts; /**< the crowd's contacts on the robot (agent UINT16_MAX: a
+                              wall or an obstacle); force on the robot, world */
     uint16_t contact_agent[PS_REC_MAX_CONTACTS];
     float contact_fx_n[PS_REC_MAX_CONTACTS], contact_fy_n[PS_REC_MAX_CONTACTS],
         contact_fz_n[PS_REC_MAX_CONTACTS];

@@ -836,11 +836,32 @@ void ps_crowd_before_step(ps_crowd_t *c, const mjModel *m, mjData *d, double t_s
     }
 }
 
+/* One crowd contact on the robot into the stats' list (the recorder's
+ * ground truth); other_body is the crowd's side. */
+static void list_robot_contact(ps_crowd_t *c, const mjContact *con, int other_body, uint32_t part,
+                               double sign, const double fw[3])
+{
+    const uint32_t n = c->st.n_robot_contacts_total++;
+    if (n >= PS_CROWD_MAX_ROBOT_CONTACTS)
+        return;
+    ps_crowd_robot_contact_t *rc = &c->st.robot_contact[n];
+    const int agent = c->agent_of_body[other_body];
+    rc->agent = agent >= 0 ? agent : PS_CROWD_NOT_AGENT;
+    rc->part = part;
+    for (int q = 0; q < 3; q++) {
+        rc->force_n[q] = sign * fw[q];
+        rc->pos_m[q] = con->pos[q];
+    }
+    c->st.n_robot_contacts = n + 1;
+}
+
 void ps_crowd_after_step(ps_crowd_t *c, const mjModel *m, const mjData *d, double dt_s)
 {
     double part_f[PS_CROWD_MAX_PARTS][3];
     memset(part_f, 0, sizeof(part_f));
     double pen = c->wall_pen_m;
+    c->st.n_robot_contacts = 0;
+    c->st.n_robot_contacts_total = 0;
     for (int k = 0; k < d->ncon; k++) {
         const mjContact *con = &d->contact[k];
         const int b1 = m->geom_bodyid[con->geom1], b2 = m->geom_bodyid[con->geom2];
@@ -864,6 +885,7 @@ void ps_crowd_after_step(ps_crowd_t *c, const mjModel *m, const mjData *d, doubl
         const double sign = is_r2 ? 1.0 : -1.0;
         for (int q = 0; q < 3; q++)
             part_f[part][q] += sign * fw[q];
+        list_robot_contact(c, con, is_r2 ? b1 : b2, (uint32_t)part, sign, fw);
         if (is_a1 || is_a2) {
             c->st.transmitted_impulse_ns += f[0] * dt_s;
             c->st.part_impulse_ns[part] += f[0] * dt_s;

@@ -46,6 +46,8 @@
 #define PS_CROWD_MAX_OBSTACLES 16u
 #define PS_CROWD_MAX_EVENTS    32u
 #define PS_CROWD_MAX_PARTS     32u /**< robot bodies measured one by one */
+#define PS_CROWD_MAX_ROBOT_CONTACTS 16u /**< contacts on the robot listed one by one */
+#define PS_CROWD_NOT_AGENT     -1 /**< a robot contact with a wall or an obstacle */
 
 typedef struct {
     float x_min_m, y_min_m, x_max_m, y_max_m;
@@ -165,6 +167,15 @@ typedef struct {
     uint32_t group_idx;
 } ps_crowd_agent_spec_t;
 
+/** One contact of the crowd (an agent, a wall, an obstacle) on the robot
+ *  at the last physics step, world frame. */
+typedef struct {
+    int32_t agent;      /**< agent index, or PS_CROWD_NOT_AGENT */
+    uint32_t part;      /**< robot part (ps_crowd_stats_t.part_name) */
+    double force_n[3];  /**< force on the robot */
+    double pos_m[3];    /**< contact point */
+} ps_crowd_robot_contact_t;
+
 /** What the crowd did, cumulative since create or current. */
 typedef struct {
     uint32_t n_agents;
@@ -184,6 +195,11 @@ typedef struct {
     double part_force_n[PS_CROWD_MAX_PARTS];     /**< crowd force on each robot body now */
     double part_force_max_n[PS_CROWD_MAX_PARTS]; /**< largest so far */
     double part_impulse_ns[PS_CROWD_MAX_PARTS];
+    /** the contacts on the robot now, in MuJoCo's order; past
+     *  PS_CROWD_MAX_ROBOT_CONTACTS only counted (n_robot_contacts_total) */
+    uint32_t n_robot_contacts;
+    uint32_t n_robot_contacts_total;
+    ps_crowd_robot_contact_t robot_contact[PS_CROWD_MAX_ROBOT_CONTACTS];
 } ps_crowd_stats_t;
 
 typedef struct ps_crowd ps_crowd_t;

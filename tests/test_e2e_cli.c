@@ -265,23 +265,56 @@ static void test_cli_lockstep_shove_fall_detected_and_in_truth(void **state)
 /* Lockstep is deterministic for a scenario and seed: two runs of the shove
  * give the same summary, apart from the wall-clock figures (wall_s and the
  * stage latencies), the lowest CoM while in charge included. */
+/* Lockstep judges a late policy step and an overrunning tick on the loop
+ * thread's CPU time (rt/ps_loop.h deadline_clock); on a virtual machine
+ * without steal accounting, time the host takes from the vCPU counts as the
+ * thread's, so a loaded host can make a tick late, and a late tick changes
+ * what the robot does. Determinism is judged on runs that were not
+ * disturbed so; a disturbed pair is run again (up to LOCKSTEP_AGAIN_MAX). */
+#define LOCKSTEP_AGAIN_MAX 5
+
+static bool is_disturbed(const cJSON *summary)
+{
+    return num(summary, "overruns") > 0 || num(obj(summary, "counters"), "policy_late") > 0;
+}
+
+/* One lockstep run (ARGS then --summary); its summary, NULL when disturbed. */
+static cJSON *lockstep_run(const char *args, const char *summary_path)
+{
+    char full[512];
+    snprintf(full, sizeof(full), "%s --summary %s", args, summary_path);
+    const int rc = run(full);
+    if (rc != 0)
+        fail_msg("%s: exit %d:\n%s", full, rc, out);
+    cJSON *j = read_json(summary_path);
+    unlink(summary_path);
+    if (!is_disturbed(j))
+        return j;
+    printf("  disturbed run (overruns %.0f, policy late %.0f): again\n", num(j, "overruns"),
+           num(obj(j, "counters"), "policy_late"));
+    cJSON_Delete(j);
+    return NULL;
+}
+
+/* The same scenario twice in lockstep: identical summaries (but for the
+ * wall-clock figures). */
 static void test_cli_lockstep_same_scenario_twice_identical_summaries(void **state)
 {
     (void)state;
-    char path[2][32];
-    cJSON *j[2];
+    char path[32];
+    make_temp_file(path, sizeof(path));
+    cJSON *j[2] = {NULL, NULL};
+    for (int n_again = 0; j[0] == NULL || j[1] == NULL; n_again++) {
+        if (n_again > LOCKSTEP_AGAIN_MAX)
+            fail_msg("every pair of runs disturbed by overruns (a loaded host)");
+        for (int i = 0; i < 2; i++) {
+            cJSON_Delete(j[i]);
+            j[i] = lockstep_run("--lockstep --quiet --scenario scenarios/shove.yaml", path);
+        }
+    }
     for (int i = 0; i < 2; i++) {
-        make_temp_file(path[i], sizeof(path[i]));
-        char args[256];
-        snprintf(args, sizeof(args),
-                 "--lockstep --quiet --scenario scenarios/shove.yaml --summary %s", path[i]);
-        const int rc = run(args);
-        if (rc != 0)
-            fail_msg("run %d: exit %d:\n%s", i, rc, out);
-        j[i] = read_json(path[i]);
         cJSON_DeleteItemFromObjectCaseSensitive(j[i], "wall_s");
         cJSON_DeleteItemFromObjectCaseSensitive(j[i], "latency");
-        unlink(path[i]);
     }
     const double min_com = num(obj(j[0], "sim_truth"), "min_com_height_active_m");
     assert_true(min_com > 0.1 && min_com < 0.7);
@@ -372,17 +405,27 @@ static void test_cli_record_writes_frames_density_and_mp4(void **state)
 static void test_cli_lockstep_crowd_twice_identical_logs(void **state)
 {
     (void)state;
-    char path[2][32];
-    for (int i = 0; i < 2; i++) {
+    char path[2][32], sum[32];
+    make_temp_file(sum, sizeof(sum));
+    for (int i = 0; i < 2; i++)
         make_temp_file(path[i], sizeof(path[i]));
-        char args[256];
-        snprintf(args, sizeof(args),
-                 "--lockstep --quiet --scenario scenarios/queue.yaml --duration 6 --crowd-log %s",
-                 path[i]);
-        const int rc = run(args);
-        if (rc != 0)
-            fail_msg("run %d: exit %d:\n%s", i, rc, out);
-        assert_non_null(strstr(out, "crowd log: 8000 ticks"));
+    bool is_clean = false;
+    for (int n_again = 0; !is_clean; n_again++) {
+        if (n_again > LOCKSTEP_AGAIN_MAX)
+            fail_msg("every pair of runs disturbed by overruns (a loaded host)");
+        is_clean = true;
+        for (int i = 0; i < 2 && is_clean; i++) {
+            char args[256];
+            snprintf(args, sizeof(args),
+                     "--lockstep --quiet --scenario scenarios/queue.yaml --duration 6 "
+                     "--crowd-log %s",
+                     path[i]);
+            cJSON *j = lockstep_run(args, sum);
+            is_clean = j != NULL;
+            cJSON_Delete(j);
+            assert_non_null(strstr(out, "crowd log: 8000 ticks"));
+            assert_null(strstr(out, "ticks lost"));
+        }
     }
     char cmd[128];
     snprintf(cmd, sizeof(cmd), "cmp -s %s %s", path[0], path[1]);
@@ -590,12 +633,19 @@ static void test_cli_profile_without_rt_privileges_says_so(void **state)
     if (ticks < 1 || fabs(ticks + missed - periods) > 2)
         fail_msg("ticks %.0f + missed %.0f != %.1f periods of loop time", ticks, missed, periods);
     cJSON_Delete(j);
+    /* --require-rt as nobody: refused (exit 1), saying why */
     snprintf(cmd, sizeof(cmd),
-             "setpriv --reuid=65534 --regid=65534 --clear-groups %s --duration 1 --require-rt "
-             ">/dev/null 2>&1",
+             "setpriv --reuid=65534 --regid=65534 --clear-groups %s --scenario "
+             "scenarios/stand.yaml --duration 1 --require-rt 2>&1",
              bin());
-    status = system(cmd);
-    assert_true(WIFEXITED(status) && WEXITSTATUS(status) == 1);
+    p = popen(cmd, "r");
+    assert_non_null(p);
+    n = fread(out, 1, sizeof(out) - 1, p);
+    out[n] = '\0';
+    status = pclose(p);
+    if (!WIFEXITED(status) || WEXITSTATUS(status) != 1 ||
+        strstr(out, "--require-rt: real-time setup not permitted") == NULL)
+        fail_msg("--require-rt as nobody: status 0x%x, not exit 1:\n%s", status, out);
     snprintf(cmd, sizeof(cmd), "rm -rf %s", dir);
     assert_int_equal(system(cmd), 0);
 }
