@@ -604,10 +604,8 @@ static void test_e2e_rec_cli_power_cut_file_readable_up_to_last_chunk(void **sta
 
 /* SIGUSR1: a dump of 1 s before and 0.5 s after. In lockstep (until
  * SIGTERM) so that no overrun or watchdog of a loaded machine starts a dump
- * of its own. The signal goes once the loop has run 1.2 s of its time (the
- * RAMP -> ACTIVE line), so the pre window is full however fast lockstep
- * runs on a loaded machine; SIGTERM then brakes through 2 s of DAMPING, in
- * which the post window ends. */
+ * of its own; lockstep runs several times faster than real time, so the
+ * post window is long over when SIGTERM comes. */
 static void test_e2e_rec_cli_sigusr1_dumps_the_window_around_it(void **state)
 {
     (void)state;

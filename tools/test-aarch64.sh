@@ -48,9 +48,10 @@ command -v "$QEMU" >/dev/null || { echo "[  SKIPPED ] aarch64: no $QEMU (package
 declare -A CANNOT=([test_e2e_cli]=1 [test_e2e_lockstep]=1 [test_e2e_recorder]=1 \
                    [test_e2e_camera]=1)
 # Offscreen OpenGL (test_render, test_camera_sim) goes through Mesa's arm64
-# software rasteriser: llvmpipe's JIT dies of SIGSEGV under qemu-user, its
-# non-JIT sibling softpipe runs (measured: test_camera_sim 18 s, test_render
-# 235 s).
+# software rasteriser, libgl1-mesa-dri:arm64 (in the Makefile's CROSS_LIBS;
+# without it test_camera_sim exits 255). llvmpipe's JIT dies of SIGSEGV under
+# qemu-user; its non-JIT sibling softpipe runs (measured: test_camera_sim
+# 18 s, test_render 235 s).
 export GALLIUM_DRIVER=softpipe
 # Slow under qemu, run only by AARCH64_TESTS=all (measured here: test_plant
 # 127 s, test_sim 83 s, test_render 235 s; test_crowd steps crowds of up to
