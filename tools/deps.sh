@@ -7,6 +7,7 @@ set -euo pipefail
 # packages: `make run` in tests/hw/test_hw_e2e.c took over a minute to start).
 native=$(dpkg --print-architecture)
 declare -A have=()
+listed=$(dpkg-query -W -f='${binary:Package}\t${Status}\n' "$@" 2>/dev/null || true)
 while IFS=$'\t' read -r name status; do
     [ "$status" = "install ok installed" ] || continue
     have[$name]=1
@@ -15,7 +16,7 @@ while IFS=$'\t' read -r name status; do
         *:*) ;;
         *) have[$name:$native]=1 ;;
     esac
-done < <(dpkg-query -W -f='${binary:Package}\t${Status}\n' "$@" 2>/dev/null || true)
+done <<<"$listed" # (no process substitution: the test VM has no /dev/fd)
 missing=()
 for p in "$@"; do
     [ -n "${have[$p]:-}" ] || missing+=("$p")
