@@ -1116,6 +1116,13 @@ int main(int argc, char **argv)
     /* Line-buffered even into a pipe: whoever reads the output (tee, a
      * supervisor, the tests) sees each transition when it happens. */
     (void)setvbuf(stdout, NULL, _IOLBF, 0); /* before any output: cannot fail */
+    /* Offscreen rendering (the simulated camera, --render) goes through
+     * Mesa's llvmpipe, which starts rasteriser threads on every CPU, the
+     * loop's too (bench/camera.sh: the loop's p99 wake-up 5.4x, overruns 65
+     * against 6 without perception). With none it rasterises on the
+     * rendering thread, on the worker CPU. Set before any thread starts
+     * (setenv is not safe beside getenv); a user's own setting wins. */
+    (void)setenv("LP_NUM_THREADS", "0", 0);
     if (argc > 1 && strcmp(argv[1], "log") == 0)
         return ps_reclog_main(argc - 1, argv + 1);
     if (argc > 1 && strcmp(argv[1], "camera") == 0) {
