@@ -391,6 +391,8 @@ static uint32_t watchdog_conditions(const ps_loop_t *loop)
         cond |= PS_SM_C_BUS_OFF;
     if (loop->has_tx_refused)
         cond |= PS_SM_C_TX_REFUSED;
+    if (loop->has_heartbeat_fault)
+        cond |= PS_SM_C_ESTOP_INPUT; /* the relay is cutting the drives' power */
     if (is_overrunning(loop))
         cond |= PS_SM_C_OVERRUN;
     if (loop->estimator.est.is_fallen)
@@ -715,6 +717,7 @@ static void stage_write(ps_loop_t *loop)
                     : ps_gpio_set_heartbeat(&loop->cfg.gpio, (loop->counters.n_ticks & 1u) != 0);
     loop->last.heartbeat = loop->state == PS_SM_ESTOP ? -1 : (int8_t)(loop->counters.n_ticks & 1u);
     loop->last.led = (uint8_t)led;
+    loop->has_heartbeat_fault = hb_rc < 0; /* ESTOP_INPUT for the next tick */
     if (hb_rc < 0 || ps_gpio_set_led(&loop->cfg.gpio, led) < 0)
         loop->counters.n_gpio_errors++;
 }

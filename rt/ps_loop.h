@@ -28,6 +28,11 @@
  * older than the board's camera.max_age_s it is emptied (no neighbour
  * information). Never a wait: one atomic exchange at most.
  *
+ * GPIO: an e-stop input that cannot be read counts as pressed, and so does a
+ * heartbeat that cannot be written (the relay is cutting the drives' power):
+ * both raise ESTOP_INPUT. In ESTOP the heartbeat is not written, so its
+ * fault clears there; after a reset the next write tells again.
+ *
  * Stale-data rule: a joint's reply is stale when older than
  * control.reply_timeout_s + rate_div servo periods (a joint commanded every
  * rate_div ticks can only answer that often); the IMU likewise with
@@ -256,6 +261,7 @@ struct ps_loop {
     bool has_policy_late;
     bool has_target_invalid;
     bool has_cmd_fault; /**< a command had to be replaced (TARGET_INVALID) */
+    bool has_heartbeat_fault; /**< the last heartbeat write failed (ESTOP_INPUT until ESTOP) */
     uint32_t bus_off_mask;
     uint8_t bus_joint[PS_MAX_BUSES][PS_MAX_JOINTS]; /**< joints on each bus, in order */
     uint32_t n_bus_joints[PS_MAX_BUSES];

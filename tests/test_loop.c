@@ -48,6 +48,7 @@ typedef struct {
     ps_canbus_plan_t plan;
     fake_bus_t buses[PS_MAX_BUSES];
     bool is_estop_pressed, has_gpio_error;
+    bool has_heartbeat_error;    /* set_heartbeat fails */
     bool is_button_latched;      /* the record button: a press since the last read */
     uint64_t n_taps;             /* tap calls */
     uint64_t tap_tick;           /* n_ticks the tap saw last */
@@ -190,6 +191,8 @@ static int gpio_heartbeat(void *ctx, bool level)
 {
     (void)ctx;
     fx->n_hb_calls++;
+    if (fx->has_heartbeat_error)
+        return -EIO;
     if (level != fx->heartbeat)
         fx->n_hb_edges++;
     fx->heartbeat = level;
@@ -761,6 +764,34 @@ static void test_loop_gpio_error_counts_as_estop(void **state)
     assert_int_equal(fx->loop.counters.n_gpio_errors, 1);
 }
 
+/* A heartbeat that cannot be written lets the relay cut the drives' power:
+ * ESTOP the next tick, as an unreadable e-stop input does. In ESTOP the
+ * heartbeat is not written; a reset works once it can be written again, and
+ * one that cannot goes straight back to ESTOP. */
+static void test_loop_heartbeat_write_error_estops_reset_retries(void **state)
+{
+    (void)state;
+    go_active();
+    fx->has_heartbeat_error = true;
+    steps(1);
+    assert_int_equal(fx->loop.state, PS_SM_ACTIVE); /* the failed write is this tick's last act */
+    steps(1);
+    assert_int_equal(fx->loop.state, PS_SM_ESTOP);
+    assert_true((fx->loop.last.cond & PS_SM_C_ESTOP_INPUT) != 0);
+    const uint64_t n_calls = fx->n_hb_calls;
+    steps(5);
+    assert_int_equal(fx->n_hb_calls, n_calls); /* not written in ESTOP */
+    ps_loop_request(&fx->loop, PS_SM_C_REQ_RESET);
+    steps(1);
+    assert_int_equal(fx->loop.state, PS_SM_STANDBY);
+    steps(1);
+    assert_int_equal(fx->loop.state, PS_SM_ESTOP); /* still failing: back */
+    fx->has_heartbeat_error = false;
+    ps_loop_request(&fx->loop, PS_SM_C_REQ_RESET);
+    steps(3);
+    assert_int_equal(fx->loop.state, PS_SM_STANDBY);
+}
+
 static void test_loop_drive_fault_estops(void **state)
 {
     (void)state;
@@ -1221,6 +1252,7 @@ int main(void)
         T(test_loop_estop_input_latches_estop_sends_exit),
         T(test_loop_gpio_error_counts_as_estop),
         T(test_loop_tap_once_per_tick_sees_the_tick),
+        T(test_loop_heartbeat_write_error_estops_reset_retries),
         T(test_loop_drive_fault_estops),
         T(test_loop_bus_off_estops),
         T(test_loop_run_until_end_goes_through_damping_to_standby),
