@@ -1,6 +1,7 @@
 #include "ps_perception.h"
 
 #include <errno.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -186,13 +187,34 @@ void ps_perception_stop(ps_perception_t *p)
     p->is_thread = false;
 }
 
+/* A list no thread of ours could have made: more shoulders than it holds, a
+ * position or confidence that is not a number in range, a side that is
+ * neither, an exposure further in the future than a list may be old (it
+ * would never age). */
+static bool is_list_sane(const ps_neighbours_t *n, int64_t now_ns, int64_t max_age_ns)
+{
+    if (n->n_shoulders > PS_MAX_SHOULDERS || n->t_exposure_ns - now_ns > max_age_ns)
+        return false;
+    for (uint32_t i = 0; i < n->n_shoulders; i++) {
+        const ps_shoulder_t *s = &n->shoulders[i];
+        if (!isfinite(s->pos_robot_m[0]) || !isfinite(s->pos_robot_m[1]) ||
+            !isfinite(s->pos_robot_m[2]) || !(s->confidence >= 0.0f && s->confidence <= 1.0f) ||
+            s->side > PS_SHOULDER_RIGHT)
+            return false;
+    }
+    return true;
+}
+
 bool ps_perception_take(ps_mailbox_t *mb, int64_t now_ns, int64_t max_age_ns,
                         ps_neighbours_t *inout)
 {
     bool is_new = false;
     const ps_neighbours_t *latest = ps_mailbox_read(mb, &is_new);
-    if (is_new)
+    if (is_new) {
         *inout = *latest;
+        if (!is_list_sane(inout, now_ns, max_age_ns))
+            inout->t_exposure_ns = 0; /* refused: no neighbour information until a sane one */
+    }
     const bool has_any = inout->t_exposure_ns != 0;
     const int64_t age = now_ns - inout->t_exposure_ns;
     inout->age_ns = has_any ? (age > 0 ? age : 0) : 0;

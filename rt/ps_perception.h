@@ -106,7 +106,11 @@ ps_mailbox_t *ps_perception_mailbox(ps_perception_t *p);
  *  inout->age_ns = now_ns - t_exposure_ns; a list from the future counts as
  *  age 0. is_valid when a list was ever taken and its age is at most
  *  max_age_ns; otherwise the list is emptied (n_shoulders 0: no neighbour
- *  information) while t_exposure_ns and frame_seq stay as they were.
+ *  information) while t_exposure_ns and frame_seq stay as they were. A new
+ *  list that is not sane (more than PS_MAX_SHOULDERS, a non-finite position,
+ *  a confidence outside 0..1, a side that is neither, an exposure more than
+ *  max_age_ns in the future) is refused: t_exposure_ns 0, not valid, until
+ *  a sane one comes.
  *  @return true when a new list was taken this call
  *  @rt RT-SAFE O(list), wait-free, the mailbox's reader thread (the loop) */
 bool ps_perception_take(ps_mailbox_t *mb, int64_t now_ns, int64_t max_age_ns,

@@ -10,6 +10,7 @@
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <math.h>
 #include <setjmp.h>
 #include <cmocka.h>
 
@@ -248,10 +249,55 @@ static void test_ps_perception_take_stale_falls_back_then_recovers(void **state)
     assert_true(nb.is_valid);
     assert_int_equal(nb.n_shoulders, 4);
     /* stamped ahead of the loop's clock: age 0 */
-    publish(&mb, 8 * PS_NS_PER_S, 1);
+    publish(&mb, 7 * PS_NS_PER_S + max_age, 1);
     assert_true(ps_perception_take(&mb, 7 * PS_NS_PER_S, max_age, &nb));
     assert_true(nb.is_valid);
     assert_int_equal(nb.age_ns, 0);
+    /* further ahead than a list may be old (it would never age): refused */
+    publish(&mb, 8 * PS_NS_PER_S, 1);
+    assert_true(ps_perception_take(&mb, 7 * PS_NS_PER_S, max_age, &nb));
+    assert_false(nb.is_valid);
+    assert_int_equal(nb.n_shoulders, 0);
+    assert_int_equal(nb.t_exposure_ns, 0);
+    assert_false(ps_perception_take(&mb, 7 * PS_NS_PER_S + 1, max_age, &nb));
+    assert_false(nb.is_valid); /* until a sane list comes */
+}
+
+/* Lists no perception thread makes are refused like a stale one: more
+ * shoulders than a list holds, a NaN position, a confidence outside 0..1,
+ * a side that is neither; the next sane list is taken. */
+static void test_ps_perception_take_insane_list_refused(void **state)
+{
+    (void)state;
+    ps_mailbox_t mb;
+    ps_neighbours_t slots[PS_MAILBOX_SLOTS];
+    assert_int_equal(ps_mailbox_init(&mb, slots, sizeof(slots[0])), 0);
+    const int64_t t = 5 * PS_NS_PER_S, max_age = 200 * PS_NS_PER_MS;
+    ps_neighbours_t nb;
+    memset(&nb, 0, sizeof(nb));
+    for (int bad = 0; bad < 4; bad++) {
+        ps_neighbours_t *last = ps_mailbox_write_slot(&mb);
+        memset(last, 0, sizeof(*last));
+        last->t_exposure_ns = t;
+        last->n_shoulders = 2;
+        if (bad == 0)
+            last->n_shoulders = PS_MAX_SHOULDERS + 1;
+        else if (bad == 1)
+            last->shoulders[1].pos_robot_m[2] = NAN;
+        else if (bad == 2)
+            last->shoulders[0].confidence = 1.5f;
+        else
+            last->shoulders[0].side = 2;
+        ps_mailbox_publish(&mb);
+        assert_true(ps_perception_take(&mb, t, max_age, &nb));
+        assert_false(nb.is_valid);
+        assert_int_equal(nb.n_shoulders, 0);
+        assert_int_equal(nb.t_exposure_ns, 0);
+    }
+    publish(&mb, t, 2);
+    assert_true(ps_perception_take(&mb, t, max_age, &nb));
+    assert_true(nb.is_valid);
+    assert_int_equal(nb.n_shoulders, 2);
 }
 
 int main(void)
@@ -267,6 +313,7 @@ int main(void)
                                         setup, teardown),
         cmocka_unit_test_setup_teardown(test_ps_perception_init_bad_size_einval, setup, teardown),
         cmocka_unit_test(test_ps_perception_take_stale_falls_back_then_recovers),
+        cmocka_unit_test(test_ps_perception_take_insane_list_refused),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
