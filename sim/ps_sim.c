@@ -769,6 +769,14 @@ int ps_sim_get_actuator(ps_sim_t *s, unsigned joint_idx, ps_devices_actuator_t *
     return 0;
 }
 
+int ps_sim_set_actuator_temp(ps_sim_t *s, unsigned joint_idx, double temp_c)
+{
+    if (joint_idx >= s->robot.n_joints || !isfinite(temp_c))
+        return -EINVAL;
+    s->act[joint_idx].temp_c = temp_c;
+    return 0;
+}
+
 int ps_sim_take_crowd_sample(ps_sim_t *s, ps_sim_crowd_sample_t *out)
 {
     if (ps_plant_crowd(s->plant) == NULL)

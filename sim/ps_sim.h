@@ -262,6 +262,13 @@ uint32_t ps_sim_take_requests(ps_sim_t *s);
  *  @return 0 | -EINVAL joint_idx out of range  @rt NON-RT */
 int ps_sim_get_actuator(ps_sim_t *s, unsigned joint_idx, ps_devices_actuator_t *out);
 
+/** Fault injection (tests): set one emulated drive's winding temperature,
+ *  as if it had heated up; the drive's own model takes it from there (above
+ *  its temp_max_c it leaves motor mode with MOTOR_OVERTEMP and reports it).
+ *  @pre lockstep, or the plant thread stopped (no lock guards the devices)
+ *  @return 0 | -EINVAL joint_idx out of range or temp_c not finite  @rt NON-RT */
+int ps_sim_set_actuator_temp(ps_sim_t *s, unsigned joint_idx, double temp_c);
+
 /** The oldest crowd sample not taken yet (one per servo period, pushed by
  *  the thread that steps the plant into a preallocated SPSC ring; when the
  *  taker falls behind, new samples are dropped and counted).
