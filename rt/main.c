@@ -99,6 +99,8 @@ static struct {
     ps_render_t *render;
     int loop_rc;
     _Atomic bool is_loop_done;
+    _Atomic unsigned n_reloads; /* SIGHUP: configuration reloads asked for (all refused) */
+    unsigned n_reloads_told;
 } g;
 
 /* Lockstep and replay run on a clock the loop itself moves: no real-time
@@ -193,7 +195,8 @@ static const char USAGE[] =
     "                        at most 10000), like cyclictest -h N\n"
     "\n"
     "Ctrl-C (or the end of --duration) brakes the robot through DAMPING to STANDBY\n"
-    "before exiting; a second Ctrl-C while braking requests e-stop.\n"
+    "before exiting; a second Ctrl-C while braking requests e-stop. SIGHUP (reload)\n"
+    "is refused and logged: the files are read once, at start.\n"
     "A soft fault while ACTIVE (stale reply or IMU, late policy, invalid targets,\n"
     "repeated overruns, refused frames) HOLDs the last safe pose until the operator\n"
     "stops or restarts, a fall, or control.hold_s; see docs/safety.md.\n"
@@ -547,6 +550,27 @@ static void on_signal(int sig)
     ps_loop_request_stop(&g.app.loop);
 }
 
+/* SIGHUP, the usual "reload your configuration": refused, in every state
+ * (the loop runs on the files it started with; docs/safety.md). Without a
+ * handler it would end the process unbraked. Told on the main thread. */
+static void on_reload_signal(int sig)
+{
+    (void)sig;
+    atomic_fetch_add(&g.n_reloads, 1u);
+}
+
+static void tell_reloads_refused(void)
+{
+    const unsigned n = atomic_load(&g.n_reloads);
+    if (n == g.n_reloads_told)
+        return;
+    g.n_reloads_told = n;
+    printf("config reload refused (SIGHUP) in %s: board, robot and scenario are read once, at "
+           "start; stop the robot and restart pushstep to use changed files\n",
+           ps_sm_state_name(ps_loop_get_state(&g.app.loop)));
+    fflush(stdout);
+}
+
 /* SIGUSR1: a flight-recorder trigger (installed only when recording). */
 static void on_trigger_signal(int sig)
 {
@@ -597,8 +621,8 @@ static int install_recorder_signals(void)
     return 0;
 }
 
-/* SIGINT and SIGTERM are blocked from the start of main until the loop is
- * initialised, with the handler already installed: a signal during start-up
+/* SIGINT, SIGTERM and SIGHUP are blocked from the start of main until the
+ * loop is initialised, with the handlers already installed: a signal during start-up
  * (loading the model takes a while) stays pending instead of killing the
  * process unbraked or being lost to ps_loop_init's zeroing, and is acted on
  * (a stop request) the moment it is unblocked. Threads start after that and
@@ -609,6 +633,7 @@ static int block_stop_signals(int how)
     sigemptyset(&set);
     sigaddset(&set, SIGINT);
     sigaddset(&set, SIGTERM);
+    sigaddset(&set, SIGHUP);
     return -pthread_sigmask(how, &set, NULL);
 }
 
@@ -619,6 +644,9 @@ static int install_signals(void)
     sa.sa_handler = on_signal;
     sigemptyset(&sa.sa_mask);
     if (sigaction(SIGINT, &sa, NULL) < 0 || sigaction(SIGTERM, &sa, NULL) < 0)
+        return -errno;
+    sa.sa_handler = on_reload_signal;
+    if (sigaction(SIGHUP, &sa, NULL) < 0)
         return -errno;
     return 0;
 }
@@ -736,6 +764,7 @@ static void watch_truth(ps_summary_t *sum)
     while (!atomic_load(&g.is_loop_done)) {
         nanosleep(&poll, NULL);
         drain_crowd_log();
+        tell_reloads_refused();
     }
     drain_crowd_log();
 }
@@ -1139,7 +1168,7 @@ int main(int argc, char **argv)
         return ps_doctor_main(argc - 1, argv + 1, g.data_dir);
     }
     if (block_stop_signals(SIG_BLOCK) < 0 || install_signals() < 0) {
-        fprintf(stderr, "pushstep: cannot install the SIGINT/SIGTERM handler\n");
+        fprintf(stderr, "pushstep: cannot install the SIGINT/SIGTERM/SIGHUP handlers\n");
         return 1;
     }
     if (parse_options(argc, argv, &g.opt) < 0)

@@ -29,13 +29,17 @@
 #include <dlfcn.h>
 #include <errno.h>
 #include <math.h>
+#include <poll.h>
 #include <setjmp.h>
+#include <signal.h>
+#include <spawn.h>
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -46,6 +50,7 @@
 #include "../rt/ps_err.h"
 #include "../rt/ps_perception.h"
 #include "../rt/ps_recorder.h"
+#include "fakes/ps_cli.h"
 
 #define START_NS PS_NS_PER_S
 #define INJECT_S 1.5 /* ACTIVE since 1.2 s (start 0.2 s, ramp 1 s), harness on until 2 s */
@@ -1181,6 +1186,81 @@ static void test_fault_clock_realtime_jump_changes_nothing(void **state)
     row_done();
 }
 
+/* ---- row: a configuration reload asked for while ACTIVE ------------------------ */
+
+extern char **environ;
+
+static double mono_s(void)
+{
+    struct timespec ts;
+    (void)clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* pushstep itself (lockstep, 8 s standing): SIGHUP twice once the logger
+ * printed RAMP -> ACTIVE. Both are refused and said so, naming the state;
+ * the run goes on to its end exactly as without them (the same transitions
+ * at the same times), exit status 0. Before, SIGHUP's default action ended
+ * the process unbraked. */
+static void test_fault_config_reload_refused_while_active(void **state)
+{
+    (void)state;
+    begin_row("config_reload_while_active", "ACTIVE");
+    char sum[64];
+    ps_cli_temp_file(sum, sizeof(sum));
+    char *argv[] = {(char *)ps_cli_bin(),   "--lockstep", "--duration", "8", "--scenario",
+                    "scenarios/stand.yaml", "--summary",  sum,          NULL};
+    int fds[2];
+    assert_int_equal(pipe(fds), 0);
+    posix_spawn_file_actions_t fa;
+    assert_int_equal(posix_spawn_file_actions_init(&fa), 0);
+    assert_int_equal(posix_spawn_file_actions_adddup2(&fa, fds[1], 1), 0);
+    assert_int_equal(posix_spawn_file_actions_adddup2(&fa, fds[1], 2), 0);
+    assert_int_equal(posix_spawn_file_actions_addclose(&fa, fds[0]), 0);
+    pid_t pid;
+    assert_int_equal(posix_spawn(&pid, argv[0], &fa, NULL, argv, environ), 0);
+    posix_spawn_file_actions_destroy(&fa);
+    close(fds[1]);
+    static char out[64 * 1024];
+    size_t n = 0;
+    int n_sent = 0;
+    const double t0 = mono_s();
+    for (bool is_eof = false; !is_eof && mono_s() - t0 < 60;) {
+        if (n_sent < 2 && strstr(out, "RAMP -> ACTIVE") != NULL) {
+            assert_int_equal(kill(pid, SIGHUP), 0);
+            n_sent++;
+        }
+        struct pollfd pfd = {.fd = fds[0], .events = POLLIN};
+        if (poll(&pfd, 1, 20) > 0) {
+            const ssize_t got = read(fds[0], out + n, sizeof(out) - 1 - n);
+            is_eof = got <= 0;
+            n += got > 0 ? (size_t)got : 0;
+            out[n] = '\0';
+        }
+    }
+    close(fds[0]);
+    int status = 0;
+    assert_int_equal(waitpid(pid, &status, 0), pid);
+    if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
+        fail_msg("pushstep did not exit 0 (status 0x%x):\n%s", status, out);
+    assert_int_equal(n_sent, 2);
+    const char *said = "config reload refused (SIGHUP) in ACTIVE";
+    const char *p = strstr(out, said);
+    if (p == NULL)
+        fail_msg("no \"%s\" in:\n%s", said, out);
+    cJSON *j = ps_cli_read_json(sum);
+    (void)unlink(sum);
+    assert_true(ps_cli_num(j, "loop_s") >= 8.0);
+    const cJSON *tr = ps_cli_obj(j, "transitions");
+    assert_int_equal(cJSON_GetArraySize(tr), 4); /* RAMP, ACTIVE, DAMPING at 8 s, STANDBY */
+    const cJSON *stop = cJSON_GetArrayItem(tr, 2);
+    assert_string_equal(cJSON_GetStringValue(ps_cli_obj(stop, "to")), "DAMPING");
+    assert_string_equal(cJSON_GetStringValue(ps_cli_obj(stop, "conditions")), "REQ_STOP");
+    assert_true(ps_cli_num(stop, "t_s") >= 8.0); /* the end of the run, not the signal */
+    cJSON_Delete(j);
+    row_done();
+}
+
 /* ---- the figures ------------------------------------------------------------------- */
 
 static int print_figures(void **state)
@@ -1220,7 +1300,7 @@ static char test_names[N_ROWS][64];
 
 int main(void)
 {
-    struct CMUnitTest tests[N_ROWS + 1];
+    struct CMUnitTest tests[N_ROWS + 2];
     for (size_t i = 0; i < N_ROWS; i++) {
         snprintf(test_names[i], sizeof(test_names[i]), "test_fault_%s", ROWS[i].name);
         tests[i] = (struct CMUnitTest){.name = test_names[i],
@@ -1230,5 +1310,7 @@ int main(void)
     }
     tests[N_ROWS] = (struct CMUnitTest)cmocka_unit_test_teardown(
         test_fault_clock_realtime_jump_changes_nothing, teardown);
-    return _cmocka_run_group_tests("e2e_faults", tests, N_ROWS + 1, NULL, print_figures);
+    tests[N_ROWS + 1] =
+        (struct CMUnitTest)cmocka_unit_test(test_fault_config_reload_refused_while_active);
+    return _cmocka_run_group_tests("e2e_faults", tests, N_ROWS + 2, NULL, print_figures);
 }
