@@ -260,8 +260,9 @@ endif
 test-hw: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(HW_BINS)
 	@PUSHSTEP_BIN=$(BUILD)/pushstep QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh tools/qemu/test-hw.sh
 
-bench: deps-bench $(BUILD)/pushstep $(CAMERA_SO) $(BUILD)/crowd_bench
+bench: deps-bench $(BUILD)/pushstep $(CAMERA_SO) $(BUILD)/crowd_bench $(BUILD)/tests/test_e2e_faults
 	@bash bench/run.sh
+	@BUILD=$(BUILD) bash bench/faults.sh
 	@BUILD=$(BUILD) bash bench/crowd.sh
 	@BUILD=$(BUILD) bash bench/camera.sh
 	@bash bench/policy.sh
