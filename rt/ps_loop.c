@@ -379,6 +379,8 @@ static uint32_t watchdog_conditions(const ps_loop_t *loop)
         else if (now >= loop->fault_grace_until_ns[j] &&
                  ((m->fault_bits | loop->fault_report_bits[j]) != 0u || m->temp_c > a->temp_max_c))
             cond |= PS_SM_C_DRIVE_FAULT;
+        else if (m->temp_c >= a->temp_max_c - PS_LOOP_HOT_MARGIN_C)
+            cond |= PS_SM_C_DRIVE_HOT; /* damp before its own protection trips */
     }
     if (is_stale(loop->meas.imu.t_ns, now,
                  ps_s_to_ns(r->control.imu_timeout_s) + (int64_t)r->imu.rate_div * loop->period_ns))
@@ -592,11 +594,26 @@ static void disable_joint(ps_loop_t *loop, uint32_t j)
         loop->is_entered[j] = false;
 }
 
+float ps_loop_torque_scale(float temp_c, float temp_max_c)
+{
+    const float start_c = temp_max_c - PS_LOOP_DERATE_BAND_C;
+    const float end_c = temp_max_c - PS_LOOP_HOT_MARGIN_C;
+    if (!(temp_c > start_c)) /* NaN too */
+        return 1.0f;
+    if (temp_c >= end_c)
+        return PS_LOOP_DERATE_MIN;
+    return 1.0f - (1.0f - PS_LOOP_DERATE_MIN) * (temp_c - start_c) / (end_c - start_c);
+}
+
 static void servo_joint(ps_loop_t *loop, uint32_t j, const ps_servo_mode_t *mode)
 {
     const ps_robot_cfg_t *r = loop->cfg.robot;
-    const ps_servo_joint_cfg_t *sj = &r->servo[j];
     const ps_act_cfg_t *a = &r->act[j];
+    /* A hot drive gets a smaller torque budget: the servo layer clamps the
+     * feed-forward and the spring's reach into it (docs/safety.md). */
+    ps_servo_joint_cfg_t derated = r->servo[j];
+    derated.lim.torque_max_nm *= ps_loop_torque_scale(loop->meas.joints[j].temp_c, a->temp_max_c);
+    const ps_servo_joint_cfg_t *sj = &derated;
     ps_act_cmd_t cmd;
     if (ps_servo_command(sj, &r->servo_common, mode, j, &loop->targets, &cmd) < 0)
         loop->counters.n_target_invalid++;

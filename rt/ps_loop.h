@@ -33,6 +33,11 @@
  * both raise ESTOP_INPUT. In ESTOP the heartbeat is not written, so its
  * fault clears there; after a reset the next write tells again.
  *
+ * Hot drives: a joint whose last reply reports a temperature within
+ * PS_LOOP_DERATE_BAND_C of its temp_max_c is commanded with a derated torque
+ * budget (ps_loop_torque_scale); within PS_LOOP_HOT_MARGIN_C it raises
+ * DRIVE_HOT, which damps.
+ *
  * Stale-data rule: a joint's reply is stale when older than
  * control.reply_timeout_s + rate_div servo periods (a joint commanded every
  * rate_div ticks can only answer that often); the IMU likewise with
@@ -86,6 +91,15 @@ typedef struct {
     float overrun_window_s;  /**< window of the overrun count */
     float hold_s;            /**< longest HOLD before DAMPING; 0: one tick of HOLD */
 } ps_control_cfg_t;
+
+/** Drive temperature (docs/safety.md "Hot drives"): from this far below a
+ *  joint's temp_max_c its torque budget (torque_max_nm of every command) is
+ *  derated linearly, down to PS_LOOP_DERATE_MIN of it at PS_LOOP_HOT_MARGIN_C
+ *  below temp_max_c, where DRIVE_HOT damps the robot before the drive's own
+ *  protection trips (above temp_max_c: DRIVE_FAULT, ESTOP). */
+#define PS_LOOP_DERATE_BAND_C 15.0f
+#define PS_LOOP_HOT_MARGIN_C  5.0f
+#define PS_LOOP_DERATE_MIN    0.5f
 
 /** Largest control.overrun_limit: the loop keeps that many overrun times. */
 #define PS_LOOP_MAX_OVERRUN_LIMIT 64u
@@ -327,6 +341,13 @@ void ps_loop_request_stop(ps_loop_t *loop);
 
 /** Post operator request bits (PS_SM_C_REQ_*). @rt async-signal-safe, any thread */
 void ps_loop_request(ps_loop_t *loop, uint32_t request_bits);
+
+/** The share of a joint's torque_max_nm it may be commanded at temp_c: 1 up
+ *  to temp_max_c - PS_LOOP_DERATE_BAND_C, then linearly down to
+ *  PS_LOOP_DERATE_MIN at temp_max_c - PS_LOOP_HOT_MARGIN_C and beyond; 1 for
+ *  a temperature that is not a number (never reported).
+ *  @units degC  @rt RT-SAFE O(1), pure */
+float ps_loop_torque_scale(float temp_c, float temp_max_c);
 
 /** @return name of a stage, e.g. "wake"  @rt RT-SAFE */
 const char *ps_loop_stage_name(ps_stage_t s);

@@ -30,18 +30,20 @@ static const ps_sm_edge_t EDGES[] = {
     {PS_SM_RAMP, PS_SM_C_REQ_STOP, 0u, PS_SM_DAMPING},
     {PS_SM_RAMP, PS_SM_C_RAMP_DONE, HARD | SOFT | PS_SM_C_REQ_STOP, PS_SM_ACTIVE},
 
-    /* ACTIVE: controller in charge. A fall damps; the other soft faults
-     * hold the last safe pose while the drives still take commands. */
+    /* ACTIVE: controller in charge. A fall or a drive about to overheat
+     * damps; the other soft faults hold the last safe pose while the drives
+     * still take commands. */
     {PS_SM_ACTIVE, HARD, 0u, PS_SM_ESTOP},
-    {PS_SM_ACTIVE, PS_SM_C_FALL, 0u, PS_SM_DAMPING},
+    {PS_SM_ACTIVE, PS_SM_C_FALL | PS_SM_C_DRIVE_HOT, 0u, PS_SM_DAMPING},
     {PS_SM_ACTIVE, PS_SM_C_HOLD_FAULTS, 0u, PS_SM_HOLD},
     {PS_SM_ACTIVE, PS_SM_C_REQ_STOP, 0u, PS_SM_DAMPING},
 
     /* HOLD: stiff at the last safe pose. The fault that led here may persist
-     * (it does not re-trigger anything); a fall, the operator's stop or the
-     * end of hold_s damps; a start with every fault gone resumes. */
+     * (it does not re-trigger anything); a fall, a hot drive, the
+     * operator's stop or the end of hold_s damps; a start with every fault
+     * gone resumes. */
     {PS_SM_HOLD, HARD, 0u, PS_SM_ESTOP},
-    {PS_SM_HOLD, PS_SM_C_FALL | PS_SM_C_HOLD_DONE, 0u, PS_SM_DAMPING},
+    {PS_SM_HOLD, PS_SM_C_FALL | PS_SM_C_HOLD_DONE | PS_SM_C_DRIVE_HOT, 0u, PS_SM_DAMPING},
     {PS_SM_HOLD, PS_SM_C_REQ_STOP, 0u, PS_SM_DAMPING},
     {PS_SM_HOLD, PS_SM_C_REQ_START, PS_SM_C_RESUME_BLOCKERS, PS_SM_RAMP},
 
@@ -69,11 +71,11 @@ static_assert(sizeof STATE_NAMES / sizeof STATE_NAMES[0] == PS_SM_STATE_COUNT,
 static const char *const COND_NAMES[] = {
     "REQ_START",   "REQ_STOP",    "REQ_RESET", "REQ_ESTOP",   "ESTOP_INPUT",    "RAMP_DONE",
     "DAMP_DONE",   "REPLY_STALE", "IMU_STALE", "POLICY_LATE", "TARGET_INVALID", "FALL",
-    "DRIVE_FAULT", "BUS_OFF",     "OVERRUN",   "TX_REFUSED",  "HOLD_DONE",
+    "DRIVE_FAULT", "BUS_OFF",     "OVERRUN",   "TX_REFUSED",  "HOLD_DONE",      "DRIVE_HOT",
 };
 static_assert(sizeof COND_NAMES / sizeof COND_NAMES[0] == PS_SM_COND_COUNT,
               "one name per condition bit");
-static_assert(PS_SM_C_HOLD_DONE == 1u << (PS_SM_COND_COUNT - 1u), "HOLD_DONE is the last bit");
+static_assert(PS_SM_C_DRIVE_HOT == 1u << (PS_SM_COND_COUNT - 1u), "DRIVE_HOT is the last bit");
 
 /* Refusal sentences for a blocked START or RESET, checked in this order (the
  * most actionable reason first). Every blocker bit has one; the tests check
@@ -90,6 +92,7 @@ static const blocker_reason_t START_REASONS[] = {
     {PS_SM_C_DRIVE_FAULT, "start refused: drive fault"},
     {PS_SM_C_REPLY_STALE, "start refused: actuator replies stale"},
     {PS_SM_C_IMU_STALE, "start refused: IMU data stale"},
+    {PS_SM_C_DRIVE_HOT, "start refused: drive too hot"},
     /* only block a resume from HOLD (PS_SM_C_RESUME_BLOCKERS) */
     {PS_SM_C_FALL, "start refused: robot fallen"},
     {PS_SM_C_POLICY_LATE, "start refused: policy still late"},

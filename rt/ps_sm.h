@@ -62,13 +62,17 @@ typedef enum {
     PS_SM_C_OVERRUN = 1u << 14,        /**< overrun_limit overruns within overrun_window_s */
     PS_SM_C_TX_REFUSED = 1u << 15,     /**< a bus refused frames this loop wanted to send */
     PS_SM_C_HOLD_DONE = 1u << 16,      /**< hold_s elapsed in HOLD */
+    PS_SM_C_DRIVE_HOT = 1u << 17,      /**< a drive nears its temp_max_c: damp before its own
+                                            protection trips (docs/safety.md) */
 } ps_sm_cond_t;
 
 /** Soft faults where the drives still take commands: ACTIVE holds. */
 #define PS_SM_C_HOLD_FAULTS                                                                        \
     (PS_SM_C_REPLY_STALE | PS_SM_C_IMU_STALE | PS_SM_C_POLICY_LATE | PS_SM_C_TARGET_INVALID |      \
      PS_SM_C_OVERRUN | PS_SM_C_TX_REFUSED)
-#define PS_SM_C_SOFT_FAULTS (PS_SM_C_HOLD_FAULTS | PS_SM_C_FALL)
+/** Soft faults: the hold faults, and those that damp at once (a fall, a drive
+ *  about to overheat). */
+#define PS_SM_C_SOFT_FAULTS (PS_SM_C_HOLD_FAULTS | PS_SM_C_FALL | PS_SM_C_DRIVE_HOT)
 #define PS_SM_C_HARD_FAULTS                                                                        \
     (PS_SM_C_REQ_ESTOP | PS_SM_C_ESTOP_INPUT | PS_SM_C_DRIVE_FAULT | PS_SM_C_BUS_OFF)
 #define PS_SM_C_REQUESTS                                                                           \
@@ -76,14 +80,16 @@ typedef enum {
 
 /** Number of condition bits (bit 0 .. PS_SM_COND_COUNT - 1); ps_sm_cond_name
  *  has one name per bit. */
-#define PS_SM_COND_COUNT 17u
+#define PS_SM_COND_COUNT 18u
 #define PS_SM_C_ALL      ((1u << PS_SM_COND_COUNT) - 1u)
 
 /** What blocks STANDBY -> RAMP: every hard fault, and the soft faults that
- *  make *starting* unsafe (no fresh actuator or IMU data to ramp from). The
- *  other soft faults (POLICY_LATE, TARGET_INVALID, FALL, ...) do not block a
- *  start: if they persist, RAMP drops to DAMPING on its first tick. */
-#define PS_SM_C_START_BLOCKERS (PS_SM_C_HARD_FAULTS | PS_SM_C_REPLY_STALE | PS_SM_C_IMU_STALE)
+ *  make *starting* unsafe (no fresh actuator or IMU data to ramp from, a
+ *  drive too hot to carry the robot). The other soft faults (POLICY_LATE,
+ *  TARGET_INVALID, FALL, ...) do not block a start: if they persist, RAMP
+ *  drops to DAMPING on its first tick. */
+#define PS_SM_C_START_BLOCKERS                                                                     \
+    (PS_SM_C_HARD_FAULTS | PS_SM_C_REPLY_STALE | PS_SM_C_IMU_STALE | PS_SM_C_DRIVE_HOT)
 /** What blocks HOLD -> RAMP (the operator resumes after a fault): the start
  *  blockers, every soft fault still present, and the hold's end (the robot
  *  is being damped in that tick). */

@@ -107,7 +107,8 @@ typedef struct {
     uint32_t estop_pattern;      /* bit k: read k pressed (LSB first) */
     bool heartbeat_fails;
     /* policy */
-    int policy_fault; /* 0 none, 1 NaN, 2 +inf, 3 out of range */
+    int policy_fault; /* 0 none, 1 NaN, 2 +inf, 3 out of range, 4 feed-forward policy_tau_ff_nm */
+    float policy_tau_ff_nm;
     int64_t policy_burn_ns;
     unsigned policy_burn_runs_left;
 } knobs_t;
@@ -418,6 +419,8 @@ static int policy_step(void *ctx, const ps_meas_t *m, const ps_estimate_t *e, ps
         out->q_rad[j] = INFINITY;
     else if (k.policy_fault == 3)
         out->q_rad[j] = app.robot.servo[j].lim.pos_max_rad + 0.5f;
+    else if (k.policy_fault == 4)
+        out->tau_ff_nm[j] = k.policy_tau_ff_nm;
     return rc;
 }
 
@@ -809,6 +812,90 @@ static bool has_l_knee_over_temp(const ps_rec_tick_t *r, const void *arg)
     return r->temp_c[L_KNEE] > app.robot.act[L_KNEE].temp_max_c;
 }
 
+static bool has_l_knee_over_temp_band(const ps_rec_tick_t *r, const void *arg)
+{
+    (void)arg;
+    return r->temp_c[L_KNEE] > app.robot.act[L_KNEE].temp_max_c - 15.0f;
+}
+
+/* The torque budget a drive at temp_c may be commanded, written from the
+ * spec (docs/safety.md "Hot drives"), not from the loop's function. */
+static float budget_nm(float temp_c, float temp_max_c, float torque_max_nm)
+{
+    const float x = (temp_c - (temp_max_c - 15.0f)) / 10.0f; /* 0 at the band's start, 1 hot */
+    const float share = x <= 0.0f ? 1.0f : x >= 1.0f ? 0.5f : 1.0f - 0.5f * x;
+    return share * torque_max_nm;
+}
+
+static void arm_warm_l_knee_full_feed_forward(void)
+{
+    const double t = (double)app.robot.act[L_KNEE].temp_max_c - 6.0; /* in the band */
+    assert_int_equal(ps_sim_set_actuator_temp(app.sim, L_KNEE, t), 0);
+    k.policy_fault = 4; /* the policy asks for the whole torque_max as feed-forward */
+    k.policy_tau_ff_nm = app.robot.servo[L_KNEE].lim.torque_max_nm;
+    n_rx_bad_at_arm = atomic_load(&rec.head); /* the first record of the row */
+}
+
+/* Every command l_knee got from the injection on stays inside the budget
+ * of the temperature the loop had measured: the feed-forward and the
+ * spring's reach (|kp (p - q)| + |tau_ff|); and the budget is what bounded
+ * it (the feed-forward sits at the derated cap, well under torque_max). */
+static void check_derated(void)
+{
+    const float tmax_c = app.robot.act[L_KNEE].temp_max_c;
+    const float tq_max = app.robot.servo[L_KNEE].lim.torque_max_nm;
+    const uint64_t head = atomic_load(&rec.head);
+    unsigned n_at_cap = 0, n_sent = 0;
+    float least_budget = tq_max;
+    for (uint64_t i = n_rx_bad_at_arm; i < head; i++) {
+        assert_int_equal(ps_recorder_read(&rec, i, &rtick), 0);
+        if (!rtick.is_cmd_sent[L_KNEE])
+            continue;
+        n_sent++;
+        const float budget = budget_nm(rtick.temp_c[L_KNEE], tmax_c, tq_max);
+        least_budget = fminf(least_budget, budget);
+        const float ff = fabsf(rtick.cmd_tau_ff_nm[L_KNEE]);
+        const float spring =
+            rtick.cmd_kp_nm_rad[L_KNEE] * fabsf(rtick.cmd_q_rad[L_KNEE] - rtick.q_rad[L_KNEE]);
+        if (ff > budget + 1e-3f || spring + ff > budget + 1e-2f)
+            fail_msg("tick %llu: %.1f degC, budget %.2f Nm: tau_ff %.2f, spring %.2f",
+                     (unsigned long long)rtick.tick, (double)rtick.temp_c[L_KNEE], (double)budget,
+                     (double)ff, (double)spring);
+        n_at_cap += ff > budget - 0.5f;
+    }
+    print_message(
+        "      l_knee: %u commands, %u at the derated cap; least budget %.1f of %.0f Nm\n", n_sent,
+        n_at_cap, (double)least_budget, (double)tq_max);
+    assert_true(n_sent > 100);
+    assert_true(n_at_cap > 100);
+    assert_true(least_budget < 0.7f * tq_max);
+}
+
+static void arm_hot_l_knee(void)
+{
+    const double t = (double)app.robot.act[L_KNEE].temp_max_c - 3.0; /* under its own trip */
+    assert_int_equal(ps_sim_set_actuator_temp(app.sim, L_KNEE, t), 0);
+}
+
+/* Damped down to STANDBY, and no START while the drive is that hot. */
+static void check_hot_no_start(void)
+{
+    while (app.loop.state != PS_SM_STANDBY && loop_time_s() < INJECT_S + 3.0)
+        step();
+    assert_int_equal(app.loop.state, PS_SM_STANDBY);
+    ps_loop_rec_t r;
+    while (ps_ring_pop(&app.ring, &r) == 0) {
+    }
+    ps_loop_request(&app.loop, PS_SM_C_REQ_START);
+    step();
+    assert_int_equal(app.loop.state, PS_SM_STANDBY);
+    bool is_refused = false;
+    while (ps_ring_pop(&app.ring, &r) == 0)
+        is_refused |= r.kind == PS_REC_REFUSED && r.reason != NULL &&
+                      strcmp(r.reason, "start refused: drive too hot") == 0;
+    assert_true(is_refused);
+}
+
 /* -- IMU -- */
 
 static void arm_imu_drop(void)
@@ -1087,6 +1174,11 @@ static const row_t ROWS[] = {
      .events = "  - {t_s: 1.5005, kind: drive_fault, joint: l_knee}\n",
      .to = PS_SM_ESTOP, .cond = PS_SM_C_DRIVE_FAULT, .within = 6, .watch_s = 0.2,
      .evidence = has_l_knee_fault_bits, .check = check_power_cut},
+    {.name = "actuator_warm_derated", .arm = arm_warm_l_knee_full_feed_forward,
+     .to = PS_SM_ACTIVE, .watch_s = 0.3, .evidence = has_l_knee_over_temp_band,
+     .check = check_derated},
+    {.name = "actuator_hot_damps", .arm = arm_hot_l_knee, .to = PS_SM_DAMPING,
+     .cond = PS_SM_C_DRIVE_HOT, .within = 6, .watch_s = 0.15, .check = check_hot_no_start},
     {.name = "actuator_over_temperature", .arm = arm_overheat_l_knee, .to = PS_SM_ESTOP,
      .cond = PS_SM_C_DRIVE_FAULT, .within = 6, .watch_s = 0.2,
      .evidence = has_l_knee_over_temp, .check = check_power_cut},

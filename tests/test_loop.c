@@ -792,6 +792,24 @@ static void test_loop_heartbeat_write_error_estops_reset_retries(void **state)
     assert_int_equal(fx->loop.state, PS_SM_STANDBY);
 }
 
+/* The torque budget of a warm drive: whole up to 15 degC under its
+ * temp_max_c, then linearly down to half at 5 degC under it, half beyond;
+ * a temperature never reported (NaN) derates nothing. */
+static void test_loop_torque_scale_derates_in_band(void **state)
+{
+    (void)state;
+    const float tmax = 90.0f;
+    assert_float_equal(ps_loop_torque_scale(25.0f, tmax), 1.0f, 0.0f);
+    assert_float_equal(ps_loop_torque_scale(75.0f, tmax), 1.0f, 1e-6f);
+    assert_float_equal(ps_loop_torque_scale(80.0f, tmax), 0.75f, 1e-6f);
+    assert_float_equal(ps_loop_torque_scale(84.0f, tmax), 0.55f, 1e-6f);
+    assert_float_equal(ps_loop_torque_scale(85.0f, tmax), 0.5f, 0.0f);
+    assert_float_equal(ps_loop_torque_scale(120.0f, tmax), 0.5f, 0.0f);
+    assert_float_equal(ps_loop_torque_scale(NAN, tmax), 1.0f, 0.0f);
+    for (float t = 70.0f; t < 90.0f; t += 0.25f) /* never rises with temperature */
+        assert_true(ps_loop_torque_scale(t + 0.25f, tmax) <= ps_loop_torque_scale(t, tmax));
+}
+
 static void test_loop_drive_fault_estops(void **state)
 {
     (void)state;
@@ -1253,6 +1271,7 @@ int main(void)
         T(test_loop_gpio_error_counts_as_estop),
         T(test_loop_tap_once_per_tick_sees_the_tick),
         T(test_loop_heartbeat_write_error_estops_reset_retries),
+        cmocka_unit_test(test_loop_torque_scale_derates_in_band),
         T(test_loop_drive_fault_estops),
         T(test_loop_bus_off_estops),
         T(test_loop_run_until_end_goes_through_damping_to_standby),

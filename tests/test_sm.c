@@ -34,14 +34,15 @@ enum {
     OVERRUN = 1u << 14,
     TX_REFUSED = 1u << 15,
     HOLD_DONE = 1u << 16,
-    N_BITS = 17,
+    DRIVE_HOT = 1u << 17,
+    N_BITS = 18,
 };
 #define T_HARD (REQ_ESTOP | ESTOP_IN | DRIVE_FAULT | BUS_OFF)
 /* A drive fault does not block a reset: the drive is re-enabled in STANDBY. */
 #define T_RESET_BLOCK (REQ_ESTOP | ESTOP_IN | BUS_OFF)
 /* Soft faults with the drives still taking commands: ACTIVE holds on these. */
 #define T_HOLDF (REPLY_STALE | IMU_STALE | POLICY_LATE | TARGET_INVALID | OVERRUN | TX_REFUSED)
-#define T_SOFT  (T_HOLDF | FALL)
+#define T_SOFT  (T_HOLDF | FALL | DRIVE_HOT)
 
 enum {
     SB = PS_SM_STANDBY,
@@ -57,13 +58,13 @@ enum {
  * no condition at all). Written by hand from the rules. */
 static const int EXPECT_SINGLE[N_STATES][1 + N_BITS] = {
     /*      none START STOP RESET REQ_E E_IN RDONE DDONE REPLY IMU PLATE TINV FALL DRV BUS
-     *      OVERRUN TX_REF HDONE */
-    [SB] = {SB, RA, SB, SB, ES, ES, SB, SB, SB, SB, SB, SB, SB, ES, ES, SB, SB, SB},
-    [RA] = {RA, RA, DA, RA, ES, ES, AC, RA, DA, DA, DA, DA, DA, ES, ES, DA, DA, RA},
-    [AC] = {AC, AC, DA, AC, ES, ES, AC, AC, HO, HO, HO, HO, DA, ES, ES, HO, HO, AC},
-    [DA] = {DA, DA, DA, DA, ES, ES, DA, SB, DA, DA, DA, DA, DA, ES, ES, DA, DA, DA},
-    [ES] = {ES, ES, ES, SB, ES, ES, ES, ES, ES, ES, ES, ES, ES, ES, ES, ES, ES, ES},
-    [HO] = {HO, RA, DA, HO, ES, ES, HO, HO, HO, HO, HO, HO, DA, ES, ES, HO, HO, DA},
+     *      OVERRUN TX_REF HDONE HOT */
+    [SB] = {SB, RA, SB, SB, ES, ES, SB, SB, SB, SB, SB, SB, SB, ES, ES, SB, SB, SB, SB},
+    [RA] = {RA, RA, DA, RA, ES, ES, AC, RA, DA, DA, DA, DA, DA, ES, ES, DA, DA, RA, DA},
+    [AC] = {AC, AC, DA, AC, ES, ES, AC, AC, HO, HO, HO, HO, DA, ES, ES, HO, HO, AC, DA},
+    [DA] = {DA, DA, DA, DA, ES, ES, DA, SB, DA, DA, DA, DA, DA, ES, ES, DA, DA, DA, DA},
+    [ES] = {ES, ES, ES, SB, ES, ES, ES, ES, ES, ES, ES, ES, ES, ES, ES, ES, ES, ES, ES},
+    [HO] = {HO, RA, DA, HO, ES, ES, HO, HO, HO, HO, HO, HO, DA, ES, ES, HO, HO, DA, DA},
 };
 
 /* Hand-picked combinations: blockers, priorities, latching. */
@@ -77,6 +78,7 @@ static const combo_t COMBOS[] = {
     /* start blockers */
     {SB, START | REPLY_STALE, SB},
     {SB, START | IMU_STALE, SB},
+    {SB, START | DRIVE_HOT, SB}, /* a hot drive: no start */
     {SB, START | ESTOP_IN, ES},
     {SB, START | REQ_ESTOP, ES},
     {SB, START | DRIVE_FAULT, ES},
@@ -96,6 +98,12 @@ static const combo_t COMBOS[] = {
     {AC, STOP | REPLY_STALE | ESTOP_IN, ES},
     {AC, STOP | FALL, DA},
     {AC, FALL | OVERRUN, DA}, /* a fall damps even with a hold fault present */
+    {AC, DRIVE_HOT | POLICY_LATE, DA}, /* so does a drive about to overheat */
+    {AC, DRIVE_HOT | STOP, DA},
+    {HO, DRIVE_HOT | REPLY_STALE, DA},
+    {HO, START | DRIVE_HOT, DA},
+    {DA, DAMP_DONE | DRIVE_HOT, SB}, /* limp in STANDBY while it cools */
+    {RA, RAMP_DONE | DRIVE_HOT, DA},
     {AC, STOP | POLICY_LATE, HO},
     /* HOLD: the fault that led here changes nothing; a fall, a stop or the
      * end of the hold damps; a start resumes only with every fault gone */
@@ -130,7 +138,7 @@ static int ref_next(int s, uint32_t c)
     case SB:
         if (hard)
             return ES;
-        if ((c & START) && !(c & (REPLY_STALE | IMU_STALE)))
+        if ((c & START) && !(c & (REPLY_STALE | IMU_STALE | DRIVE_HOT)))
             return RA;
         return SB;
     case RA:
@@ -142,7 +150,7 @@ static int ref_next(int s, uint32_t c)
     case AC:
         if (hard)
             return ES;
-        if (c & FALL)
+        if (c & (FALL | DRIVE_HOT))
             return DA;
         if (c & T_HOLDF)
             return HO;
@@ -150,7 +158,7 @@ static int ref_next(int s, uint32_t c)
     case HO:
         if (hard)
             return ES;
-        if (c & (FALL | HOLD_DONE | STOP))
+        if (c & (FALL | HOLD_DONE | STOP | DRIVE_HOT))
             return DA;
         if ((c & START) && !(c & T_SOFT))
             return RA;
@@ -214,7 +222,7 @@ static void test_ps_sm_next_unknown_bits_ignored(void **state)
 {
     (void)state;
     for (int s = 0; s < N_STATES; s++)
-        assert_int_equal(ps_sm_next((ps_sm_state_t)s, 0xFFFE0000u), s);
+        assert_int_equal(ps_sm_next((ps_sm_state_t)s, 0xFFFC0000u), s);
 }
 
 static void test_ps_sm_next_invalid_state_estop(void **state)
@@ -332,7 +340,7 @@ static void test_ps_sm_fault_masks_match_spec(void **state)
     assert_int_equal(PS_SM_C_HARD_FAULTS, T_HARD);
     assert_int_equal(PS_SM_C_SOFT_FAULTS, T_SOFT);
     assert_int_equal(PS_SM_C_REQUESTS, START | STOP | RESET | REQ_ESTOP);
-    assert_int_equal(PS_SM_C_START_BLOCKERS, T_HARD | REPLY_STALE | IMU_STALE);
+    assert_int_equal(PS_SM_C_START_BLOCKERS, T_HARD | REPLY_STALE | IMU_STALE | DRIVE_HOT);
     assert_int_equal(PS_SM_C_HOLD_FAULTS, T_HOLDF);
     assert_int_equal(PS_SM_C_RESUME_BLOCKERS, T_HARD | T_SOFT | HOLD_DONE);
     assert_int_equal(PS_SM_C_RESET_BLOCKERS, T_RESET_BLOCK);
@@ -362,6 +370,8 @@ static const req_case_t REQ_CASES[] = {
     {SB, START, REPLY_STALE, ILL, "start refused: actuator replies stale"},
     {SB, START, IMU_STALE, ILL, "start refused: IMU data stale"},
     {SB, START, IMU_STALE | ESTOP_IN, ILL, "start refused: e-stop input pressed"},
+    {SB, START, DRIVE_HOT, ILL, "start refused: drive too hot"},
+    {SB, START, DRIVE_HOT | IMU_STALE, ILL, "start refused: IMU data stale"},
     {RA, START, 0u, ILL, "start refused: only allowed from STANDBY or HOLD"},
     {AC, START, 0u, ILL, "start refused: only allowed from STANDBY or HOLD"},
     {DA, START, 0u, ILL, "start refused: only allowed from STANDBY or HOLD"},
@@ -374,6 +384,7 @@ static const req_case_t REQ_CASES[] = {
     {HO, START, OVERRUN, ILL, "start refused: loop still overrunning"},
     {HO, START, TX_REFUSED, ILL, "start refused: bus still refusing frames"},
     {HO, START, FALL, ILL, "start refused: robot fallen"},
+    {HO, START, DRIVE_HOT, ILL, "start refused: drive too hot"},
     {SB, START, OVERRUN | TX_REFUSED, 0, NULL}, /* not start blockers in STANDBY */
     {ES, START, 0u, ILL, "start refused: e-stop latched, reset first"},
     /* STOP */
@@ -518,14 +529,14 @@ static void test_ps_sm_cond_name_each_bit_named(void **state)
     static const char *const want[N_BITS] = {
         "REQ_START",   "REQ_STOP",    "REQ_RESET", "REQ_ESTOP",   "ESTOP_INPUT",    "RAMP_DONE",
         "DAMP_DONE",   "REPLY_STALE", "IMU_STALE", "POLICY_LATE", "TARGET_INVALID", "FALL",
-        "DRIVE_FAULT", "BUS_OFF",     "OVERRUN",   "TX_REFUSED",  "HOLD_DONE",
+        "DRIVE_FAULT", "BUS_OFF",     "OVERRUN",   "TX_REFUSED",  "HOLD_DONE",      "DRIVE_HOT",
     };
     for (unsigned b = 0; b < N_BITS; b++)
         assert_string_equal(ps_sm_cond_name(1u << b), want[b]);
     /* lowest set bit wins */
     assert_string_equal(ps_sm_cond_name(BUS_OFF | REPLY_STALE), "REPLY_STALE");
     assert_string_equal(ps_sm_cond_name(0u), "?");
-    assert_string_equal(ps_sm_cond_name(1u << 17), "?");
+    assert_string_equal(ps_sm_cond_name(1u << 18), "?");
     assert_string_equal(ps_sm_cond_name(1u << 31), "?");
 }
 
