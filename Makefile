@@ -125,7 +125,7 @@ HW_BINS := $(patsubst tests/hw/%.c,$(BUILD)/tests/hw/%,$(HW_SRCS))
 QEMU_WORK ?= $(BUILD)/qemu
 
 .PHONY: all deps deps-build deps-test deps-npm deps-bench deps-train run test test-hw clean format help \
-        bench bench-hw train install deb test-deb aarch64-test-bins
+        bench bench-hw train install deb test-deb aarch64-test-bins soak
 all: $(BUILD)/pushstep $(CAMERA_SO)
 
 help:
@@ -145,6 +145,9 @@ help:
 	@echo "             camera.md (docs/latency.md, docs/perception.md, docs/policy.md)"
 	@echo "make bench-hw the real drivers' figures in the test VM (e-stop reaction,"
 	@echo "             loop reaction, frames per bus): bench/results/hw.json"
+	@echo "make soak    SOAK_TICKS (1,000,000) ticks in lockstep among the crowd with a"
+	@echo "             random fault every 8 s, each recovered; checks states, limits,"
+	@echo "             recorder, memory: bench/results/soak.json, soak.md"
 	@echo "make train   train the balance policy on the C environment (CPU, 2 cores,"
 	@echo "             seeded): policy/weights/ps1_stage1.safetensors, $(BUILD)/train/"
 	@echo "make install PREFIX=/usr/local [DESTDIR=]: the binary, its data (boards, robots,"
@@ -261,7 +264,7 @@ test: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(BUILD)/libpsenv.so $(TEST_BINS)
 	@PUSHSTEP_BIN=$(BUILD)/pushstep PUSHSTEP_NPM=$(BUILD)/npm QEMU_WORK=$(QEMU_WORK) \
 	    HW_BINS="$(HW_BINS)" AARCH64_BUILD=$(AARCH64_BUILD) bash tools/run-tests.sh \
 	    tools/check-layers.sh $(TEST_BINS) $(TSAN_BINS) tests/test_tsan_threads.sh \
-	    policy/train/test_tools.py \
+	    tests/test_soak_short.sh policy/train/test_tools.py \
 	    tests/test_train_smoke.sh tools/test-install.sh tools/test-aarch64.sh tools/qemu/test-hw.sh
 
 AARCH64_BUILD := build-aarch64
@@ -275,6 +278,12 @@ aarch64-test-bins:
 	    $(MAKE) --no-print-directory ARCH=aarch64 BUILD=$(AARCH64_BUILD) aarch64-test-bins; \
 	else echo "aarch64: cross tools or arm64 libraries missing: its tests are skipped"; fi
 endif
+
+# The soak (tools/soak.py, docs/safety.md): SOAK_TICKS ticks in lockstep among
+# the crowd with a random fault every 8 s; figures into bench/results/soak.*.
+SOAK_TICKS ?= 1000000
+soak: deps-test $(BUILD)/pushstep
+	python3 tools/soak.py --ticks $(SOAK_TICKS) --results bench/results
 
 test-hw: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(HW_BINS)
 	@PUSHSTEP_BIN=$(BUILD)/pushstep QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh tools/qemu/test-hw.sh

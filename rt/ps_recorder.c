@@ -794,6 +794,7 @@ static void file_close(rec_file_t *f, const ps_mcap_kv_t *extra, size_t n_extra)
         kv[n++] = extra[i];
     if (ps_mcap_error(&f->mcap) == 0)
         (void)ps_mcap_write_metadata(&f->mcap, "pushstep.recorder", kv, n); /* seen in close */
+    st->n_index_bytes = (uint64_t)f->mcap.chunks_cap * sizeof(ps_mcap_chunk_entry_t);
     int rc = ps_mcap_close(&f->mcap);
     if (close(f->fd) < 0 && rc == 0)
         rc = -errno;

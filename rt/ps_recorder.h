@@ -188,6 +188,9 @@ typedef struct {
     uint64_t n_bytes;
     uint64_t n_lost_ring; /**< records overwritten before the writer read them */
     uint64_t n_lost_io;   /**< records that could not be written (I/O error) */
+    uint64_t n_index_bytes; /**< chunk index held in memory until close, for the MCAP
+                                 summary: it grows with the file (the one growth a long
+                                 recording has; tools/soak.py allows for it) */
     int err;              /**< 0 or the error that ended the file */
     uint32_t triggers;    /**< flight: cause(s) of the dump */
     uint64_t trigger_tick;
