@@ -23,6 +23,7 @@
 #include "../drivers/ps_candump.h"
 #include "../sim/ps_plant.h"
 #include "../sim/ps_render.h"
+#include "ps_args.h"
 #include "ps_app.h"
 #include "ps_doctor.h"
 #include "ps_camview.h"
@@ -207,15 +208,11 @@ static const char USAGE[] =
 
 static int parse_seconds(const char *text, const char *what, double *out)
 {
-    char *end = NULL;
-    errno = 0;
-    double v = strtod(text, &end);
-    if (errno != 0 || end == text || *end != '\0' || !(v >= 0.0) || v > 86400.0) {
+    if (ps_args_seconds(text, 0.0, 86400.0, false, out) < 0) {
         fprintf(stderr, "pushstep: %s: \"%s\" is not a number of seconds in [0, 86400]\n", what,
                 text);
         return -EINVAL;
     }
-    *out = v;
     return 0;
 }
 

@@ -1,3 +1,4 @@
+#include "ps_args.h"
 #include "ps_emulate.h"
 
 #include <errno.h>
@@ -117,15 +118,11 @@ static int parse_ifaces(const char *arg)
 
 static int parse_seconds(const char *arg, const char *name, double *out)
 {
-    char *end = NULL;
-    errno = 0;
-    const double v = strtod(arg, &end);
-    if (errno != 0 || end == arg || *end != '\0' || !isfinite(v) || v < 0.0 || v > 1e6) {
+    if (ps_args_seconds(arg, 0.0, 1e6, false, out) < 0) {
         fprintf(stderr, "pushstep emulate: %s: '%s' is not a number of seconds in [0, 1e6]\n", name,
                 arg);
         return -EINVAL;
     }
-    *out = v;
     return 0;
 }
 
