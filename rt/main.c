@@ -579,6 +579,7 @@ static int setup_recorder(char *err, size_t len)
         .compression = g.opt.compression,
         .is_sync_chunks = true,
         .cpu = g.app.board.rt.worker_cpu,
+        .is_lossless = is_unpaced(), /* no deadline to keep: wait for the writer */
     };
     ps_app_recorder_cfg(&g.app, &rc_cfg);
     int rc = ps_recorder_init(&g.rec, &rc_cfg, err, len);
