@@ -129,7 +129,7 @@ HW_BINS := $(patsubst tests/hw/%.c,$(BUILD)/tests/hw/%,$(HW_SRCS))
 QEMU_WORK ?= $(BUILD)/qemu
 
 .PHONY: all deps deps-build deps-test deps-npm deps-bench deps-train run test test-hw clean format help \
-        bench bench-hw train install deb test-deb aarch64-test-bins soak
+        bench bench-hw train install deb test-deb aarch64-test-bins soak test-build
 all: $(BUILD)/pushstep $(CAMERA_SO)
 
 help:
@@ -262,9 +262,12 @@ aarch64-test-bins: $(BUILD)/pushstep $(CAMERA_SO) $(TEST_BINS)
 else
 # The native suite, then the quick part of the aarch64 one under qemu-user
 # (tools/test-aarch64.sh) when the cross tools are installed (deps-test
-# installs them where apt can), then the VM tests.
-test: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(BUILD)/libpsenv.so $(TEST_BINS) $(TSAN_BINS) \
-      $(TSAN_PUSHSTEP) $(ASAN_PUSHSTEP) $(HW_BINS) aarch64-test-bins
+# installs them where apt can), then the VM tests. The packages first, then
+# the builds (plain, sanitized, aarch64) on every CPU: a sub-make, so that
+# no compiler starts before its headers are installed.
+NPROC := $(shell nproc 2>/dev/null || echo 1)
+test: deps-test
+	@$(MAKE) --no-print-directory -j$(NPROC) test-build
 	@# without the npm packages the rest of the suite still runs; the reader
 	@# check then fails (tests/test_e2e_recorder.c) and says why
 	@bash tools/npm-deps.sh $(BUILD)/npm || echo "make test: continuing without the MCAP readers"
@@ -274,6 +277,9 @@ test: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(BUILD)/libpsenv.so $(TEST_BINS)
 	    tests/test_asan_cli.sh \
 	    tests/test_soak_short.sh policy/train/test_tools.py \
 	    tests/test_train_smoke.sh tools/test-install.sh tools/test-aarch64.sh tools/qemu/test-hw.sh
+
+test-build: $(BUILD)/pushstep $(CAMERA_SO) $(BUILD)/libpsenv.so $(TEST_BINS) $(TSAN_BINS) \
+            $(TSAN_PUSHSTEP) $(ASAN_PUSHSTEP) $(HW_BINS) aarch64-test-bins
 
 AARCH64_BUILD := build-aarch64
 aarch64-test-bins:
