@@ -665,7 +665,9 @@ static void test_sigkill_heartbeat_stops(void **state)
                       "every %.1f us); after the kill %d change(s) (at %s), process gone at "
                       "%.3f ms\n",
                       k, r.n_before, r.sample_us, r.n_after, after, (double)r.gone_ns / 1e6);
-        assert_true(r.n_before >= 10);       /* it was beating */
+        /* it was beating: 100 changes at 1 kHz, far fewer when the host
+         * starves the VM's CPUs (8 seen under load 4) */
+        assert_true(r.n_before >= 3);
         assert_true(r.n_after <= 2);         /* a beat in flight and the release at most */
         assert_int_equal(r.n_after_gone, 0); /* nothing moves the line once it is gone */
         if (r.last_ns > worst_last_ns)
