@@ -43,6 +43,10 @@ TOOL_PKGS  := rt-tests can-utils
 TEST_PKGS  := can-utils systemd gnuplot-nox libcamera-ipa udev \
               python3 python3-numpy python3-onnx python3-hypothesis python3-torch \
               python3-yaml python3-tqdm
+# The fuzz targets (tests/fuzz/, docs/fuzzing.md): clang with libFuzzer and
+# its sanitizer runtimes (libclang-rt-14-dev is only a recommendation of
+# clang-14's, so it is named).
+TEST_PKGS  += clang-14 libclang-rt-14-dev
 # Extra packages `make bench` needs: load generator, plots, the analysis script,
 # GNU parallel for the push-recovery grid (bench/push.py), OpenBLAS and
 # libtorch for the inference comparison (bench/policy.sh).
@@ -120,6 +124,7 @@ HW_SRCS := $(wildcard tests/hw/test_hw_*.c)
 HW_BINS := $(patsubst tests/hw/%.c,$(BUILD)/tests/hw/%,$(HW_SRCS))
 QEMU_WORK ?= $(BUILD)/qemu
 
+.PHONY: fuzz
 .PHONY: all deps deps-build deps-test deps-npm deps-bench deps-train run test test-hw clean format help \
         bench bench-hw train install deb test-deb aarch64-test-bins
 all: $(BUILD)/pushstep $(CAMERA_SO)
@@ -222,6 +227,44 @@ $(addprefix $(BUILD)/tests/,$(NOSAN_TESTS)): $(BUILD)/tests/%: $(BUILD)/obj/test
 $(HW_BINS): $(BUILD)/tests/hw/%: $(BUILD)/obj/tests/hw/%.o $(LIB_OBJS) $(FAKE_OBJS)
 	@mkdir -p $(@D)
 	$(CC) $(CFLAGS) -o $@ $^ $(LDLIBS) -lcmocka
+
+# ---- fuzzing (docs/fuzzing.md) --------------------------------------------
+# libFuzzer targets, one file each in tests/fuzz/, built with Debian's clang
+# and AddressSanitizer + UBSan. The parsers they call are built again with
+# coverage into an archive (only the modules of outside input and what they
+# need), so a target links only what it uses.
+FUZZ_CC      ?= clang-14
+FUZZ_CFLAGS  := -O1 -g -std=c11 -D_GNU_SOURCE -pthread $(WARN) -MMD -MP -fno-omit-frame-pointer
+FUZZ_SAN     := -fsanitize=address,undefined -fno-sanitize-recover=undefined
+FUZZ_LIB_SRCS := drivers/ps_actuator.c drivers/ps_mit.c drivers/ps_robstride.c drivers/ps_moteus.c \
+                 drivers/ps_imu.c drivers/ps_imu_msg.c drivers/ps_imu_xsens.c drivers/ps_candump.c \
+                 drivers/ps_can_replay.c drivers/ps_gpio_gpiod.c drivers/ps_canbus.c \
+                 $(wildcard policy/*.c) rt/ps_err.c rt/ps_clock.c rt/ps_config_board.c \
+                 rt/ps_config_common.c rt/ps_config_robot.c rt/ps_config_scenario.c rt/ps_mcap.c \
+                 rt/ps_rosmsg.c rt/ps_reclog.c drivers/ps_camera.c sim/ps_crowd.c sim/ps_social.c \
+                 rt/ps_sm.c
+FUZZ_SRCS    := $(wildcard tests/fuzz/fuzz_*.c)
+FUZZ_BINS    := $(patsubst tests/fuzz/%.c,$(BUILD)/fuzz/%,$(FUZZ_SRCS))
+FUZZ_LIB     := $(BUILD)/fuzz/libps_fuzz.a
+FUZZ_LDLIBS  := -lmujoco -lcyaml -lyaml -lcjson -lgpiod -lmnl -lzstd -llz4 -lz -lm -pthread
+FUZZ_SECONDS ?= 60
+
+$(BUILD)/fuzz/obj/%.o: %.c
+	@mkdir -p $(@D)
+	$(FUZZ_CC) $(FUZZ_CFLAGS) $(FUZZ_SAN) -fsanitize=fuzzer-no-link -c $< -o $@
+
+$(FUZZ_LIB): $(patsubst %.c,$(BUILD)/fuzz/obj/%.o,$(FUZZ_LIB_SRCS))
+	@rm -f $@
+	ar rcs $@ $^
+
+$(FUZZ_BINS): $(BUILD)/fuzz/%: tests/fuzz/%.c $(FUZZ_LIB)
+	$(FUZZ_CC) $(FUZZ_CFLAGS) $(FUZZ_SAN) -fsanitize=fuzzer -MF $@.d -o $@ $< $(FUZZ_LIB) $(FUZZ_LDLIBS)
+
+# make fuzz: every target for FUZZ_SECONDS (default 60) from its seeds and
+# what earlier runs found ($(BUILD)/fuzz/corpus), into bench/results/fuzz.json
+# and fuzz.md; crashes are kept in $(BUILD)/fuzz/crashes.
+fuzz: deps-test $(FUZZ_BINS)
+	@BUILD=$(BUILD) FUZZ_SECONDS=$(FUZZ_SECONDS) bash tools/fuzz.sh $(FUZZ_BINS)
 
 run: deps-build $(BUILD)/pushstep $(CAMERA_SO)
 	$(BUILD)/pushstep --board sim $(ARGS)
@@ -326,4 +369,4 @@ format:
 clean:
 	rm -rf $(BUILD)
 
--include $(shell find $(BUILD)/obj $(BUILD)/san $(BUILD)/pic -name '*.d' -type f 2>/dev/null)
+-include $(shell find $(BUILD)/obj $(BUILD)/san $(BUILD)/pic $(BUILD)/fuzz -name '*.d' -type f 2>/dev/null)
