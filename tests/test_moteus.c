@@ -357,6 +357,33 @@ static void test_ps_moteus_decode_cmd_vendor_example(void **state)
     assert_float_equal(c.kd_nm_s_rad, 5.0f, 0.0f);
 }
 
+/* Found by tests/fuzz/fuzz_moteus: a position set-point of 1.27e38 rev is
+ * finite but inf in rad; the decoded command was inf. Refused now, output
+ * untouched; a large finite one still decodes. */
+static void test_ps_moteus_decode_cmd_overflowing_scale_refused(void **state)
+{
+    (void)state;
+    const ps_act_cfg_t a = drive();
+    /* mode 10; write 5 floats at 0x020: position 0x7ec00000, velocity and
+     * torque 0, kp and kd scale 1; NOP padding */
+    static const uint8_t CRASH[32] = {0x01, 0x00, 0x0a, 0x0c, 0x05, 0x20, 0x00, 0x00,
+                                      0xc0, 0x7e, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,
+                                      0x00, 0x00, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00,
+                                      0x80, 0x3f, 0x50, 0x50, 0x50, 0x50, 0x50, 0x50};
+    ps_can_frame_t f = fd_frame(0x810b, CRASH, 32);
+    ps_act_cmd_t c = {.q_rad = 7.0f};
+    assert_int_equal(ps_moteus_proto.decode_cmd(&a, &f, &c), -PS_ERR_PROTOCOL);
+    assert_float_equal(c.q_rad, 7.0f, 0.0f);
+    f.data[9] = 0x4e; /* 1.6e9 rev: finite in rad */
+    f.data[21] = 0x7f; /* and a kp scale of 3e38 is inf in Nm/rad */
+    f.data[20] = 0x70;
+    assert_int_equal(ps_moteus_proto.decode_cmd(&a, &f, &c), -PS_ERR_PROTOCOL);
+    f.data[21] = 0x3f;
+    f.data[20] = 0x80;
+    assert_int_equal(ps_moteus_proto.decode_cmd(&a, &f, &c), 0);
+    assert_true(isfinite(c.q_rad) && isfinite(c.qd_rad_s));
+}
+
 /* Malformed replies and commands: -PS_ERR_PROTOCOL, output untouched. */
 static void test_ps_moteus_malformed_frames_refused(void **state)
 {
@@ -599,6 +626,7 @@ int main(void)
         cmocka_unit_test(test_ps_act_decode_reply_moteus_hand_vector),
         cmocka_unit_test(test_ps_moteus_decode_reply_vendor_example),
         cmocka_unit_test(test_ps_moteus_decode_cmd_vendor_example),
+        cmocka_unit_test(test_ps_moteus_decode_cmd_overflowing_scale_refused),
         cmocka_unit_test(test_ps_moteus_malformed_frames_refused),
         cmocka_unit_test(test_ps_moteus_match_reply_and_filter),
         cmocka_unit_test(test_ps_moteus_encode_reply_round_trip),

@@ -10,7 +10,8 @@
  * The harness keeps the raw level as it told the filter (times clamped as
  * the filter documents: never backwards) and checks the filter's promises:
  *   - no missed press: a press seen held for debounce_ns or longer (by an
- *     edge or poll) is reported by the next take, even if released before;
+ *     edge or poll) is reported by the next take, even if released before
+ *     (once: a press held across a take is not owed again);
  *   - no phantom press: a take says pressed only if some press (or the level
  *     at init) was seen held for at least debounce_ns;
  *   - debounce 0: take says pressed exactly when the input is pressed now or
@@ -23,6 +24,7 @@ typedef struct {
     int64_t since_ns;       /* when it took it */
     int64_t last_ns;        /* latest time told */
     bool is_owed;           /* a press held >= debounce since the last take: must report */
+    bool is_run_counted;    /* the present press already made a take owe it */
     bool has_stable_press;  /* some press (or the init level) held >= debounce, ever */
     bool has_press_edge;    /* debounce 0: a press edge since the last take */
 } model_t;
@@ -36,7 +38,8 @@ static int64_t add_sat(int64_t t, int64_t dt)
 static void observe(model_t *m, int64_t debounce_ns, int64_t t_ns)
 {
     if (m->is_raw && (uint64_t)t_ns - (uint64_t)m->since_ns >= (uint64_t)debounce_ns) {
-        m->is_owed = true;
+        m->is_owed = m->is_owed || !m->is_run_counted;
+        m->is_run_counted = true;
         m->has_stable_press = true;
     }
 }
@@ -50,7 +53,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 
     ps_gpio_debounce_t d;
     ps_gpio_debounce_init(&d, debounce_ns, is_init_pressed, t_ns);
-    model_t m = {is_init_pressed, t_ns, t_ns, is_init_pressed, is_init_pressed, false};
+    model_t m = {is_init_pressed, t_ns,           t_ns, is_init_pressed,
+                 is_init_pressed, is_init_pressed, false};
 
     while (in.n > 0) {
         const uint8_t op = fuzz_u8(&in);
@@ -69,6 +73,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             if (level != m.is_raw) {
                 m.is_raw = level;
                 m.since_ns = t;
+                m.is_run_counted = false;
                 if (level)
                     m.has_press_edge = true;
                 observe(&m, debounce_ns, t);
