@@ -138,6 +138,8 @@ help:
 	@echo "             options pass through: make run ARGS=\"--duration 5 --lockstep\""
 	@echo "make test    deps + build + run the whole cmocka suite, test-hw included"
 	@echo "             (skipped with a message where qemu cannot be installed)"
+	@echo "make fuzz    every libFuzzer target (tests/fuzz/) for FUZZ_SECONDS (default 60)"
+	@echo "             each: bench/results/fuzz.json and fuzz.md (docs/fuzzing.md)"
 	@echo "make test-hw the real drivers (SocketCAN, libgpiod) in a Debian kernel"
 	@echo "             booted under qemu with vcan, vxcan and gpio-mockup"
 	@echo "make bench   latency beside cyclictest, tick share, bus load, allocations,"
@@ -238,11 +240,11 @@ FUZZ_CFLAGS  := -O1 -g -std=c11 -D_GNU_SOURCE -pthread $(WARN) -MMD -MP -fno-omi
 FUZZ_SAN     := -fsanitize=address,undefined -fno-sanitize-recover=undefined
 FUZZ_LIB_SRCS := drivers/ps_actuator.c drivers/ps_mit.c drivers/ps_robstride.c drivers/ps_moteus.c \
                  drivers/ps_imu.c drivers/ps_imu_msg.c drivers/ps_imu_xsens.c drivers/ps_candump.c \
-                 drivers/ps_can_replay.c drivers/ps_gpio_gpiod.c drivers/ps_canbus.c \
-                 $(wildcard policy/*.c) rt/ps_err.c rt/ps_clock.c rt/ps_config_board.c \
-                 rt/ps_config_common.c rt/ps_config_robot.c rt/ps_config_scenario.c rt/ps_mcap.c \
-                 rt/ps_rosmsg.c rt/ps_reclog.c drivers/ps_camera.c sim/ps_crowd.c sim/ps_social.c \
-                 rt/ps_sm.c
+                 drivers/ps_can_replay.c drivers/ps_gpio_gpiod.c drivers/ps_camera.c drivers/ps_canbus.c \
+                 $(wildcard policy/*.c) \
+                 rt/ps_err.c rt/ps_clock.c rt/ps_config_board.c rt/ps_config_common.c \
+                 rt/ps_config_robot.c rt/ps_config_scenario.c rt/ps_mcap.c rt/ps_rosmsg.c \
+                 rt/ps_reclog.c rt/ps_sm.c sim/ps_crowd.c sim/ps_social.c
 FUZZ_SRCS    := $(wildcard tests/fuzz/fuzz_*.c)
 FUZZ_BINS    := $(patsubst tests/fuzz/%.c,$(BUILD)/fuzz/%,$(FUZZ_SRCS))
 FUZZ_LIB     := $(BUILD)/fuzz/libps_fuzz.a
@@ -258,7 +260,7 @@ $(FUZZ_LIB): $(patsubst %.c,$(BUILD)/fuzz/obj/%.o,$(FUZZ_LIB_SRCS))
 	ar rcs $@ $^
 
 $(FUZZ_BINS): $(BUILD)/fuzz/%: tests/fuzz/%.c $(FUZZ_LIB)
-	$(FUZZ_CC) $(FUZZ_CFLAGS) $(FUZZ_SAN) -fsanitize=fuzzer -MF $@.d -o $@ $< $(FUZZ_LIB) $(FUZZ_LDLIBS)
+	$(FUZZ_CC) $(FUZZ_CFLAGS) $(FUZZ_SAN) -fsanitize=fuzzer -MF $(BUILD)/fuzz/obj/$(@F).d -o $@ $< $(FUZZ_LIB) $(FUZZ_LDLIBS)
 
 # make fuzz: every target for FUZZ_SECONDS (default 60) from its seeds and
 # what earlier runs found ($(BUILD)/fuzz/corpus), into bench/results/fuzz.json
@@ -279,14 +281,16 @@ else
 # (tools/test-aarch64.sh) when the cross tools are installed (deps-test
 # installs them where apt can), then the VM tests.
 test: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(BUILD)/libpsenv.so $(TEST_BINS) $(TSAN_BINS) \
-      $(HW_BINS) aarch64-test-bins
+      $(HW_BINS) $(FUZZ_BINS) aarch64-test-bins
 	@# without the npm packages the rest of the suite still runs; the reader
 	@# check then fails (tests/test_e2e_recorder.c) and says why
 	@bash tools/npm-deps.sh $(BUILD)/npm || echo "make test: continuing without the MCAP readers"
 	@PUSHSTEP_BIN=$(BUILD)/pushstep PUSHSTEP_NPM=$(BUILD)/npm QEMU_WORK=$(QEMU_WORK) \
-	    HW_BINS="$(HW_BINS)" AARCH64_BUILD=$(AARCH64_BUILD) bash tools/run-tests.sh \
+	    HW_BINS="$(HW_BINS)" AARCH64_BUILD=$(AARCH64_BUILD) BUILD=$(BUILD) FUZZ_BINS="$(FUZZ_BINS)" \
+	    bash tools/run-tests.sh \
 	    tools/check-layers.sh $(TEST_BINS) $(TSAN_BINS) policy/train/test_tools.py \
-	    tests/test_train_smoke.sh tools/test-install.sh tools/test-aarch64.sh tools/qemu/test-hw.sh
+	    tests/test_train_smoke.sh tests/test_fuzz.sh tools/test-install.sh tools/test-aarch64.sh \
+	    tools/qemu/test-hw.sh
 
 AARCH64_BUILD := build-aarch64
 aarch64-test-bins:

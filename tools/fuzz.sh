@@ -8,9 +8,11 @@
 #                                 between runs), crashes in $BUILD/fuzz/crashes/
 #                                 NAME/; writes bench/results/fuzz.json and
 #                                 fuzz.md (executions, corpus, crashes)
-#   tools/fuzz.sh --test S BIN... make test: S seconds each (default 2) in a
-#                                 scratch corpus; prints cmocka's lines for
-#                                 tools/run-tests.sh, one test per target
+#   tools/fuzz.sh --test S BIN... make test: S seconds each in a scratch
+#                                 corpus (a crash's input is kept in
+#                                 $BUILD/fuzz/test-crashes/NAME/); prints
+#                                 cmocka's lines for tools/run-tests.sh, one
+#                                 test per target
 # Exit 1 if any target crashed (a broken contract or a sanitizer report).
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -19,7 +21,7 @@ is_test=0
 seconds=${FUZZ_SECONDS:-60}
 if [ "${1:-}" = "--test" ]; then
     is_test=1
-    seconds=${2:-2}
+    seconds=${2:-1}
     shift 2
 fi
 [ $# -gt 0 ] || { echo "usage: tools/fuzz.sh [--test SECONDS] BIN..." >&2; exit 2; }
@@ -65,9 +67,9 @@ for bin in "$@"; do
         echo "[  FAILED  ] $name: $n_crash crash(es) after ${execs:-?} executions"
         grep -E 'contract broken|ERROR: |SUMMARY|runtime error' "$log" | head -5
         if [ $is_test -eq 1 ]; then
-            mkdir -p "$build/fuzz/crashes/$name"
-            cp "$art"* "$build/fuzz/crashes/$name/" 2>/dev/null
-            echo "    input kept in $build/fuzz/crashes/$name/ (reproduce: $bin FILE)"
+            mkdir -p "$build/fuzz/test-crashes/$name"
+            cp "$art"* "$build/fuzz/test-crashes/$name/" 2>/dev/null
+            echo "    input kept in $build/fuzz/test-crashes/$name/ (reproduce: $bin FILE)"
         else
             echo "    input in $art (reproduce: $bin FILE)"
         fi

@@ -8,8 +8,9 @@
  * return 0 or a documented code with a message naming the file; init into
  * storage of the measured size never says -ENOSPC; replaying the whole log
  * (the clock moved tick by tick to the log's last frame, every bus drained)
- * hands over only valid frames, in time order per bus, never later than the
- * clock, and exactly as many as the stats count as fed. */
+ * hands over only valid frames, none stamped after the clock's now (in file
+ * order per bus: a log whose times go back is handed over as written), all
+ * of them by the end, and exactly as many as the stats count as fed. */
 #include <errno.h>
 
 #include "../../drivers/ps_can_replay.h"
@@ -95,11 +96,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     if (rc == 0) {
         const ps_clock_t *clk = ps_can_replay_clock(&r);
         ps_can_port_t port[4];
-        int64_t last_t[4];
-        for (uint32_t b = 0; b < 4; b++) {
+        for (uint32_t b = 0; b < 4; b++)
             port[b] = ps_can_replay_port(&r, b);
-            last_t[b] = INT64_MIN;
-        }
         uint64_t n_fed = 0;
         const int64_t end_ns = ps_can_replay_last_ns(&r);
         int64_t now = clk->now_ns(clk->ctx);
@@ -112,10 +110,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 while ((n = ps_can_recv_batch(&port[b], f, 16)) > 0) {
                     for (int k = 0; k < n; k++) {
                         FUZZ_CHECK(ps_can_is_valid_frame(&f[k]), "handed over an invalid frame");
-                        FUZZ_CHECK(f[k].t_ns <= now && f[k].t_ns >= last_t[b],
-                                   "frame at %lld handed over at %lld after %lld",
-                                   (long long)f[k].t_ns, (long long)now, (long long)last_t[b]);
-                        last_t[b] = f[k].t_ns;
+                        FUZZ_CHECK(f[k].t_ns <= now, "frame at %lld handed over at %lld",
+                                   (long long)f[k].t_ns, (long long)now);
                     }
                     n_fed += (uint64_t)n;
                 }

@@ -10,36 +10,49 @@
  * The harness keeps the raw level as it told the filter (times clamped as
  * the filter documents: never backwards) and checks the filter's promises:
  *   - no missed press: a press seen held for debounce_ns or longer (by an
- *     edge or poll) is reported by the next take, even if released before
- *     (once: a press held across a take is not owed again);
+ *     edge or poll) is reported by the next take, even if released before;
+ *     a press counts again only after a release held that long (a shorter
+ *     release is a glitch inside one press, reported once);
  *   - no phantom press: a take says pressed only if some press (or the level
  *     at init) was seen held for at least debounce_ns;
  *   - debounce 0: take says pressed exactly when the input is pressed now or
- *     a press edge came since the previous take. */
+ *     a press edge came since the previous take (the first take: or the
+ *     input was pressed at init). */
 #include "../../drivers/ps_gpio_gpiod.h"
 #include "fuzz.h"
 
 typedef struct {
-    bool is_raw;            /* level told to the filter */
-    int64_t since_ns;       /* when it took it */
-    int64_t last_ns;        /* latest time told */
-    bool is_owed;           /* a press held >= debounce since the last take: must report */
-    bool is_run_counted;    /* the present press already made a take owe it */
-    bool has_stable_press;  /* some press (or the init level) held >= debounce, ever */
-    bool has_press_edge;    /* debounce 0: a press edge since the last take */
+    bool is_raw;           /* level told to the filter */
+    int64_t since_ns;      /* when it took it */
+    int64_t last_ns;       /* latest time told */
+    bool is_owed;          /* a new press held >= debounce since the last take: must report */
+    bool is_waiting_release; /* a press was counted: the next counts only after a release
+                                held >= debounce (a shorter one is a glitch of that press) */
+    bool has_stable_press; /* some press (or the init level) held >= debounce, ever */
+    bool has_press_edge;   /* debounce 0: a press edge since the last take */
 } model_t;
 
+/* dt >= 0 */
 static int64_t add_sat(int64_t t, int64_t dt)
 {
     return t > INT64_MAX - dt ? INT64_MAX : t + dt;
 }
 
-/* The level held from since_ns to t_ns: a press that long is stable. */
+static int64_t sub_sat(int64_t t, int64_t dt)
+{
+    return t < INT64_MIN + dt ? INT64_MIN : t - dt;
+}
+
+/* The level held from since_ns to t_ns: that long is stable. */
 static void observe(model_t *m, int64_t debounce_ns, int64_t t_ns)
 {
-    if (m->is_raw && (uint64_t)t_ns - (uint64_t)m->since_ns >= (uint64_t)debounce_ns) {
-        m->is_owed = m->is_owed || !m->is_run_counted;
-        m->is_run_counted = true;
+    if ((uint64_t)t_ns - (uint64_t)m->since_ns < (uint64_t)debounce_ns)
+        return;
+    if (!m->is_raw) {
+        m->is_waiting_release = false;
+    } else if (!m->is_waiting_release) {
+        m->is_owed = true;
+        m->is_waiting_release = true;
         m->has_stable_press = true;
     }
 }
@@ -53,8 +66,14 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 
     ps_gpio_debounce_t d;
     ps_gpio_debounce_init(&d, debounce_ns, is_init_pressed, t_ns);
-    model_t m = {is_init_pressed, t_ns,           t_ns, is_init_pressed,
-                 is_init_pressed, is_init_pressed, false};
+    /* a level pressed at init counts as a press for the first take */
+    model_t m = {.is_raw = is_init_pressed,
+                 .since_ns = t_ns,
+                 .last_ns = t_ns,
+                 .is_owed = is_init_pressed,
+                 .is_waiting_release = is_init_pressed,
+                 .has_stable_press = is_init_pressed,
+                 .has_press_edge = is_init_pressed};
 
     while (in.n > 0) {
         const uint8_t op = fuzz_u8(&in);
@@ -63,7 +82,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         switch (op & 3u) {
         case 0:
         case 3: {
-            const int64_t t_edge = (op & 3u) == 0 ? add_sat(t_ns, dt_ns) : t_ns - dt_ns;
+            const int64_t t_edge = (op & 3u) == 0 ? add_sat(t_ns, dt_ns) : sub_sat(t_ns, dt_ns);
             if ((op & 3u) == 0)
                 t_ns = t_edge;
             ps_gpio_debounce_edge(&d, level, t_edge);
@@ -73,7 +92,6 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             if (level != m.is_raw) {
                 m.is_raw = level;
                 m.since_ns = t;
-                m.is_run_counted = false;
                 if (level)
                     m.has_press_edge = true;
                 observe(&m, debounce_ns, t);
