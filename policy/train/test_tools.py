@@ -179,6 +179,10 @@ class Onnx2Policy(unittest.TestCase):
         m = graph(rand_layers(rng, [15, 8, 4], ["relu", "identity"]))
         m.graph.node[1].output[0] = m.graph.node[1].input[0]  # Relu(y0) -> y0
         self._refused(m, "computed earlier in the chain (a cycle)")
+        # a square Gemm writing its own input: the old importer looped forever
+        m = graph(rand_layers(rng, [15, 15], ["identity"]))
+        m.graph.node[0].output[0] = m.graph.node[0].input[0]  # Gemm(x) -> x
+        self._refused(m, "node g0 (Gemm): its output x is computed earlier")
 
     def test_cli_not_onnx_exit_status(self):
         rng = np.random.default_rng(12)
