@@ -374,7 +374,7 @@ static void test_ps_moteus_decode_cmd_overflowing_scale_refused(void **state)
     ps_act_cmd_t c = {.q_rad = 7.0f};
     assert_int_equal(ps_moteus_proto.decode_cmd(&a, &f, &c), -PS_ERR_PROTOCOL);
     assert_float_equal(c.q_rad, 7.0f, 0.0f);
-    f.data[9] = 0x4e; /* 1.6e9 rev: finite in rad */
+    f.data[9] = 0x4e;  /* 1.6e9 rev: finite in rad */
     f.data[21] = 0x7f; /* and a kp scale of 3e38 is inf in Nm/rad */
     f.data[20] = 0x70;
     assert_int_equal(ps_moteus_proto.decode_cmd(&a, &f, &c), -PS_ERR_PROTOCOL);

@@ -90,15 +90,15 @@ static void fuzz_act_check_values(const ps_act_cfg_t *a, const fuzz_act_res_t *r
         const ps_act_meas_t *m = &r->reply;
         FUZZ_CHECK(isfinite(m->q_rad) && isfinite(m->qd_rad_s) && isfinite(m->tau_nm) &&
                        isfinite(m->temp_c),
-                   "reply not finite: q %g qd %g tau %g temp %g", m->q_rad, m->qd_rad_s,
-                   m->tau_nm, m->temp_c);
+                   "reply not finite: q %g qd %g tau %g temp %g", m->q_rad, m->qd_rad_s, m->tau_nm,
+                   m->temp_c);
         FUZZ_CHECK((m->fault_bits & ~FUZZ_ACT_ALL_FAULTS) == 0u, "reply fault bits 0x%x",
                    m->fault_bits);
         FUZZ_CHECK(m->t_ns == 77, "decode_reply wrote t_ns");
         if (is_packed) {
             const float i_abs = fmaxf(fabsf(w->i_min_a), fabsf(w->i_max_a));
-            const float t_abs = fmaxf(fmaxf(fabsf(w->t_min_nm), fabsf(w->t_max_nm)),
-                                      i_abs * fabsf(a->kt_nm_a));
+            const float t_abs =
+                fmaxf(fmaxf(fabsf(w->t_min_nm), fabsf(w->t_max_nm)), i_abs * fabsf(a->kt_nm_a));
             FUZZ_CHECK(fuzz_in_range(m->q_rad, w->p_min_rad, w->p_max_rad),
                        "reply q %.9g outside [%g, %g]", m->q_rad, w->p_min_rad, w->p_max_rad);
             FUZZ_CHECK(fuzz_in_range(m->qd_rad_s, w->v_min_rad_s, w->v_max_rad_s),
@@ -154,8 +154,8 @@ static void fuzz_act_round_trip(const ps_act_cfg_t *a, const fuzz_act_res_t *r)
     const float lsb_v = (w->v_max_rad_s - w->v_min_rad_s) / (float)((1u << bits[1]) - 1u);
     FUZZ_CHECK(fabsf(m.q_rad - r->reply.q_rad) <= lsb_q * 1.01f, "q %.9g came back as %.9g",
                r->reply.q_rad, m.q_rad);
-    FUZZ_CHECK(fabsf(m.qd_rad_s - r->reply.qd_rad_s) <= lsb_v * 1.01f,
-               "qd %.9g came back as %.9g", r->reply.qd_rad_s, m.qd_rad_s);
+    FUZZ_CHECK(fabsf(m.qd_rad_s - r->reply.qd_rad_s) <= lsb_v * 1.01f, "qd %.9g came back as %.9g",
+               r->reply.qd_rad_s, m.qd_rad_s);
 }
 
 /* Two mountings of the same drive: direct, and geared 9:1, reversed, offset. */
@@ -170,8 +170,7 @@ static ps_act_cfg_t fuzz_act_mount(ps_act_cfg_t a, uint8_t sel)
     return a;
 }
 
-static int fuzz_act_run(const ps_act_cfg_t *base, bool is_packed, const uint8_t *data,
-                        size_t size)
+static int fuzz_act_run(const ps_act_cfg_t *base, bool is_packed, const uint8_t *data, size_t size)
 {
     fuzz_in_t in = {data, size};
     const ps_act_cfg_t a = fuzz_act_mount(*base, fuzz_u8(&in));

@@ -66,8 +66,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     cfg.act = act;
     cfg.n_joints = 3;
     cfg.imu_bus_idx = 3;
-    const ps_imu_cfg_t imu = {.bus_idx = 3, .base_id = 0x080, .rate_div = 1,
-                              .protocol = PS_IMU_PROTO_PUSHSTEP};
+    const ps_imu_cfg_t imu = {
+        .bus_idx = 3, .base_id = 0x080, .rate_div = 1, .protocol = PS_IMU_PROTO_PUSHSTEP};
     uint8_t lens[PS_IMU_MAX_FRAMES];
     cfg.n_imu_ids = ps_imu_frames(&imu, cfg.imu_ids, lens);
     cfg.period_ns = PERIOD_NS;
@@ -77,22 +77,19 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     FUZZ_CHECK(rc == 0 || rc == -PS_ERR_PROTOCOL || rc == -PS_ERR_CONFIG || rc == -EIO,
                "measure returned %d (%s)", rc, err);
     if (rc < 0) {
-        FUZZ_CHECK(strncmp(err, path, strlen(path)) == 0, "a message not naming the file: %s",
-                   err);
+        FUZZ_CHECK(strncmp(err, path, strlen(path)) == 0, "a message not naming the file: %s", err);
         close(fd);
         return 0;
     }
-    ps_can_replay_entry_t *entries = calloc(sz.n_entries > 0 ? sz.n_entries : 1,
-                                            sizeof(*entries));
+    ps_can_replay_entry_t *entries = calloc(sz.n_entries > 0 ? sz.n_entries : 1, sizeof(*entries));
     uint8_t *pool = sz.n_data > 0 ? malloc(sz.n_data) : NULL;
     static ps_can_replay_t r;
     rc = entries != NULL && (pool != NULL || sz.n_data == 0)
-             ? ps_can_replay_init(&r, &cfg, entries, sz.n_entries, pool, sz.n_data, err,
-                                  sizeof err)
+             ? ps_can_replay_init(&r, &cfg, entries, sz.n_entries, pool, sz.n_data, err, sizeof err)
              : -ENOMEM;
     close(fd);
-    FUZZ_CHECK(rc == 0 || rc == -ENOMEM, "init after a measure that passed returned %d (%s)",
-               rc, err);
+    FUZZ_CHECK(rc == 0 || rc == -ENOMEM, "init after a measure that passed returned %d (%s)", rc,
+               err);
     if (rc == 0) {
         const ps_clock_t *clk = ps_can_replay_clock(&r);
         ps_can_port_t port[4];
@@ -101,8 +98,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         uint64_t n_fed = 0;
         const int64_t end_ns = ps_can_replay_last_ns(&r);
         int64_t now = clk->now_ns(clk->ctx);
-        FUZZ_CHECK(now == ps_can_replay_start_ns(&r) && now >= PERIOD_NS,
-                   "clock starts at %lld", (long long)now);
+        FUZZ_CHECK(now == ps_can_replay_start_ns(&r) && now >= PERIOD_NS, "clock starts at %lld",
+                   (long long)now);
         for (int tick = 0; tick < MAX_TICKS; tick++) {
             for (int b = 0; b < 4; b++) {
                 ps_can_frame_t f[16];
@@ -125,10 +122,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         ps_can_replay_stats_t st;
         ps_can_replay_get_stats(&r, &st);
         FUZZ_CHECK(now <= end_ns || st.n_fed == st.n_fed_logged,
-                   "%llu of %llu fed frames handed over by the end",
-                   (unsigned long long)st.n_fed, (unsigned long long)st.n_fed_logged);
-        FUZZ_CHECK(st.n_fed == n_fed, "stats say %llu fed, %llu were",
-                   (unsigned long long)st.n_fed, (unsigned long long)n_fed);
+                   "%llu of %llu fed frames handed over by the end", (unsigned long long)st.n_fed,
+                   (unsigned long long)st.n_fed_logged);
+        FUZZ_CHECK(st.n_fed == n_fed, "stats say %llu fed, %llu were", (unsigned long long)st.n_fed,
+                   (unsigned long long)n_fed);
         ps_can_replay_deinit(&r);
     }
     free(entries);

@@ -22,14 +22,14 @@
 #include "fuzz.h"
 
 typedef struct {
-    bool is_raw;           /* level told to the filter */
-    int64_t since_ns;      /* when it took it */
-    int64_t last_ns;       /* latest time told */
-    bool is_owed;          /* a new press held >= debounce since the last take: must report */
+    bool is_raw;             /* level told to the filter */
+    int64_t since_ns;        /* when it took it */
+    int64_t last_ns;         /* latest time told */
+    bool is_owed;            /* a new press held >= debounce since the last take: must report */
     bool is_waiting_release; /* a press was counted: the next counts only after a release
                                 held >= debounce (a shorter one is a glitch of that press) */
-    bool has_stable_press; /* some press (or the init level) held >= debounce, ever */
-    bool has_press_edge;   /* debounce 0: a press edge since the last take */
+    bool has_stable_press;   /* some press (or the init level) held >= debounce, ever */
+    bool has_press_edge;     /* debounce 0: a press edge since the last take */
 } model_t;
 
 /* dt >= 0 */

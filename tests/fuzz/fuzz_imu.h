@@ -49,10 +49,9 @@ static void fuzz_imu_run(const ps_imu_cfg_t *cfg, float gyro_max, float accel_ma
                 FUZZ_CHECK(fuzz_in_range(s1.accel_body_m_s2[k], -accel_max, accel_max),
                            "accel[%d] %.9g beyond %g", k, s1.accel_body_m_s2[k], accel_max);
             }
-            const uint8_t known = PS_IMU_STATUS_GYRO_SAT | PS_IMU_STATUS_ACCEL_SAT |
-                                  PS_IMU_STATUS_SELFTEST_FAIL;
-            FUZZ_CHECK(!is_status_mapped || (s1.status & ~known) == 0, "status 0x%02x",
-                       s1.status);
+            const uint8_t known =
+                PS_IMU_STATUS_GYRO_SAT | PS_IMU_STATUS_ACCEL_SAT | PS_IMU_STATUS_SELFTEST_FAIL;
+            FUZZ_CHECK(!is_status_mapped || (s1.status & ~known) == 0, "status 0x%02x", s1.status);
             FUZZ_CHECK(s1.t_ns >= 1000000 && s1.t_ns <= t_ns && s1.t_ns % 1000000 == 0,
                        "sample time %lld, frame time %lld", (long long)s1.t_ns, (long long)t_ns);
         }

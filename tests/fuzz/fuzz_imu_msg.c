@@ -6,8 +6,8 @@
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
-    const ps_imu_cfg_t cfg = {.bus_idx = 0, .base_id = 0x080, .rate_div = 1,
-                              .protocol = PS_IMU_PROTO_PUSHSTEP};
+    const ps_imu_cfg_t cfg = {
+        .bus_idx = 0, .base_id = 0x080, .rate_div = 1, .protocol = PS_IMU_PROTO_PUSHSTEP};
     fuzz_imu_run(&cfg, 32767.0f * PS_IMU_GYRO_LSB_RAD_S, 32767.0f * PS_IMU_ACCEL_LSB_M_S2, false,
                  data, size);
     return 0;

@@ -16,7 +16,7 @@
 #include "../../rt/ps_rosmsg.h"
 #include "fuzz.h"
 
-#define MAX_SCHEMAS 16u
+#define MAX_SCHEMAS  16u
 #define MAX_CHANNELS 32u
 
 typedef struct {

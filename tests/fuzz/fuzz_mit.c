@@ -1,7 +1,8 @@
 /* libFuzzer target: MIT-mode frames (drivers/ps_mit.c) through the actuator
  * port, host and device side (tests/fuzz/fuzz_act.h), and the raw byte
  * decoders on a buffer of exactly the frame's length, so ASan sees any read
- * past it. Drive 0x01 replying on 0x101 (waist_yaw of tests/data/robots/ps1-mixed.yaml) (AK-style ranges). */
+ * past it. Drive 0x01 replying on 0x101 (waist_yaw of tests/data/robots/ps1-mixed.yaml) (AK-style
+ * ranges). */
 #include "../../drivers/ps_mit.h"
 #include "../fakes/ps_test_wire.h"
 #include "fuzz_act.h"

@@ -35,8 +35,8 @@ static void check_parsed(const ps_st_file_t *st)
         FUZZ_CHECK(memchr(t->name, '\0', sizeof t->name) != NULL, "name not terminated");
         static float buf[1u << 16];
         char err[256];
-        const int n_copied = ps_st_copy_f32(st, t, buf, sizeof buf / sizeof buf[0], err,
-                                            sizeof err);
+        const int n_copied =
+            ps_st_copy_f32(st, t, buf, sizeof buf / sizeof buf[0], err, sizeof err);
         FUZZ_CHECK(n_copied >= 0 || n_copied == -ENOSPC || n_copied == -ERANGE,
                    "ps_st_copy_f32 returned %d", n_copied);
         for (int k = 0; k < n_copied; k++)
@@ -74,19 +74,16 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                    rc == -EIO,
                "ps_weights_load returned %d (%s)", rc, err);
     if (rc != 0) {
-        FUZZ_CHECK(strncmp(err, path, strlen(path)) == 0, "a message not naming the file: %s",
-                   err);
+        FUZZ_CHECK(strncmp(err, path, strlen(path)) == 0, "a message not naming the file: %s", err);
     } else {
         const ps_weights_contract_t *c = &w.contract;
-        FUZZ_CHECK(c->n_obs == w.mlp.n_in && c->n_act == w.mlp.n_out &&
-                       c->n_extra == w.mlp.n_extra,
-                   "contract %u obs %u act, network %u in %u out", c->n_obs, c->n_act,
-                   w.mlp.n_in, w.mlp.n_out);
-        FUZZ_CHECK(c->n_joints <= PS_MAX_JOINTS && c->n_act <= c->n_joints,
-                   "%u joints, %u actions", c->n_joints, c->n_act);
+        FUZZ_CHECK(c->n_obs == w.mlp.n_in && c->n_act == w.mlp.n_out && c->n_extra == w.mlp.n_extra,
+                   "contract %u obs %u act, network %u in %u out", c->n_obs, c->n_act, w.mlp.n_in,
+                   w.mlp.n_out);
+        FUZZ_CHECK(c->n_joints <= PS_MAX_JOINTS && c->n_act <= c->n_joints, "%u joints, %u actions",
+                   c->n_joints, c->n_act);
         for (uint32_t k = 0; k < c->n_act; k++)
-            FUZZ_CHECK(c->act_joint[k] < c->n_joints, "action %u on joint %u", k,
-                       c->act_joint[k]);
+            FUZZ_CHECK(c->act_joint[k] < c->n_joints, "action %u on joint %u", k, c->act_joint[k]);
         static float in[PS_OBS_MAX + 64], extra[PS_OBS_MAX + 64], out[PS_MAX_JOINTS + 64];
         memset(in, 0, sizeof in);
         memset(extra, 0, sizeof extra);
