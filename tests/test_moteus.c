@@ -32,6 +32,7 @@
 #include "../drivers/ps_actuator.h"
 #include "../drivers/ps_moteus.h"
 #include "../rt/ps_err.h"
+#include "fakes/ps_test_wire.h"
 
 #define PI_F     3.14159265f
 #define TWO_PI_F 6.28318548f
@@ -40,27 +41,7 @@
 
 static ps_act_cfg_t drive(void)
 {
-    ps_act_cfg_t a;
-    memset(&a, 0, sizeof a);
-    a.protocol = PS_ACT_PROTO_MOTEUS;
-    a.can_id = 0x0B;
-    a.reply_id = 0x05;
-    a.wire = (ps_act_range_t){.p_min_rad = -4.0f * PI_F,
-                              .p_max_rad = 4.0f * PI_F,
-                              .v_min_rad_s = -20.0f,
-                              .v_max_rad_s = 20.0f,
-                              .kp_max_nm_rad = 200.0f,
-                              .kd_max_nm_s_rad = 5.0f,
-                              .t_min_nm = -30.0f,
-                              .t_max_nm = 30.0f,
-                              .i_min_a = -60.0f,
-                              .i_max_a = 60.0f};
-    a.gear_ratio = 1.0f;
-    a.direction = 1.0f;
-    a.kt_nm_a = 1.0f;
-    a.temp_max_c = 80.0f;
-    a.rate_div = 1;
-    return a;
+    return ps_test_wire_moteus();
 }
 
 /* An FD frame with a 29-bit id and these bytes, the rest NOP-free zero. */

@@ -9,17 +9,8 @@
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
-    ps_act_cfg_t a;
-    memset(&a, 0, sizeof a);
-    a.protocol = PS_ACT_PROTO_MIT;
-    a.can_id = 0x01;
-    a.reply_id = 0x101;
-    a.wire = ps_test_wire_ak();
-    a.gear_ratio = 1.0f;
-    a.direction = 1.0f;
+    ps_act_cfg_t a = ps_test_wire_drive(PS_ACT_PROTO_MIT, 0x01, 0x101, ps_test_wire_ak());
     a.kt_nm_a = 0.09f;
-    a.temp_max_c = 80.0f;
-    a.rate_div = 1;
     (void)fuzz_act_run(&a, true, data, size);
 
     /* The byte-level API on an exact-size copy of the whole input. */
