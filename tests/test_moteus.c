@@ -285,6 +285,26 @@ static void test_ps_act_decode_reply_moteus_hand_vector(void **state)
     assert_int_equal(m.fault_bits, 0);
 }
 
+/* Found by tests/fuzz/fuzz_moteus: moteus sends floats, so a reply can hold
+ * a torque that is finite on the motor side (1e38 Nm) and inf on a joint
+ * geared 9:1; ps_act_decode_reply gave the loop that inf. Refused now, the
+ * measurement untouched; the same reply on a direct drive still decodes. */
+static void test_ps_act_decode_reply_moteus_not_finite_geared_refused(void **state)
+{
+    (void)state;
+    ps_act_cfg_t a = drive();
+    ps_can_frame_t f = fd_frame(REPLY_ID, REPLY, 32);
+    memcpy(&f.data[15], (const uint8_t[]){0x99, 0x76, 0x96, 0x7e}, 4); /* 1e38 Nm */
+    ps_act_meas_t m = {.q_rad = 3.0f, .t_ns = 7};
+    assert_int_equal(ps_act_decode_reply(&a, &f, &m), 0);
+    assert_float_equal(m.tau_nm, 1e38f, 1e31f);
+    a.gear_ratio = 9.0f;
+    m = (ps_act_meas_t){.q_rad = 3.0f, .t_ns = 7};
+    assert_int_equal(ps_act_decode_reply(&a, &f, &m), -PS_ERR_PROTOCOL);
+    assert_float_equal(m.q_rad, 3.0f, 0.0f);
+    assert_int_equal(m.t_ns, 7);
+}
+
 /* can.md's own example reply, int16 values, 16 bytes:
  *   24 04 00  reply int16 x4 (varuint count) at 0x000
  *   0A 00     mode 10
@@ -605,6 +625,7 @@ int main(void)
         cmocka_unit_test(test_ps_moteus_encode_cmd_refuses_out_of_range),
         cmocka_unit_test(test_ps_act_encode_request_moteus_frames),
         cmocka_unit_test(test_ps_act_decode_reply_moteus_hand_vector),
+        cmocka_unit_test(test_ps_act_decode_reply_moteus_not_finite_geared_refused),
         cmocka_unit_test(test_ps_moteus_decode_reply_vendor_example),
         cmocka_unit_test(test_ps_moteus_decode_cmd_vendor_example),
         cmocka_unit_test(test_ps_moteus_decode_cmd_overflowing_scale_refused),

@@ -27,31 +27,53 @@ fi
 [ $# -gt 0 ] || { echo "usage: tools/fuzz.sh [--test SECONDS] BIN..." >&2; exit 2; }
 scratch=$(mktemp -d)
 trap 'rm -rf "$scratch"' EXIT
+# Where each target's corpus and crash artifacts go.
+corpus_of() { if [ $is_test -eq 1 ]; then echo "$scratch/$1"; else echo "$build/fuzz/corpus/$1"; fi; }
+art_of() { if [ $is_test -eq 1 ]; then echo "$scratch/crashes-$1/"; else echo "$build/fuzz/crashes/$1/"; fi; }
+
+# One target: its log, exit status and wall time into $scratch/NAME.{log,rc,ms}.
+run_one() {
+    local bin=$1 name seeds corpus art start
+    name=$(basename "$bin")
+    seeds=tests/fuzz/corpus/$name
+    [ -d "$seeds" ] || seeds=
+    corpus=$(corpus_of "$name")
+    art=$(art_of "$name")
+    mkdir -p "$corpus" "$art"
+    local dict=()
+    [ -f "tests/fuzz/$name.dict" ] && dict=(-dict="tests/fuzz/$name.dict")
+    start=$(date +%s%N)
+    # -close_fd_mask=1: the targets' stdout (pushstep log's summary) is not
+    # wanted; libFuzzer's own report goes to stderr. -timeout: an input that
+    # takes 10 s is a hang, reported as a crash. The seeds come second: new
+    # inputs go to the first directory only.
+    "$bin" -max_total_time="$seconds" -print_final_stats=1 -close_fd_mask=1 -timeout=10 \
+        -rss_limit_mb=2048 -artifact_prefix="$art" "${dict[@]}" "$corpus" $seeds \
+        >"$scratch/$name.log" 2>&1
+    echo $? >"$scratch/$name.rc"
+    echo $((($(date +%s%N) - start) / 1000000)) >"$scratch/$name.ms"
+}
+
+# FUZZ_JOBS targets at a time (make test: 2, the short runs; make fuzz: 1,
+# so that the executions of one target are comparable from run to run).
+jobs=${FUZZ_JOBS:-$([ $is_test -eq 1 ] && echo 2 || echo 1)}
+for bin in "$@"; do
+    while [ "$(jobs -rp | wc -l)" -ge "$jobs" ]; do wait -n; done
+    run_one "$bin" &
+done
+wait
+
 results=()
 n_pass=0; n_fail=0; failed=()
 for bin in "$@"; do
     name=$(basename "$bin")
     seeds=tests/fuzz/corpus/$name
     [ -d "$seeds" ] || seeds=
-    if [ $is_test -eq 1 ]; then
-        corpus=$scratch/$name
-        art=$scratch/crashes-$name/
-    else
-        corpus=$build/fuzz/corpus/$name
-        art=$build/fuzz/crashes/$name/
-    fi
-    mkdir -p "$corpus" "$art"
-    dict=()
-    [ -f "tests/fuzz/$name.dict" ] && dict=(-dict="tests/fuzz/$name.dict")
+    corpus=$(corpus_of "$name")
+    art=$(art_of "$name")
     log=$scratch/$name.log
-    start=$(date +%s%N)
-    # -close_fd_mask=1: the targets' stdout (pushstep log's summary) is not
-    # wanted; libFuzzer's own report goes to stderr. -timeout: an input that
-    # takes 10 s is a hang, reported as a crash.
-    "$bin" -max_total_time="$seconds" -print_final_stats=1 -close_fd_mask=1 -timeout=10 \
-        -rss_limit_mb=2048 -artifact_prefix="$art" "${dict[@]}" "$corpus" $seeds >"$log" 2>&1
-    rc=$?
-    wall_ms=$((($(date +%s%N) - start) / 1000000))
+    rc=$(cat "$scratch/$name.rc")
+    wall_ms=$(cat "$scratch/$name.ms")
     execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
     rss=$(sed -n 's/^stat::peak_rss_mb: *//p' "$log" | tail -1)
     n_corpus=$(ls "$corpus" | wc -l)

@@ -60,7 +60,9 @@ static void fuzz_act_decode(const ps_act_cfg_t *a, const ps_can_frame_t *f, fuzz
     /* return codes and untouched outputs */
     FUZZ_CHECK(r->rc_reply == 0 || r->rc_reply == -ENOENT || r->rc_reply == -PS_ERR_PROTOCOL,
                "decode_reply returned %d", r->rc_reply);
-    FUZZ_CHECK(r->rc_joint == (r->is_match ? r->rc_reply : -ENOENT),
+    /* the joint side refuses what is not finite once geared (ps_act_decode_reply) */
+    FUZZ_CHECK(r->rc_joint == (r->is_match ? r->rc_reply : -ENOENT) ||
+                   (r->rc_reply == 0 && r->rc_joint == -PS_ERR_PROTOCOL),
                "ps_act_decode_reply returned %d, the protocol's decode %d (match %d)", r->rc_joint,
                r->rc_reply, r->is_match);
     if (r->rc_reply < 0)
@@ -107,6 +109,9 @@ static void fuzz_act_check_values(const ps_act_cfg_t *a, const fuzz_act_res_t *r
             FUZZ_CHECK(fuzz_in_range(m->tau_nm, -t_abs, t_abs), "reply tau %.9g beyond %g",
                        m->tau_nm, t_abs);
         }
+        FUZZ_CHECK(r->rc_joint == 0 || !is_packed, "a packed reply refused on the joint side");
+    }
+    if (r->rc_joint == 0) {
         const ps_act_meas_t *j = &r->joint;
         FUZZ_CHECK(isfinite(j->q_rad) && isfinite(j->qd_rad_s) && isfinite(j->tau_nm),
                    "joint measurement not finite");
