@@ -40,15 +40,16 @@ run_one() {
     corpus=$(corpus_of "$name")
     art=$(art_of "$name")
     mkdir -p "$corpus" "$art"
-    local dict=()
+    local dict=() seed=()
     [ -f "tests/fuzz/$name.dict" ] && dict=(-dict="tests/fuzz/$name.dict")
+    [ $is_test -eq 1 ] && seed=(-seed=1) # make test: the same mutations each run
     start=$(date +%s%N)
     # -close_fd_mask=1: the targets' stdout (pushstep log's summary) is not
     # wanted; libFuzzer's own report goes to stderr. -timeout: an input that
     # takes 10 s is a hang, reported as a crash. The seeds come second: new
     # inputs go to the first directory only.
     "$bin" -max_total_time="$seconds" -print_final_stats=1 -close_fd_mask=1 -timeout=10 \
-        -rss_limit_mb=2048 -artifact_prefix="$art" "${dict[@]}" "$corpus" $seeds \
+        -rss_limit_mb=2048 -artifact_prefix="$art" "${dict[@]}" "${seed[@]}" "$corpus" $seeds \
         >"$scratch/$name.log" 2>&1
     echo $? >"$scratch/$name.rc"
     echo $((($(date +%s%N) - start) / 1000000)) >"$scratch/$name.ms"
