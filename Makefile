@@ -118,6 +118,10 @@ TEST_BINS := $(addprefix $(BUILD)/tests/,$(SAN_TESTS) $(NOSAN_TESTS))
 # The lock-free mailbox's test again under ThreadSanitizer (it checks the
 # atomics' memory orders, which ASan cannot).
 TSAN_BINS := $(BUILD)/tests/test_mailbox_tsan
+# The whole runtime under ThreadSanitizer, for the threads around the loop
+# (plant, logger, recorder writer, perception, render):
+# tests/test_tsan_threads.sh runs it.
+TSAN_PUSHSTEP := $(BUILD)/tsan/pushstep
 # Tests of the real drivers: they need vcan/vxcan and gpio-mockup, so they run
 # inside a Debian kernel booted under qemu (tools/qemu/, docs/testing-hw.md).
 HW_SRCS := $(wildcard tests/hw/test_hw_*.c)
@@ -126,7 +130,7 @@ QEMU_WORK ?= $(BUILD)/qemu
 
 .PHONY: fuzz
 .PHONY: all deps deps-build deps-test deps-npm deps-bench deps-train run test test-hw clean format help \
-        bench bench-hw train install deb test-deb aarch64-test-bins
+        bench bench-hw train install deb test-deb aarch64-test-bins soak
 all: $(BUILD)/pushstep $(CAMERA_SO)
 
 help:
@@ -148,6 +152,9 @@ help:
 	@echo "             camera.md (docs/latency.md, docs/perception.md, docs/policy.md)"
 	@echo "make bench-hw the real drivers' figures in the test VM (e-stop reaction,"
 	@echo "             loop reaction, frames per bus): bench/results/hw.json"
+	@echo "make soak    SOAK_TICKS (1,000,000) ticks in lockstep among the crowd with a"
+	@echo "             random fault every 8 s, each recovered; checks states, limits,"
+	@echo "             recorder, memory: bench/results/soak.json, soak.md"
 	@echo "make train   train the balance policy on the C environment (CPU, 2 cores,"
 	@echo "             seeded): policy/weights/ps1_stage1.safetensors, $(BUILD)/train/"
 	@echo "make install PREFIX=/usr/local [DESTDIR=]: the binary, its data (boards, robots,"
@@ -201,6 +208,20 @@ $(BUILD)/pic/%.o: %.c
 $(CAMERA_SO): $(BUILD)/pic/drivers/ps_camera_libcamera.o $(BUILD)/pic/drivers/ps_camera.o
 	$(CXX) $(LDFLAGS) -shared -o $@ $^ $(shell pkg-config --libs libcamera) -pthread
 
+$(BUILD)/tsan/%.o: %.c
+	@mkdir -p $(@D)
+	$(CC) $(CFLAGS) -O1 -fsanitize=thread -c $< -o $@
+
+# The inference engine picks its vector width through an ifunc (target_clones),
+# resolved before ThreadSanitizer's runtime starts: instrumented, the resolver
+# crashes. It shares nothing between threads, so it is built plain.
+$(BUILD)/tsan/policy/ps_mlp.o: policy/ps_mlp.c
+	@mkdir -p $(@D)
+	$(CC) $(CFLAGS) -O3 -c $< -o $@
+
+$(TSAN_PUSHSTEP): $(patsubst %.c,$(BUILD)/tsan/%.o,$(MAIN_SRC) $(LIB_SRCS))
+	$(CC) $(CFLAGS) -fsanitize=thread $(LDFLAGS) -o $@ $^ $(LDLIBS)
+
 $(BUILD)/tests/test_mailbox_tsan: tests/test_mailbox.c rt/ps_mailbox.c
 	@mkdir -p $(@D)
 	$(CC) $(CFLAGS) -fsanitize=thread -o $@ $^ -lcmocka
@@ -244,7 +265,7 @@ FUZZ_LIB_SRCS := drivers/ps_actuator.c drivers/ps_mit.c drivers/ps_robstride.c d
                  $(wildcard policy/*.c) \
                  rt/ps_err.c rt/ps_clock.c rt/ps_config_board.c rt/ps_config_common.c \
                  rt/ps_config_robot.c rt/ps_config_scenario.c rt/ps_mcap.c rt/ps_rosmsg.c \
-                 rt/ps_reclog.c rt/ps_sm.c sim/ps_crowd.c sim/ps_social.c
+                 rt/ps_reclog.c rt/ps_args.c rt/ps_sm.c sim/ps_crowd.c sim/ps_social.c
 FUZZ_SRCS    := $(wildcard tests/fuzz/fuzz_*.c)
 FUZZ_BINS    := $(patsubst tests/fuzz/%.c,$(BUILD)/fuzz/%,$(FUZZ_SRCS))
 FUZZ_LIB     := $(BUILD)/fuzz/libps_fuzz.a
@@ -281,14 +302,15 @@ else
 # (tools/test-aarch64.sh) when the cross tools are installed (deps-test
 # installs them where apt can), then the VM tests.
 test: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(BUILD)/libpsenv.so $(TEST_BINS) $(TSAN_BINS) \
-      $(HW_BINS) $(FUZZ_BINS) aarch64-test-bins
+      $(TSAN_PUSHSTEP) $(HW_BINS) $(FUZZ_BINS) aarch64-test-bins
 	@# without the npm packages the rest of the suite still runs; the reader
 	@# check then fails (tests/test_e2e_recorder.c) and says why
 	@bash tools/npm-deps.sh $(BUILD)/npm || echo "make test: continuing without the MCAP readers"
 	@PUSHSTEP_BIN=$(BUILD)/pushstep PUSHSTEP_NPM=$(BUILD)/npm QEMU_WORK=$(QEMU_WORK) \
 	    HW_BINS="$(HW_BINS)" AARCH64_BUILD=$(AARCH64_BUILD) BUILD=$(BUILD) FUZZ_BINS="$(FUZZ_BINS)" \
 	    bash tools/run-tests.sh \
-	    tools/check-layers.sh $(TEST_BINS) $(TSAN_BINS) policy/train/test_tools.py \
+	    tools/check-layers.sh $(TEST_BINS) $(TSAN_BINS) tests/test_tsan_threads.sh \
+	    tests/test_soak_short.sh policy/train/test_tools.py \
 	    tests/test_train_smoke.sh tests/test_fuzz.sh tools/test-install.sh tools/test-aarch64.sh \
 	    tools/qemu/test-hw.sh
 
@@ -303,6 +325,12 @@ aarch64-test-bins:
 	    $(MAKE) --no-print-directory ARCH=aarch64 BUILD=$(AARCH64_BUILD) aarch64-test-bins; \
 	else echo "aarch64: cross tools or arm64 libraries missing: its tests are skipped"; fi
 endif
+
+# The soak (tools/soak.py, docs/safety.md): SOAK_TICKS ticks in lockstep among
+# the crowd with a random fault every 8 s; figures into bench/results/soak.*.
+SOAK_TICKS ?= 1000000
+soak: deps-test $(BUILD)/pushstep
+	python3 tools/soak.py --ticks $(SOAK_TICKS) --results bench/results
 
 test-hw: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(HW_BINS)
 	@PUSHSTEP_BIN=$(BUILD)/pushstep QEMU_WORK=$(QEMU_WORK) HW_BINS="$(HW_BINS)" bash tools/run-tests.sh tools/qemu/test-hw.sh

@@ -23,6 +23,7 @@
 #include "../drivers/ps_candump.h"
 #include "../sim/ps_plant.h"
 #include "../sim/ps_render.h"
+#include "ps_args.h"
 #include "ps_app.h"
 #include "ps_doctor.h"
 #include "ps_camview.h"
@@ -207,15 +208,11 @@ static const char USAGE[] =
 
 static int parse_seconds(const char *text, const char *what, double *out)
 {
-    char *end = NULL;
-    errno = 0;
-    double v = strtod(text, &end);
-    if (errno != 0 || end == text || *end != '\0' || !(v >= 0.0) || v > 86400.0) {
+    if (ps_args_seconds(text, 0.0, 86400.0, false, out) < 0) {
         fprintf(stderr, "pushstep: %s: \"%s\" is not a number of seconds in [0, 86400]\n", what,
                 text);
         return -EINVAL;
     }
-    *out = v;
     return 0;
 }
 
@@ -484,11 +481,25 @@ static void find_data_dir(char *out, size_t len)
 
 /* ---- real-time setup -------------------------------------------------- */
 
+/* A sanitizer's shadow memory spans terabytes, reserved but never backed:
+ * locking or prefaulting it would exhaust the machine. Such a build (make
+ * test's ThreadSanitizer runtime, tests/test_tsan_threads.sh) runs without
+ * either, reported as mlockall missing. */
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+#define PS_IS_SANITIZED 1
+#else
+#define PS_IS_SANITIZED 0
+#endif
+
 static int setup_process_rt(void)
 {
     g.cpu_latency_fd = -1;
     if (!is_unpaced() && ps_rtsetup_hold_cpu_latency(&g.cpu_latency_fd) < 0)
         g.rt_missing |= PS_RT_MISSING_CPU_LATENCY;
+    if (PS_IS_SANITIZED) {
+        g.rt_missing |= PS_RT_MISSING_MLOCK;
+        return 0;
+    }
     int rc = ps_rtsetup_lock_memory();
     if (rc < 0) {
         g.rt_missing |= PS_RT_MISSING_MLOCK;
@@ -568,6 +579,7 @@ static int setup_recorder(char *err, size_t len)
         .compression = g.opt.compression,
         .is_sync_chunks = true,
         .cpu = g.app.board.rt.worker_cpu,
+        .is_lossless = is_unpaced(), /* no deadline to keep: wait for the writer */
     };
     ps_app_recorder_cfg(&g.app, &rc_cfg);
     int rc = ps_recorder_init(&g.rec, &rc_cfg, err, len);
@@ -968,11 +980,7 @@ static void finish_summary(ps_summary_t *sum)
     sum->loop = &g.app.loop;
     sum->logger = &g.logger;
     sum->guard = g.guard;
-#if defined(__SANITIZE_ADDRESS__)
-    sum->is_guard_exact = false;
-#else
-    sum->is_guard_exact = true;
-#endif
+    sum->is_guard_exact = !PS_IS_SANITIZED; /* the guard does not interpose then */
     sum->rt_missing = g.rt_missing;
     sum->priority = g.app.board.rt.priority;
     sum->loop_cpu = g.app.board.rt.loop_cpu;

@@ -1,3 +1,4 @@
+#include "ps_args.h"
 #include "ps_camview.h"
 
 #include <cjson/cJSON.h>
@@ -71,7 +72,6 @@ static int parse(int argc, char **argv, camview_opts_t *o)
     };
     *o = (camview_opts_t){.out_dir = "camera", .duration_s = 5.0};
     int c;
-    char *end;
     while ((c = getopt_long(argc, argv, "h", LONG, NULL)) != -1) {
         switch (c) {
         case 'b':
@@ -87,9 +87,7 @@ static int parse(int argc, char **argv, camview_opts_t *o)
             o->out_dir = optarg;
             break;
         case 'd':
-            o->duration_s = strtod(optarg, &end);
-            if (*end != '\0' || !isfinite(o->duration_s) || o->duration_s <= 0 ||
-                o->duration_s > 86400) {
+            if (ps_args_seconds(optarg, 0.0, 86400.0, true, &o->duration_s) < 0) {
                 fprintf(stderr, "pushstep camera: --duration: '%s' is not seconds in (0, 86400]\n",
                         optarg);
                 return -EINVAL;

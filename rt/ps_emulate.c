@@ -1,3 +1,4 @@
+#include "ps_args.h"
 #include "ps_emulate.h"
 
 #include <errno.h>
@@ -55,6 +56,9 @@ static struct {
     uint64_t n_cmd[PS_MAX_BUSES], n_reply[PS_MAX_BUSES];
     int64_t first_cmd_ns[PS_MAX_BUSES], last_cmd_ns[PS_MAX_BUSES]; /* the span commands came in */
     int64_t period_ns, t0_ns;
+    /* the longest time between two plant steps: a stall of the emulator's
+     * own (a busy VM), which its drives' comms timeout would see too */
+    int64_t last_step_ns, longest_step_gap_ns;
     /* e-stop and heartbeat */
     int estop_fd, heartbeat_fd;
     int64_t estop_press_ns, estop_seen_ns; /* 0: not yet */
@@ -93,9 +97,11 @@ static const char USAGE[] =
     "  --bus-off-at S          send a bus-off error report on bus 0 at S seconds\n"
     "  --restart-at S          send \"controller restarted\" on bus 0 at S seconds\n"
     "  --report FILE.json      write the figures as JSON\n"
-    "Prints: frames, commands per second per bus, late commands, reaction from\n"
-    "each reply to the drive's next command (percentiles), e-stop to the first\n"
-    "limp or damping command, when the heartbeat stopped.\n";
+    "Prints: frames, commands per second per bus, late commands, the longest\n"
+    "gap between its own plant steps (a stall its drives' 100 ms comms timeout\n"
+    "would see), reaction from each reply to the drive's next command\n"
+    "(percentiles), e-stop to the first limp or damping command, when the\n"
+    "heartbeat stopped.\n";
 
 static int parse_ifaces(const char *arg)
 {
@@ -112,15 +118,11 @@ static int parse_ifaces(const char *arg)
 
 static int parse_seconds(const char *arg, const char *name, double *out)
 {
-    char *end = NULL;
-    errno = 0;
-    const double v = strtod(arg, &end);
-    if (errno != 0 || end == arg || *end != '\0' || !isfinite(v) || v < 0.0 || v > 1e6) {
+    if (ps_args_seconds(arg, 0.0, 1e6, false, out) < 0) {
         fprintf(stderr, "pushstep emulate: %s: '%s' is not a number of seconds in [0, 1e6]\n", name,
                 arg);
         return -EINVAL;
     }
-    *out = v;
     return 0;
 }
 
@@ -371,6 +373,9 @@ static bool is_due(double at_s, bool *sent, int64_t now)
 
 static void step(int64_t now)
 {
+    if (e.last_step_ns != 0 && now - e.last_step_ns > e.longest_step_gap_ns)
+        e.longest_step_gap_ns = now - e.last_step_ns;
+    e.last_step_ns = now;
     if (is_due(e.o.bus_off_at_s, &e.is_bus_off_sent, now))
         send_error_report(CAN_ERR_BUSOFF);
     if (is_due(e.o.restart_at_s, &e.is_restart_sent, now))
@@ -467,7 +472,8 @@ static void report(FILE *out, double elapsed_s)
                 "emulate: bus %u %s: %llu commands, %.1f/s while the runtime sent, %llu replies\n",
                 b, e.o.ifaces[b], (unsigned long long)e.n_cmd[b], cmd_rate(b),
                 (unsigned long long)e.n_reply[b]);
-    fprintf(out, "emulate: late commands: %llu\n", (unsigned long long)late);
+    fprintf(out, "emulate: late commands: %llu; longest gap between plant steps %.1f ms\n",
+            (unsigned long long)late, (double)e.longest_step_gap_ns * 1e-6);
     fprintf(out,
             "emulate: reaction reply->next command (us): n %zu p50 %.1f p90 %.1f p99 %.1f "
             "p99.9 %.1f max %.1f\n",
@@ -514,6 +520,7 @@ static int write_json(double elapsed_s, char *err, size_t len)
             "],\n \"reaction_us\": {\"n\": %zu, \"p50\": %.1f, \"p90\": %.1f, \"p99\": %.1f, "
             "\"p999\": %.1f, \"max\": %.1f},\n",
             e.n_reaction, pct_us(50), pct_us(90), pct_us(99), pct_us(99.9), pct_us(100));
+    fprintf(f, " \"longest_step_gap_ms\": %.3f,\n", (double)e.longest_step_gap_ns * 1e-6);
     fprintf(f, " \"estop_reaction_ms\": %.3f, \"heartbeat_stopped_s\": %.3f,\n",
             e.estop_seen_ns && e.estop_press_ns
                 ? (double)(e.estop_seen_ns - e.estop_press_ns) * 1e-6

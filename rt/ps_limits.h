@@ -12,7 +12,7 @@
 #define PS_MAX_JOINTS  32u  /**< actuated joints of one robot */
 #define PS_MAX_BUSES   8u   /**< CAN buses of one board */
 #define PS_MAX_PUSHES  64u  /**< pushes in one scenario */
-#define PS_MAX_EVENTS  32u  /**< timed events in one scenario */
+#define PS_MAX_EVENTS  1024u /**< timed events in one scenario (a soak has hundreds) */
 #define PS_ERR_MSG_LEN 512u /**< one-line error messages */
 
 #endif /* PS_LIMITS_H */

@@ -250,7 +250,7 @@ int ps_mcap_add_schema(ps_mcap_writer_t *w, const char *name, const char *encodi
 int ps_mcap_add_channel(ps_mcap_writer_t *w, uint16_t schema_id, const char *topic,
                         const char *message_encoding, const ps_mcap_kv_t *meta, size_t n_meta)
 {
-    if (w->n_channels >= PS_MCAP_MAX_CHANNELS)
+    if (w->n_channels >= PS_MCAP_MAX_WRITE_CHANNELS)
         return -ENOSPC;
     if (schema_id > w->n_schemas)
         return -EINVAL;

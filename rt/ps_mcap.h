@@ -42,8 +42,12 @@
 #include <stdint.h>
 
 #define PS_MCAP_MAX_SCHEMAS  64u
-#define PS_MCAP_MAX_CHANNELS 64u
-#define PS_MCAP_MAGIC_LEN    8u
+#define PS_MCAP_MAX_CHANNELS 64u /**< the reader's; a file of any writer */
+/** Channels one writer defines. Every chunk's index entry keeps a message
+ *  index offset per channel until close (the summary needs them all), so
+ *  this bounds what a long recording holds per chunk: 184 bytes at 16. */
+#define PS_MCAP_MAX_WRITE_CHANNELS 16u
+#define PS_MCAP_MAGIC_LEN          8u
 
 typedef enum {
     PS_MCAP_COMPRESS_NONE = 0,
@@ -81,7 +85,7 @@ typedef struct {
     uint64_t offset, length;       /**< of the chunk record */
     uint64_t index_length;         /**< message index records after it */
     uint64_t compressed_size, uncompressed_size;
-    uint64_t index_offset[PS_MCAP_MAX_CHANNELS]; /**< 0: no message on that channel */
+    uint64_t index_offset[PS_MCAP_MAX_WRITE_CHANNELS]; /**< 0: no message on that channel */
 } ps_mcap_chunk_entry_t;
 
 typedef struct {
@@ -139,7 +143,7 @@ int ps_mcap_add_schema(ps_mcap_writer_t *w, const char *name, const char *encodi
                        const void *data, size_t len);
 
 /** Register a channel (written before its first message).
- *  @return id >= 0 | -ENOSPC (PS_MCAP_MAX_CHANNELS) | -EINVAL (unknown schema)
+ *  @return id >= 0 | -ENOSPC (PS_MCAP_MAX_WRITE_CHANNELS) | -EINVAL (unknown schema)
  *  | -ENOMEM  @rt NON-RT */
 int ps_mcap_add_channel(ps_mcap_writer_t *w, uint16_t schema_id, const char *topic,
                         const char *message_encoding, const ps_mcap_kv_t *meta, size_t n_meta);

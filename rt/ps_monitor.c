@@ -1,3 +1,4 @@
+#include "ps_args.h"
 #include "ps_monitor.h"
 
 #include <errno.h>
@@ -223,8 +224,7 @@ static int parse(int argc, char **argv)
             g.log_path = optarg;
             break;
         case 'd':
-            g.duration_s = strtod(optarg, &end);
-            if (*end != '\0' || !isfinite(g.duration_s) || g.duration_s < 0) {
+            if (ps_args_seconds(optarg, 0.0, 1e9, false, &g.duration_s) < 0) {
                 fprintf(stderr, "pushstep monitor: --duration: '%s' is not seconds >= 0\n", optarg);
                 return -EINVAL;
             }

@@ -1,3 +1,4 @@
+#include "ps_args.h"
 #include "ps_reclog.h"
 
 #include <errno.h>
@@ -682,7 +683,6 @@ static int parse_args(int argc, char **argv, log_t *lg)
     optind = 1;
     int c;
     while ((c = getopt_long(argc, argv, "h", LONG, NULL)) != -1) {
-        char *end = NULL;
         switch (c) {
         case 'c':
             lg->csv = optarg;
@@ -699,9 +699,9 @@ static int parse_args(int argc, char **argv, log_t *lg)
             break;
         case 'f':
         case 't':
-            *(c == 'f' ? &lg->from_s : &lg->to_s) = strtod(optarg, &end);
-            if (end == optarg || *end != '\0') {
-                fprintf(stderr, "pushstep log: --%s: \"%s\" is not a number of seconds\n",
+            if (ps_args_seconds(optarg, 0.0, 1e9, false, c == 'f' ? &lg->from_s : &lg->to_s) <
+                0) {
+                fprintf(stderr, "pushstep log: --%s: \"%s\" is not a number of seconds >= 0\n",
                         c == 'f' ? "from" : "to", optarg);
                 return -EINVAL;
             }

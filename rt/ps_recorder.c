@@ -17,6 +17,7 @@
 #include "ps_rtsetup.h"
 
 #define IDLE_SLEEP_NS    (5 * PS_NS_PER_MS)
+#define LOSSLESS_WAIT_NS (50 * PS_NS_PER_US) /* the loop's poll while the writer catches up */
 #define RECORDS_PER_PASS 2048u /* per file, between looks at the other file and triggers */
 #define DEFAULT_CHUNK    (256u * 1024u)
 #define MSG_BUF          16384u
@@ -370,9 +371,28 @@ static void fill_buses(const ps_loop_t *loop, ps_rec_tick_t *t)
     t->n_gpio_errors = loop->counters.n_gpio_errors;
 }
 
+static void sleep_ns(int64_t ns);
+
+/* Unpaced runs only: until the slot about to be filled holds nothing the
+ * writer still needs (one slot spare for the writer's read in progress). */
+static void wait_for_writer(ps_recorder_t *r)
+{
+    const uint64_t head = atomic_load_explicit(&r->head, memory_order_relaxed);
+    bool has_waited = false;
+    while (atomic_load_explicit(&r->is_writer_running, memory_order_acquire) &&
+           head - atomic_load_explicit(&r->writer_needed, memory_order_acquire) + 1u >=
+               r->n_slots) {
+        has_waited = true;
+        sleep_ns(LOSSLESS_WAIT_NS);
+    }
+    r->n_lossless_waits += has_waited;
+}
+
 void ps_recorder_on_tick(void *ctx, const ps_loop_t *loop)
 {
     ps_recorder_t *r = ctx;
+    if (r->cfg.is_lossless)
+        wait_for_writer(r);
     const uint64_t idx = atomic_load_explicit(&r->head, memory_order_relaxed);
     ps_rec_tick_t *t = ps_recorder_begin(r);
     t->tick = loop->counters.n_ticks - 1u; /* the tick that just ran */
@@ -794,6 +814,7 @@ static void file_close(rec_file_t *f, const ps_mcap_kv_t *extra, size_t n_extra)
         kv[n++] = extra[i];
     if (ps_mcap_error(&f->mcap) == 0)
         (void)ps_mcap_write_metadata(&f->mcap, "pushstep.recorder", kv, n); /* seen in close */
+    st->n_index_bytes = (uint64_t)f->mcap.chunks_cap * sizeof(ps_mcap_chunk_entry_t);
     int rc = ps_mcap_close(&f->mcap);
     if (close(f->fd) < 0 && rc == 0)
         rc = -errno;
@@ -906,6 +927,34 @@ static void dump_end(writer_t *w)
     w->is_dumping = false;
 }
 
+/* The oldest record this writer may still read: its continuous file's
+ * next, the dump in progress's next, a pending trigger's pre window, and
+ * with flight dumps on the pre window of a trigger still to come. For the
+ * loop's wait in unpaced runs (cfg.is_lossless). */
+static void publish_needed(writer_t *w)
+{
+    ps_recorder_t *r = w->cont.r;
+    uint64_t need = atomic_load_explicit(&r->head, memory_order_acquire);
+    /* A ring shorter than a dump's window (--record-ring below pre + post)
+     * loses part of each dump however long the loop waits: the pre window
+     * is then not held, or a pending dump would wait on itself. */
+    const uint64_t pre_ticks = ticks_of(r, r->cfg.pre_s);
+    const bool is_pre_held =
+        r->cfg.dir != NULL && pre_ticks + ticks_of(r, r->cfg.post_s) + 2u < r->n_slots;
+    const uint64_t pre = is_pre_held ? pre_ticks : 0u;
+    need = need > pre ? need - pre : 0u;
+    if (r->cfg.path != NULL && w->cont_next < need)
+        need = w->cont_next;
+    if (w->is_dumping && w->dump_next < need)
+        need = w->dump_next;
+    if (w->n_pending > 0 && is_pre_held) {
+        const uint64_t from = w->pending[0].idx > pre ? w->pending[0].idx - pre : 0u;
+        if (from < need)
+            need = from;
+    }
+    atomic_store_explicit(&r->writer_needed, need, memory_order_release);
+}
+
 /* @return records handled in this pass */
 static uint32_t pass(writer_t *w, bool is_final)
 {
@@ -939,6 +988,7 @@ static uint32_t pass(writer_t *w, bool is_final)
             dump_end(w);
         }
     }
+    publish_needed(w);
     return k;
 }
 
@@ -983,9 +1033,13 @@ int ps_recorder_start(ps_recorder_t *r)
     w->cont.st = &r->stats.cont;
     if (r->cfg.path != NULL)
         (void)file_open(w, &w->cont, r->path, &r->stats.cont); /* err in stats.cont */
+    atomic_store(&r->writer_needed, atomic_load(&r->head));
+    atomic_store(&r->is_writer_running, true);
     int rc = pthread_create(&r->thread, NULL, writer_main, r);
-    if (rc != 0)
+    if (rc != 0) {
+        atomic_store(&r->is_writer_running, false);
         return -rc;
+    }
     r->has_thread = true;
     return 0;
 }

@@ -170,6 +170,11 @@ typedef struct {
     size_t chunk_size;   /**< 0: 256 KiB */
     bool is_sync_chunks; /**< fdatasync every chunk (power-cut safe); default on */
     int cpu;             /**< writer thread CPU, -1: any */
+    /** Unpaced runs (lockstep, replay): the loop waits for the writer rather
+     *  than overwrite a record the writer still needs, so a recording of a
+     *  simulation is complete however busy the machine. Never in real time
+     *  (the wait blocks the tick). */
+    bool is_lossless;
     /* what the files say about the run */
     const char *board_name, *robot_name, *scenario_path;
     const char (*joint_name)[PS_NAME_LEN];
@@ -186,10 +191,13 @@ typedef struct {
     uint64_t n_records;  /**< records written */
     uint64_t n_messages; /**< MCAP messages in the file */
     uint64_t n_bytes;
-    uint64_t n_lost_ring; /**< records overwritten before the writer read them */
-    uint64_t n_lost_io;   /**< records that could not be written (I/O error) */
-    int err;              /**< 0 or the error that ended the file */
-    uint32_t triggers;    /**< flight: cause(s) of the dump */
+    uint64_t n_lost_ring;   /**< records overwritten before the writer read them */
+    uint64_t n_lost_io;     /**< records that could not be written (I/O error) */
+    uint64_t n_index_bytes; /**< chunk index held in memory until close, for the MCAP
+                                 summary: it grows with the file (the one growth a long
+                                 recording has; tools/soak.py allows for it) */
+    int err;                /**< 0 or the error that ended the file */
+    uint32_t triggers;      /**< flight: cause(s) of the dump */
     uint64_t trigger_tick;
     uint64_t channel_n_messages[PS_MCAP_MAX_CHANNELS];
 } ps_rec_file_stats_t;
@@ -222,6 +230,11 @@ typedef struct {
     ps_rec_trig_t trig_storage[PS_REC_TRIG_QUEUE];
     _Atomic uint32_t n_trig; /**< triggers raised (loop thread writes) */
     _Atomic uint32_t n_trig_by[PS_REC_TRIG_COUNT];
+    /** the oldest record the writer may still read (its files' next, a
+     *  pending dump's pre window); the loop waits on it when is_lossless */
+    _Atomic uint64_t writer_needed;
+    atomic_bool is_writer_running;
+    uint64_t n_lossless_waits; /**< ticks the loop waited for the writer (loop thread) */
     uint8_t last_state;
     uint32_t last_cond;
     bool was_button; /**< the button read pressed last tick (a press triggers once) */
@@ -247,7 +260,8 @@ int ps_recorder_init(ps_recorder_t *r, const ps_recorder_cfg_t *cfg, char *err, 
 void ps_recorder_set_truth(ps_recorder_t *r, ps_rec_truth_src_t src);
 
 /** The loop's tap: fill the next slot from the loop's state, raise
- *  triggers.  @rt RT-SAFE O(joints + buses), loop thread */
+ *  triggers.  @rt RT-SAFE O(joints + buses), loop thread; with
+ *  cfg.is_lossless it may first sleep until the writer catches up */
 void ps_recorder_on_tick(void *ctx, const ps_loop_t *loop);
 
 /** Ask for a flight dump now (taken by the next tick).

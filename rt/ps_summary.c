@@ -154,6 +154,7 @@ static cJSON *rec_file_json(const ps_recorder_stats_t *r, const ps_rec_file_stat
     cJSON_AddNumberToObject(o, "bytes", (double)f->n_bytes);
     cJSON_AddNumberToObject(o, "records_lost_ring", (double)f->n_lost_ring);
     cJSON_AddNumberToObject(o, "records_lost_io", (double)f->n_lost_io);
+    cJSON_AddNumberToObject(o, "index_bytes", (double)f->n_index_bytes);
     if (f->err != 0)
         cJSON_AddStringToObject(o, "error", strerror(-f->err));
     else

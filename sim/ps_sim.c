@@ -715,14 +715,17 @@ int ps_sim_start(ps_sim_t *s, int64_t start_ns)
         s->is_started = true;
         return 0;
     }
+    /* set before the thread starts: it reads is_started (ThreadSanitizer
+     * found it written after pthread_create) */
+    s->is_started = true;
     atomic_store(&s->is_running, true);
     const int rc = pthread_create(&s->thread, NULL, plant_thread, s);
     if (rc != 0) {
         atomic_store(&s->is_running, false);
+        s->is_started = false;
         return -rc;
     }
     s->has_thread = true;
-    s->is_started = true;
     return 0;
 }
 

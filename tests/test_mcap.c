@@ -454,6 +454,35 @@ static void test_mcap_disk_full_counts_lost_keeps_complete_chunks(void **state)
     free(io.p);
 }
 
+/* A writer takes PS_MCAP_MAX_WRITE_CHANNELS channels and refuses the next:
+ * each chunk's index entry, held until close, has a slot per channel. */
+static void test_mcap_writer_refuses_a_channel_past_its_cap(void **state)
+{
+    (void)state;
+    ps_mcap_writer_t w;
+    mem_io_t io = {0};
+    ps_mcap_cfg_t cfg = {.io = {mem_write, mem_sync},
+                         .io_ctx = &io,
+                         .compression = PS_MCAP_COMPRESS_NONE,
+                         .chunk_size = 4096,
+                         .profile = "ros2"};
+    assert_int_equal(ps_mcap_open(&w, &cfg), 0);
+    const char schema[] = "uint8 x\n";
+    const int s = ps_mcap_add_schema(&w, "t/msg/X", "ros2msg", schema, strlen(schema));
+    assert_true(s > 0);
+    char topic[16];
+    for (unsigned c = 0; c < PS_MCAP_MAX_WRITE_CHANNELS; c++) {
+        snprintf(topic, sizeof(topic), "/c%u", c);
+        assert_int_equal(ps_mcap_add_channel(&w, (uint16_t)s, topic, "cdr", NULL, 0), (int)c);
+    }
+    assert_int_equal(ps_mcap_add_channel(&w, (uint16_t)s, "/one_more", "cdr", NULL, 0), -ENOSPC);
+    const uint8_t payload = 7;
+    const uint16_t last = PS_MCAP_MAX_WRITE_CHANNELS - 1u;
+    assert_int_equal(ps_mcap_write_message(&w, last, 1, 1000, 1000, &payload, 1), 0);
+    assert_int_equal(ps_mcap_close(&w), 0);
+    free(io.p);
+}
+
 static void test_mcap_read_refuses_non_mcap_and_missing_file(void **state)
 {
     (void)state;
@@ -512,6 +541,7 @@ int main(void)
         cmocka_unit_test(test_mcap_cut_anywhere_reads_every_complete_chunk),
         cmocka_unit_test(test_mcap_damaged_chunk_stops_reading_with_reason),
         cmocka_unit_test(test_mcap_disk_full_counts_lost_keeps_complete_chunks),
+        cmocka_unit_test(test_mcap_writer_refuses_a_channel_past_its_cap),
         cmocka_unit_test(test_mcap_read_refuses_non_mcap_and_missing_file),
         cmocka_unit_test(test_mcap_parse_compression_names),
     };

@@ -467,6 +467,55 @@ static void test_slow_disk_loses_records_counted_in_stats_and_file(void **state)
     assert_string_equal(f.meta_lost_ring, lost);
 }
 
+/* The same slow disk in an unpaced run (lockstep, replay): the loop waits
+ * for the writer, so the continuous file and both flight dumps hold every
+ * record, the dumps their whole windows; the loop noted that it waited. */
+static void test_lossless_slow_disk_loses_nothing_in_file_or_dumps(void **state)
+{
+    (void)state;
+    char path[128];
+    snprintf(path, sizeof(path), "%s/lossless.mcap", dir);
+    setenv("PUSHSTEP_REC_IO_DELAY_NS", "20000000", 1);
+    ps_recorder_cfg_t cfg = base_cfg();
+    cfg.path = path;
+    cfg.dir = dir;
+    cfg.ring_s = 2.0; /* 2048 slots: the 1.5 s dump window fits, little more */
+    cfg.chunk_size = 64u << 10;
+    cfg.is_lossless = true;
+    init_rec(cfg);
+    unsetenv("PUSHSTEP_REC_IO_DELAY_NS");
+    assert_int_equal(ps_recorder_start(&rec), 0);
+    ticks(2500);
+    ps_recorder_trigger(&rec, PS_REC_TRIG_SIGNAL);
+    ticks(1); /* record 2500 */
+    ticks(1999);
+    ps_recorder_trigger(&rec, PS_REC_TRIG_SIGNAL);
+    ticks(1); /* record 4500 */
+    ticks(1499);
+    ps_recorder_stop(&rec);
+    const ps_recorder_stats_t *s = &rec.stats;
+    const ps_rec_file_stats_t *c = &s->cont;
+    print_message("lossless: the loop waited on %llu ticks\n",
+                  (unsigned long long)rec.n_lossless_waits);
+    assert_true(rec.n_lossless_waits > 0); /* the disk was slower than the loop */
+    assert_int_equal(c->err, 0);
+    assert_int_equal(c->n_records, 6000);
+    assert_int_equal(c->n_lost_ring + c->n_lost_io, 0);
+    assert_int_equal(s->n_dumps, 2);
+    for (unsigned i = 0; i < 2; i++) {
+        assert_int_equal(s->dump[i].n_records, 1501);
+        assert_int_equal(s->dump[i].n_lost_ring + s->dump[i].n_lost_io, 0);
+    }
+    file_t f;
+    ps_mcap_read_info_t info;
+    read_file(path, &f, &info);
+    assert_true(info.has_footer);
+    assert_int_equal(f.n_state, 6000);
+    read_file(s->dump[1].path, &f, &info);
+    assert_int_equal(f.first_tick, 3500);
+    assert_int_equal(f.last_tick, 5000);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -482,6 +531,8 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_largest_record_every_channel_written, setup, teardown),
         cmocka_unit_test_setup_teardown(test_disk_full_counts_every_record_lost_io, setup,
                                         teardown),
+        cmocka_unit_test_setup_teardown(test_lossless_slow_disk_loses_nothing_in_file_or_dumps,
+                                        setup, teardown),
         cmocka_unit_test_setup_teardown(test_dump_that_cannot_be_created_is_counted_failed, setup,
                                         teardown),
         cmocka_unit_test_setup_teardown(test_slow_disk_loses_records_counted_in_stats_and_file,

@@ -9,6 +9,7 @@
  * are the VM's (qemu TCG: several times slower than a board).
  */
 #include <stdarg.h>
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 #include <setjmp.h>
@@ -109,8 +110,9 @@ static void assert_in_order(const char *text, const char *const *steps, size_t n
     for (size_t i = 0; i < n; i++) {
         const char *p = strstr(at, steps[i]);
         if (p == NULL) {
-            print_error("'%s' missing (after '%s') in:\n%s\n", steps[i], i ? steps[i - 1] : "",
-                        text);
+            /* stderr, not print_error: cmocka cuts its messages at 1 KiB */
+            fprintf(stderr, "'%s' missing (after '%s') in:\n%s\n", steps[i], i ? steps[i - 1] : "",
+                    text);
             fail();
         }
         at = p + strlen(steps[i]);
@@ -191,9 +193,53 @@ static int setup(void **state)
     return 0;
 }
 
-static void test_make_run_goes_standby_ramp_active_damping_over_socketcan(void **state)
+/* A latency's max from the runtime's summary (the line "  NAME  n=... max=X
+ * us"), in ms; -1 when absent. */
+static double summary_max_ms(const char *out, const char *stage)
 {
-    (void)state;
+    char key[32];
+    snprintf(key, sizeof(key), "\n  %s ", stage);
+    const char *p = strstr(out, key);
+    const char *max = p != NULL ? strstr(p, " max=") : NULL;
+    return max != NULL ? strtod(max + 5, NULL) * 1e-3 : -1.0;
+}
+
+/* The VM is qemu without KVM on a shared host: now and then it stops the
+ * processes in it for over 100 ms (112 ms measured in the runtime's wake-up).
+ * The emulated drives then see no command for longer than their 100 ms
+ * comms timeout and latch a fault, and the runtime e-stops for DRIVE_FAULT
+ * (or stale replies), which is the right answer to such a stall and not
+ * what this test is about. So a run that e-stopped while either side
+ * measured a stall that long is run again (at most RUN_TRIES times, each
+ * said): the runtime a wake-up or tick late by comms timeout - period (its
+ * commands then stop for the whole timeout), or the emulator a gap between
+ * its own plant steps over the timeout. Any other failure fails at once,
+ * and an e-stop without a measured stall too. */
+#define RUN_TRIES        3
+#define COMMS_TIMEOUT_MS 100.0 /* PS_DEVICES_COMMS_TIMEOUT_NS */
+#define RUNTIME_STALL_MS (COMMS_TIMEOUT_MS - TICK_MS)
+
+static bool stalled_into_estop(const char *out, const char *emu_json)
+{
+    if (strstr(out, "-> ESTOP") == NULL)
+        return false;
+    const double wake_ms = summary_max_ms(out, "wake"), tick_ms = summary_max_ms(out, "tick");
+    const char *gap = strstr(emu_json, "\"longest_step_gap_ms\": ");
+    const double emu_gap_ms = gap != NULL ? strtod(strchr(gap, ':') + 1, NULL) : -1.0;
+    print_message("  e-stopped; longest runtime wake-up %.1f ms, tick %.1f ms, emulator step gap "
+                  "%.1f ms\n",
+                  wake_ms, tick_ms, emu_gap_ms);
+    print_lines_with(out, "-> ESTOP");
+    if (wake_ms < RUNTIME_STALL_MS && tick_ms < RUNTIME_STALL_MS && emu_gap_ms < COMMS_TIMEOUT_MS)
+        return false;
+    print_message("  the VM stalled the run past the drives' comms timeout: run again\n");
+    return true;
+}
+
+/* One `make run` with the emulator, monitor and candump beside it; false
+ * when the VM stalled it into an e-stop (see stalled_into_estop). */
+static bool make_run_once(void)
+{
     /* Long enough for make's start-up (it reads the Makefile, dpkg's
      * database and the build's dependency files over 9p: 8 to 49 s seen in
      * the VM); stopped with SIGTERM below. */
@@ -244,6 +290,12 @@ static void test_make_run_goes_standby_ramp_active_damping_over_socketcan(void *
     if (rc != 0)
         print_error("%s\n", out);
     assert_int_equal(rc, 0);
+    if (strstr(out, "-> ESTOP") != NULL) {
+        assert_int_equal(kill(emu, SIGTERM), 0);
+        assert_int_equal(wait_exit(emu), 0);
+        if (stalled_into_estop(out, slurp(OUT_DIR "/emu-run.json")))
+            return false;
+    }
     static const char *const steps[] = {"STANDBY -> RAMP", "RAMP -> ACTIVE (RAMP_DONE)",
                                         "ACTIVE -> DAMPING (REQ_STOP)",
                                         "DAMPING -> STANDBY (DAMP_DONE"};
@@ -261,11 +313,36 @@ static void test_make_run_goes_standby_ramp_active_damping_over_socketcan(void *
     assert_int_equal(json_num(j, "unclaimed"), 0);
     assert_int_equal(json_num(j, "malformed"), 0);
     assert_true(json_num(j, "replies") >= json_num(j, "commands"));
+    return true;
 }
 
-static void test_an_estop_edge_in_active_limps_the_drives_within_four_ticks(void **state)
+static void test_make_run_goes_standby_ramp_active_damping_over_socketcan(void **state)
 {
     (void)state;
+    for (int i = 0; i < RUN_TRIES; i++)
+        if (make_run_once())
+            return;
+    fail_msg("the VM stalled the loop into an e-stop in all %d runs", RUN_TRIES);
+}
+
+/* The emulator presses the e-stop and reports bus-off at times counted from
+ * its own start; a runtime whose start-up a VM stall delayed can still be
+ * ramping then. Such a run did not test ACTIVE: it is run again (at most
+ * RUN_TRIES times, said), like a run with a measured stall above. */
+static bool was_still_ramping(const char *out, const char *fault)
+{
+    char line[64];
+    snprintf(line, sizeof(line), "RAMP -> ESTOP (%s", fault);
+    if (strstr(out, line) == NULL)
+        return false;
+    print_message("  the %s came while the runtime was still ramping (a slow start-up): run "
+                  "again\n",
+                  fault);
+    return true;
+}
+
+static bool estop_once(void)
+{
     pid_t emu = start_emulator("6", OUT_DIR "/emu-estop.json", OUT_DIR "/emu-estop.out",
                                "--press-estop-at", "3.5");
     char *argv[] = {BIN, "--board",    BOARD, "--robot", ROBOT, "--start-after",
@@ -273,6 +350,8 @@ static void test_an_estop_edge_in_active_limps_the_drives_within_four_ticks(void
     (void)wait_exit(spawn(argv, OUT_DIR "/estop.out"));
     assert_int_equal(wait_exit(emu), 0);
     const char *out = slurp(OUT_DIR "/estop.out");
+    if (was_still_ramping(out, "ESTOP_INPUT"))
+        return false;
     static const char *const steps[] = {"RAMP -> ACTIVE", "ACTIVE -> ESTOP (ESTOP_INPUT"};
     assert_in_order(out, steps, 2);
     print_lines_with(slurp(OUT_DIR "/emu-estop.out"), "e-stop");
@@ -292,19 +371,36 @@ static void test_an_estop_edge_in_active_limps_the_drives_within_four_ticks(void
     const double quiet_from_ns = json_num(j, "estop_press_mono_ns") + 3.0 * TICK_MS * 1e6;
     const int n_after = changes_after(j, quiet_from_ns, after_ms, 8);
     assert_true(n_after <= 1);
+    return true;
+}
+
+static void test_an_estop_edge_in_active_limps_the_drives_within_four_ticks(void **state)
+{
+    (void)state;
+    for (int i = 0; i < RUN_TRIES; i++)
+        if (estop_once())
+            return;
+    fail_msg("the runtime was still ramping at the press in all %d runs", RUN_TRIES);
 }
 
 static void test_sigkill_stops_the_heartbeat_within_a_few_ticks(void **state)
 {
     (void)state;
-    pid_t emu = start_emulator("5", OUT_DIR "/emu-kill.json", OUT_DIR "/emu-kill.out", NULL, NULL);
+    pid_t emu = start_emulator("30", OUT_DIR "/emu-kill.json", OUT_DIR "/emu-kill.out", NULL, NULL);
     char *argv[] = {BIN, "--board",    BOARD, "--robot", ROBOT, "--start-after",
                     "1", "--duration", "0",   NULL};
     pid_t rt = spawn(argv, OUT_DIR "/kill.out");
-    sleep(4); /* ACTIVE by now: start-up (up to 2 s in the VM), START at 1 s, 1 s ramp */
+    /* START at 1 s, a 1 s ramp, after a start-up of up to 2 s in the VM
+     * (more when it stalls); then a few ticks of ACTIVE */
+    for (int i = 0; i < 200 && strstr(slurp_maybe(OUT_DIR "/kill.out"), "RAMP -> ACTIVE") == NULL;
+         i++)
+        usleep(100000);
+    usleep(300000);
     const int64_t kill_ns = mono_ns();
     assert_int_equal(kill(rt, SIGKILL), 0);
     assert_int_equal(wait_exit(rt), 128 + SIGKILL);
+    usleep(500000); /* the relay's view of the line after the kill */
+    assert_int_equal(kill(emu, SIGTERM), 0);
     assert_int_equal(wait_exit(emu), 0);
     assert_non_null(strstr(slurp(OUT_DIR "/kill.out"), "RAMP -> ACTIVE"));
     const char *j = slurp(OUT_DIR "/emu-kill.json");
@@ -328,9 +424,8 @@ static void test_sigkill_stops_the_heartbeat_within_a_few_ticks(void **state)
  * again (the vxcan peer keeps answering: a real bus-off controller would
  * receive nothing until it restarts), so the summary says error-active with
  * one bus-off episode. */
-static void test_a_bus_off_report_in_active_is_an_estop(void **state)
+static bool bus_off_once(void)
 {
-    (void)state;
     pid_t emu = start_emulator("5", OUT_DIR "/emu-busoff.json", OUT_DIR "/emu-busoff.out",
                                "--bus-off-at", "3.2");
     char *argv[] = {BIN, "--board",    BOARD, "--robot", ROBOT, "--start-after",
@@ -338,9 +433,21 @@ static void test_a_bus_off_report_in_active_is_an_estop(void **state)
     (void)wait_exit(spawn(argv, OUT_DIR "/busoff.out"));
     assert_int_equal(wait_exit(emu), 0);
     const char *out = slurp(OUT_DIR "/busoff.out");
+    if (was_still_ramping(out, "BUS_OFF"))
+        return false;
     static const char *const steps[] = {"RAMP -> ACTIVE", "ACTIVE -> ESTOP (BUS_OFF", "vxcan0 ",
                                         "1 error reports (1 bus-off"};
     assert_in_order(out, steps, 4);
+    return true;
+}
+
+static void test_a_bus_off_report_in_active_is_an_estop(void **state)
+{
+    (void)state;
+    for (int i = 0; i < RUN_TRIES; i++)
+        if (bus_off_once())
+            return;
+    fail_msg("the runtime was still ramping at the bus-off in all %d runs", RUN_TRIES);
 }
 
 int main(void)
