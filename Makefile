@@ -143,7 +143,8 @@ help:
 	@echo "make test    deps + build + run the whole cmocka suite, test-hw included"
 	@echo "             (skipped with a message where qemu cannot be installed)"
 	@echo "make fuzz    every libFuzzer target (tests/fuzz/) for FUZZ_SECONDS (default 60)"
-	@echo "             each: bench/results/fuzz.json and fuzz.md (docs/fuzzing.md)"
+	@echo "             each (FUZZ_TARGETS=\"fuzz_mit ...\" for some): bench/results/fuzz.json"
+	@echo "             and fuzz.md (docs/fuzzing.md)"
 	@echo "make test-hw the real drivers (SocketCAN, libgpiod) in a Debian kernel"
 	@echo "             booted under qemu with vcan, vxcan and gpio-mockup"
 	@echo "make bench   latency beside cyclictest, tick share, bus load, allocations,"
@@ -283,11 +284,14 @@ $(FUZZ_LIB): $(patsubst %.c,$(BUILD)/fuzz/obj/%.o,$(FUZZ_LIB_SRCS))
 $(FUZZ_BINS): $(BUILD)/fuzz/%: tests/fuzz/%.c $(FUZZ_LIB)
 	$(FUZZ_CC) $(FUZZ_CFLAGS) $(FUZZ_SAN) -fsanitize=fuzzer -MF $(BUILD)/fuzz/obj/$(@F).d -o $@ $< $(FUZZ_LIB) $(FUZZ_LDLIBS)
 
-# make fuzz: every target for FUZZ_SECONDS (default 60) from its seeds and
-# what earlier runs found ($(BUILD)/fuzz/corpus), into bench/results/fuzz.json
-# and fuzz.md; crashes are kept in $(BUILD)/fuzz/crashes.
-fuzz: deps-test $(FUZZ_BINS)
-	@BUILD=$(BUILD) FUZZ_SECONDS=$(FUZZ_SECONDS) bash tools/fuzz.sh $(FUZZ_BINS)
+# make fuzz: every target (or FUZZ_TARGETS, e.g. "fuzz_mit fuzz_mcap") for
+# FUZZ_SECONDS (default 60) from its seeds and what earlier runs found
+# ($(BUILD)/fuzz/corpus), into bench/results/fuzz.json and fuzz.md (each
+# target's latest run); crashes are kept in $(BUILD)/fuzz/crashes.
+FUZZ_TARGETS ?= $(notdir $(FUZZ_BINS))
+fuzz: deps-test $(addprefix $(BUILD)/fuzz/,$(FUZZ_TARGETS))
+	@BUILD=$(BUILD) FUZZ_SECONDS=$(FUZZ_SECONDS) bash tools/fuzz.sh \
+	    $(addprefix $(BUILD)/fuzz/,$(FUZZ_TARGETS))
 
 run: deps-build $(BUILD)/pushstep $(CAMERA_SO)
 	$(BUILD)/pushstep --board sim $(ARGS)
