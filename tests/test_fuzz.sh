@@ -3,7 +3,7 @@
 # each libFuzzer target of tests/fuzz/ replays its seeds (tests/fuzz/corpus)
 # and fuzzes for FUZZ_TEST_SECONDS (default 1) in a scratch corpus; a crash,
 # a broken contract or a sanitizer report fails it, the input kept in
-# build/fuzz/crashes/. Prints cmocka's summary lines for tools/run-tests.sh
+# build/fuzz/test-crashes/. Prints cmocka's summary lines for tools/run-tests.sh
 # (tools/fuzz.sh --test): two at a time, 33 s for the 13 targets measured
 # with load average 4 on 2 cores (docs/fuzzing.md).
 set -uo pipefail
