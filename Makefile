@@ -122,6 +122,10 @@ TSAN_BINS := $(BUILD)/tests/test_mailbox_tsan
 # (plant, logger, recorder writer, perception, render):
 # tests/test_tsan_threads.sh runs it.
 TSAN_PUSHSTEP := $(BUILD)/tsan/pushstep
+# The whole runtime under ASan and UBSan, for the end-to-end paths the unit
+# tests do not cover (every subcommand, recorder, render, camera, replay):
+# tests/test_asan_cli.sh runs it. The allocation-counting tests stay plain.
+ASAN_PUSHSTEP := $(BUILD)/san/pushstep
 # Tests of the real drivers: they need vcan/vxcan and gpio-mockup, so they run
 # inside a Debian kernel booted under qemu (tools/qemu/, docs/testing-hw.md).
 HW_SRCS := $(wildcard tests/hw/test_hw_*.c)
@@ -130,7 +134,7 @@ QEMU_WORK ?= $(BUILD)/qemu
 
 .PHONY: fuzz
 .PHONY: all deps deps-build deps-test deps-npm deps-bench deps-train run test test-hw clean format help \
-        bench bench-hw train install deb test-deb aarch64-test-bins soak
+        bench bench-hw train install deb test-deb aarch64-test-bins soak test-build
 all: $(BUILD)/pushstep $(CAMERA_SO)
 
 help:
@@ -220,6 +224,9 @@ $(BUILD)/tsan/policy/ps_mlp.o: policy/ps_mlp.c
 	@mkdir -p $(@D)
 	$(CC) $(CFLAGS) -O3 -c $< -o $@
 
+$(ASAN_PUSHSTEP): $(BUILD)/san/rt/main.o $(LIB_SANOBJS)
+	$(CC) $(CFLAGS) $(SANFLAGS) $(LDFLAGS) -o $@ $^ $(LDLIBS)
+
 $(TSAN_PUSHSTEP): $(patsubst %.c,$(BUILD)/tsan/%.o,$(MAIN_SRC) $(LIB_SRCS))
 	$(CC) $(CFLAGS) -fsanitize=thread $(LDFLAGS) -o $@ $^ $(LDLIBS)
 
@@ -289,7 +296,8 @@ $(FUZZ_BINS): $(BUILD)/fuzz/%: tests/fuzz/%.c $(FUZZ_LIB)
 # ($(BUILD)/fuzz/corpus), into bench/results/fuzz.json and fuzz.md (each
 # target's latest run); crashes are kept in $(BUILD)/fuzz/crashes.
 FUZZ_TARGETS ?= $(notdir $(FUZZ_BINS))
-fuzz: deps-test $(addprefix $(BUILD)/fuzz/,$(FUZZ_TARGETS))
+fuzz: deps-test
+	@$(MAKE) --no-print-directory -j$(or $(NPROC),1) $(addprefix $(BUILD)/fuzz/,$(FUZZ_TARGETS))
 	@BUILD=$(BUILD) FUZZ_SECONDS=$(FUZZ_SECONDS) bash tools/fuzz.sh \
 	    $(addprefix $(BUILD)/fuzz/,$(FUZZ_TARGETS))
 
@@ -304,9 +312,12 @@ aarch64-test-bins: $(BUILD)/pushstep $(CAMERA_SO) $(TEST_BINS)
 else
 # The native suite, then the quick part of the aarch64 one under qemu-user
 # (tools/test-aarch64.sh) when the cross tools are installed (deps-test
-# installs them where apt can), then the VM tests.
-test: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(BUILD)/libpsenv.so $(TEST_BINS) $(TSAN_BINS) \
-      $(TSAN_PUSHSTEP) $(HW_BINS) $(FUZZ_BINS) aarch64-test-bins
+# installs them where apt can), then the VM tests. The packages first, then
+# the builds (plain, sanitized, aarch64) on every CPU: a sub-make, so that
+# no compiler starts before its headers are installed.
+NPROC := $(shell nproc 2>/dev/null || echo 1)
+test: deps-test
+	@$(MAKE) --no-print-directory -j$(NPROC) test-build
 	@# without the npm packages the rest of the suite still runs; the reader
 	@# check then fails (tests/test_e2e_recorder.c) and says why
 	@bash tools/npm-deps.sh $(BUILD)/npm || echo "make test: continuing without the MCAP readers"
@@ -314,9 +325,13 @@ test: deps-test $(BUILD)/pushstep $(CAMERA_SO) $(BUILD)/libpsenv.so $(TEST_BINS)
 	    HW_BINS="$(HW_BINS)" AARCH64_BUILD=$(AARCH64_BUILD) BUILD=$(BUILD) FUZZ_BINS="$(FUZZ_BINS)" \
 	    bash tools/run-tests.sh \
 	    tools/check-layers.sh $(TEST_BINS) $(TSAN_BINS) tests/test_tsan_threads.sh \
+	    tests/test_asan_cli.sh \
 	    tests/test_soak_short.sh policy/train/test_tools.py \
 	    tests/test_train_smoke.sh tests/test_fuzz.sh tools/test-install.sh tools/test-aarch64.sh \
 	    tools/qemu/test-hw.sh
+
+test-build: $(BUILD)/pushstep $(CAMERA_SO) $(BUILD)/libpsenv.so $(TEST_BINS) $(TSAN_BINS) \
+            $(TSAN_PUSHSTEP) $(ASAN_PUSHSTEP) $(HW_BINS) $(FUZZ_BINS) aarch64-test-bins
 
 AARCH64_BUILD := build-aarch64
 aarch64-test-bins:

@@ -25,14 +25,17 @@
 #define TEXT_CAP    16384u
 
 static const char USAGE[] =
-    "usage: pushstep log FILE.mcap [--csv OUT.csv] [--plot OUT.png]\n"
+    "usage: pushstep log FILE.mcap [--events] [--csv OUT.csv] [--plot OUT.png]\n"
     "                              [--channels LIST] [--signals LIST] [--from S] [--to S]\n"
     "Reads a flight-recorder file (pushstep --record / --flight; any MCAP file of\n"
     "ros2msg/CDR messages with flat schemas).\n"
     "  (no option)       summary: closed or cut (and where), duration, channels and\n"
     "                    message counts, the run and the recorder (records lost),\n"
     "                    events (transitions, triggers), fault conditions seen,\n"
-    "                    latency per stage (p50/p99/max from /timing)\n"
+    "                    latency per stage (p50/p99/max from /timing); a long\n"
+    "                    recording's events are listed up to a screenful\n"
+    "  --events          every event (transitions, triggers) in time order, one per\n"
+    "                    line, and nothing else\n"
     "  --csv OUT.csv     the chosen channels or signals as columns, one row per\n"
     "                    log time (t_s from the first message); a channel without a\n"
     "                    message at that time repeats its last value\n"
@@ -91,7 +94,8 @@ typedef struct {
     uint32_t n_joints;
     char meta[TEXT_CAP];
     char events[TEXT_CAP];
-    uint32_t n_events;
+    uint32_t n_events, n_events_listed;
+    bool is_events_only; /**< --events: print each event as read, no summary */
     double cond_first_s[32];
     uint64_t cond_ticks[32];
     series_t timing[MAX_TIMING];
@@ -282,13 +286,18 @@ static int on_message_summary(void *ctx, uint16_t id, uint32_t seq, uint64_t t, 
     if (ps_rosmsg_decode(def, data, len, summary_value, lg) < 0)
         return 0; /* a message its schema does not describe: counted, not decoded */
     c->has_first = true;
-    if (strcmp(c->topic, "/events") == 0 && lg->n_events < 200) {
+    if (strcmp(c->topic, "/events") == 0) {
         char line[320];
-        snprintf(line, sizeof(line), "  t=%8.3fs %-10s %s\n", (double)(t - lg->t0) * 1e-9, lg->kind,
-                 lg->text);
+        const int n = snprintf(line, sizeof(line), "  t=%8.3fs %-10s %s\n",
+                               (double)(t - lg->t0) * 1e-9, lg->kind, lg->text);
         const size_t used = strlen(lg->events);
-        snprintf(lg->events + used, TEXT_CAP - used, "%s", line);
         lg->n_events++;
+        if (lg->is_events_only)
+            fputs(line, stdout);
+        else if (n > 0 && used + (size_t)n < TEXT_CAP) { /* whole lines only */
+            memcpy(lg->events + used, line, (size_t)n + 1u);
+            lg->n_events_listed++;
+        }
     }
     return 0;
 }
@@ -328,7 +337,11 @@ static void print_summary(log_t *lg, const ps_mcap_read_info_t *info)
         printf("  %-10s %8llu messages  %s\n", c->topic, (unsigned long long)c->n, schema);
     }
     printf("metadata:\n%s", lg->meta[0] ? lg->meta : "  none\n");
-    printf("events (%u):\n%s", lg->n_events, lg->events[0] ? lg->events : "  none\n");
+    if (lg->n_events_listed < lg->n_events)
+        printf("events (%u; the first %u listed, --events lists all):\n%s", lg->n_events,
+               lg->n_events_listed, lg->events);
+    else
+        printf("events (%u):\n%s", lg->n_events, lg->events[0] ? lg->events : "  none\n");
     printf("conditions seen (first time, ticks):\n");
     bool any = false;
     for (unsigned b = 0; b < 32; b++) {
@@ -673,10 +686,15 @@ static int run_export(log_t *lg)
 static int parse_args(int argc, char **argv, log_t *lg)
 {
     static const struct option LONG[] = {
-        {"csv", required_argument, NULL, 'c'},      {"plot", required_argument, NULL, 'p'},
-        {"channels", required_argument, NULL, 'C'}, {"signals", required_argument, NULL, 's'},
-        {"from", required_argument, NULL, 'f'},     {"to", required_argument, NULL, 't'},
-        {"help", no_argument, NULL, 'h'},           {NULL, 0, NULL, 0},
+        {"csv", required_argument, NULL, 'c'},
+        {"plot", required_argument, NULL, 'p'},
+        {"channels", required_argument, NULL, 'C'},
+        {"signals", required_argument, NULL, 's'},
+        {"from", required_argument, NULL, 'f'},
+        {"to", required_argument, NULL, 't'},
+        {"events", no_argument, NULL, 'e'},
+        {"help", no_argument, NULL, 'h'},
+        {NULL, 0, NULL, 0},
     };
     lg->from_s = -INFINITY;
     lg->to_s = INFINITY;
@@ -690,6 +708,9 @@ static int parse_args(int argc, char **argv, log_t *lg)
         case 'p':
             lg->plot = optarg;
             break;
+        case 'e':
+            lg->is_events_only = true;
+            break;
         case 'C':
             lg->channels = optarg;
             break;
@@ -699,8 +720,7 @@ static int parse_args(int argc, char **argv, log_t *lg)
             break;
         case 'f':
         case 't':
-            if (ps_args_seconds(optarg, 0.0, 1e9, false, c == 'f' ? &lg->from_s : &lg->to_s) <
-                0) {
+            if (ps_args_seconds(optarg, 0.0, 1e9, false, c == 'f' ? &lg->from_s : &lg->to_s) < 0) {
                 fprintf(stderr, "pushstep log: --%s: \"%s\" is not a number of seconds >= 0\n",
                         c == 'f' ? "from" : "to", optarg);
                 return -EINVAL;
@@ -724,6 +744,11 @@ static int parse_args(int argc, char **argv, log_t *lg)
         return -EINVAL;
     }
     lg->is_export = lg->csv != NULL || lg->plot != NULL;
+    if (lg->is_events_only && lg->is_export) {
+        fprintf(stderr,
+                "pushstep log: --events lists the events alone, not with --csv or --plot\n");
+        return -EINVAL;
+    }
     if (!lg->is_export && (lg->channels != NULL || lg->signals != NULL)) {
         fprintf(stderr, "pushstep log: --channels and --signals go with --csv or --plot\n");
         return -EINVAL;
@@ -751,7 +776,11 @@ int ps_reclog_main(int argc, char **argv)
             status = 1;
         }
     }
-    if (status == 0 && !lg->is_export)
+    if (status == 0 && lg->is_events_only) {
+        if (!info.has_footer) /* the events were printed as read: say so after them */
+            printf("%s: not closed, read up to its last complete chunk (%s)\n", lg->path,
+                   info.stop_reason);
+    } else if (status == 0 && !lg->is_export)
         print_summary(lg, &info);
     else if (status == 0) {
         if (!info.has_footer)

@@ -32,23 +32,31 @@ import time
 # Each fault: the scenario events that make it (times relative to the
 # fault), the transition it must cause (target state, a condition the
 # transition names) and within how many ticks, and the operator's recovery.
-# Ticks: e-stop edge and drive fault reports arrive within a reply period
-# (rate_div 2 at 1 kHz) plus the debounce; a silent joint is stale after
-# reply_timeout_s (10 ms) plus its reply period.
+# Tick bounds (1 kHz servo), from the robot file's joint (rate_div: the
+# joint is commanded, and so answers, every rate_div ticks) and its
+# reply_timeout_s: an e-stop edge is read the next tick, debounced over 1 ms,
+# acted on in the tick after: 3. A drive's fault bits come in its reply to
+# the next command (up to rate_div ticks), after a tick of bus and reply
+# latency, read the tick after, the transition logged in the next:
+# rate_div + 3. A joint that stops answering is stale once its last reply
+# is older than reply_timeout + rate_div periods; that reply may be up to a
+# reply period old when it stops, and the same three ticks follow:
+# timeout + 2 rate_div + 3. bench/results/soak.md has the slowest measured.
 FAULTS = {
     "estop": {
         "events": [(0.0, "estop_press", None, None), (0.3, "estop_release", None, None)],
-        "expect": ("ESTOP", "ESTOP_INPUT"), "within_ticks": 5,
+        "expect": ("ESTOP", "ESTOP_INPUT"), "within_ticks": lambda div, timeout: 3,
         "recover": [(1.0, "reset"), (1.5, "start")],
     },
     "drive_fault": {
         "events": [(0.0, "drive_fault", "joint", None)],
-        "expect": ("ESTOP", "DRIVE_FAULT"), "within_ticks": 5,
+        "expect": ("ESTOP", "DRIVE_FAULT"), "within_ticks": lambda div, timeout: div + 3,
         "recover": [(1.0, "reset"), (1.5, "start")],
     },
     "silent_joint": {
         "events": [(0.0, "drop_replies", "joint", 0.05)],
-        "expect": ("HOLD", "REPLY_STALE"), "within_ticks": 20,
+        "expect": ("HOLD", "REPLY_STALE"),
+        "within_ticks": lambda div, timeout: timeout + 2 * div + 3,
         "recover": [(1.0, "start")],
     },
 }
@@ -56,15 +64,21 @@ TRANSITION = re.compile(r"^t=\s*([0-9.]+)s state (\w+) -> (\w+) \(([^)]*)\)", re
 MAX_EVENTS = 1024  # rt/ps_limits.h PS_MAX_EVENTS
 
 
-def joint_names(robot_path):
-    names = re.findall(r"^\s*- \{name: (\w+), bus:", open(robot_path).read(), re.M)
-    if not names:
-        sys.exit(f"soak: no joints found in {robot_path}")
-    return names
+def robot_joints(robot_path):
+    """{joint name: rate_div} and the reply timeout in ticks, from the robot
+    file (its joint lines and its control line; 1 kHz servo)."""
+    text = open(robot_path).read()
+    joints = {m.group(1): int(m.group(2)) for m in re.finditer(
+        r"^\s*- \{name: (\w+), bus:.*?rate_div: (\d+)", text, re.M)}
+    timeout = re.search(r"reply_timeout_s: ([0-9.]+)", text)
+    if not joints or timeout is None:
+        sys.exit(f"soak: no joints or no control.reply_timeout_s in {robot_path}")
+    return joints, round(float(timeout.group(1)) * 1000.0)
 
 
-def make_scenario(seed, duration_s, period_s, joints):
-    """The scenario YAML and the faults it injects, in time order."""
+def make_scenario(seed, duration_s, period_s, joints, timeout_ticks):
+    """The scenario YAML and the faults it injects, in time order; joints:
+    {name: rate_div}."""
     rng = random.Random(seed)
     events = [(0.2, "start", None, None)]
     faults = []
@@ -73,14 +87,15 @@ def make_scenario(seed, duration_s, period_s, joints):
         kind = rng.choice(sorted(FAULTS))
         spec = FAULTS[kind]
         t_fault = round(t0 + rng.uniform(0.0, 1.0), 3)
-        joint = rng.choice(joints)
+        joint = rng.choice(sorted(joints))
         for dt, ev, needs_joint, dur in spec["events"]:
             events.append((round(t_fault + dt, 3), ev, joint if needs_joint else None, dur))
         for dt, ev in spec["recover"]:
             events.append((round(t_fault + dt, 3), ev, None, None))
         faults.append({"t_s": t_fault, "kind": kind, "joint": joint if any(
             e[2] for e in spec["events"]) else None, "expect_state": spec["expect"][0],
-            "expect_condition": spec["expect"][1], "within_ticks": spec["within_ticks"]})
+            "expect_condition": spec["expect"][1],
+            "within_ticks": spec["within_ticks"](joints[joint], timeout_ticks)})
         t0 += period_s
     if len(events) > MAX_EVENTS:
         sys.exit(f"soak: {len(events)} events, more than a scenario holds ({MAX_EVENTS})")
@@ -160,33 +175,93 @@ class Checks:
             print(f"[  FAILED  ] {name}: {why}")
 
 
-def judge_faults(faults, transitions, end_s):
+# Faults the soak did not inject also happen, and must be handled too:
+#  - lockstep judges a late policy and overruns on the loop thread's CPU
+#    time (so that a slow policy shows in simulation too), which a loaded
+#    host inflates: now and then a hold for POLICY_LATE or OVERRUN;
+#  - the plant's own drives: a surge pressing the robot sideways on its
+#    hoist can drive a hip past its winding temperature (the drive reports
+#    over-temperature: DRIVE_FAULT, or DRIVE_HOT where derating exists).
+# Such an unprompted fault must take the robot to a safe state (HOLD,
+# ESTOP, DAMPING) and be one of these kinds; the injected fault in whose
+# window it falls, or that finds the robot not ACTIVE, is reported as not
+# judged rather than failed, and at least --min-judged of them must be.
+UNPROMPTED_OK = {"POLICY_LATE", "OVERRUN", "DRIVE_FAULT", "DRIVE_HOT"}
+SAFE_STATES = {"HOLD", "ESTOP", "DAMPING"}
+
+
+def conditions(tr):
+    return set(tr[3].split("|"))
+
+
+def unprompted(faults, transitions):
+    """Transitions into a safe state that no injected fault explains: one
+    naming a fault condition other than that of the fault whose window it
+    is in (requests aside: the operator's, the run's own stop)."""
+    out = []
+    for t in transitions:
+        if t[2] not in SAFE_STATES or all(c.startswith("REQ_") for c in conditions(t)):
+            continue
+        own = [f for f in faults if f["t_s"] - 1e-9 <= t[0]]
+        rest = {c for c in conditions(t) if not c.startswith("REQ_")}
+        if own and rest <= {own[-1]["expect_condition"]}:
+            continue
+        out.append(t)
+    return out
+
+
+def judge_faults(faults, transitions, end_s, extra):
     """Per fault: the first transition after it, its delay in ticks, and
     whether ACTIVE came back before the next fault (or the planned end,
-    when the run's own stop begins)."""
+    when the run's own stop begins); 'judged' false when an unprompted
+    fault (extra) fell in its window or the robot was not ACTIVE at it."""
     results = []
     for i, f in enumerate(faults):
         t_next = faults[i + 1]["t_s"] if i + 1 < len(faults) else end_s
+        before = [t for t in transitions if t[0] < f["t_s"] - 1e-9]
         after = [t for t in transitions if t[0] >= f["t_s"] - 1e-9]
+        window = [t for t in after if t[0] < t_next]
+        is_armed = bool(before) and before[-1][2] == "ACTIVE"
+        judged = is_armed and not any(t in extra for t in window)
         first = after[0] if after else None
         ok_first = (first is not None and first[2] == f["expect_state"]
-                    and f["expect_condition"] in first[3].split("|"))
+                    and f["expect_condition"] in conditions(first))
         delay_ticks = round((first[0] - f["t_s"]) * 1000.0) if first else None
-        window = [t for t in after if t[0] < t_next]
         recovered = bool(window) and window[-1][2] == "ACTIVE"
         results.append(dict(f, first=first and "%s -> %s (%s)" % first[1:],
-                            delay_ticks=delay_ticks,
+                            delay_ticks=delay_ticks, judged=judged,
                             ok=ok_first and delay_ticks <= f["within_ticks"] and recovered,
                             recovered=recovered))
     return results
 
 
+def drive_faults_at(bin_path, mcap, t_s):
+    """Which drives reported fault bits just after t_s, from the recording."""
+    csv = mcap + ".fault.csv"
+    r = subprocess.run([bin_path, "log", mcap, "--csv", csv, "--channels", "/joints",
+                        "--from", "%.3f" % max(0.0, t_s - 0.002), "--to", "%.3f" % (t_s + 0.01)],
+                       capture_output=True, text=True)
+    if r.returncode != 0 or not os.path.exists(csv):
+        return "?"
+    rows = open(csv).read().splitlines()
+    os.unlink(csv)
+    head = rows[0].split(",")
+    seen = {}
+    for row in rows[1:]:
+        for name, v in zip(head, row.split(",")):
+            if name.startswith("joints.fault_bits.") and v not in ("0", "0.0", ""):
+                seen[name[len("joints.fault_bits."):]] = int(float(v))
+    return ", ".join("%s 0x%x" % kv for kv in sorted(seen.items())) or "none"
+
+
 def log_counts(bin_path, mcap):
-    """Message count per channel as `pushstep log` reads the file back."""
+    """Message count per channel and every event line, as `pushstep log`
+    (the summary, then --events) reads the file back."""
     r = subprocess.run([bin_path, "log", mcap], capture_output=True, text=True)
     counts = dict((m.group(1), int(m.group(2))) for m in
                   re.finditer(r"^\s+(/\w+)\s+.*?(\d+) messages", r.stdout, re.M))
-    return r.returncode, counts, r.stdout + r.stderr
+    e = subprocess.run([bin_path, "log", mcap, "--events"], capture_output=True, text=True)
+    return r.returncode or e.returncode, counts, r.stdout + r.stderr + e.stderr, e.stdout
 
 
 def main():
@@ -198,6 +273,8 @@ def main():
     ap.add_argument("--robot", default="robots/ps1.yaml")
     ap.add_argument("--work", default="build/soak", help="scenario, recordings, summary")
     ap.add_argument("--results", help="write soak.json and soak.md here")
+    ap.add_argument("--min-judged", type=float, default=0.9,
+                    help="share of the faults that a host-caused hold may not disturb")
     ap.add_argument("--growth-kb", type=int, default=1024,
                     help="resident-memory growth allowed after the warm-up beyond the "
                     "recorder's chunk index")
@@ -206,7 +283,8 @@ def main():
     for f in os.listdir(a.work):
         if f.endswith(".mcap"):
             os.unlink(os.path.join(a.work, f))
-    text, faults = make_scenario(a.seed, a.ticks / 1000.0, a.period, joint_names(a.robot))
+    joints, timeout_ticks = robot_joints(a.robot)
+    text, faults = make_scenario(a.seed, a.ticks / 1000.0, a.period, joints, timeout_ticks)
     scenario = os.path.join(a.work, "soak.yaml")
     open(scenario, "w").write(text)
     print(f"soak: {a.ticks} ticks, {len(faults)} faults (seed {a.seed}), scenario {scenario}")
@@ -227,24 +305,42 @@ def main():
     c.check(f"ran {a.ticks} ticks or more", ticks >= a.ticks, f"{ticks} ticks")
     transitions = [(float(m.group(1)), m.group(2), m.group(3), m.group(4))
                    for m in TRANSITION.finditer(out)]
-    lrc, counts, lout = log_counts(a.bin, os.path.join(a.work, "soak.mcap"))
+    lrc, counts, lout, events_out = log_counts(a.bin, os.path.join(a.work, "soak.mcap"))
     recorded = [(float(m.group(1)), m.group(2), m.group(3), m.group(4)) for m in
                 re.finditer(r"^\s+t=\s*([0-9.]+)s transition (\w+) -> (\w+) \(([^)]*)\)",
-                            lout, re.M)]
+                            events_out, re.M)]
     c.check("the recording holds every transition the runtime printed",
             len(recorded) == len(transitions) and all(
                 abs(x[0] - y[0]) < 2e-3 and x[1:] == y[1:] for x, y in zip(recorded, transitions)),
             f"{len(recorded)} recorded, {len(transitions)} printed")
-    judged = judge_faults(faults, transitions, a.ticks / 1000.0)
+    end_s = a.ticks / 1000.0
+    extra = unprompted(faults, transitions)
+    judged = judge_faults(faults, transitions, end_s, extra)
     by_kind = {}
     for j in judged:
-        k = by_kind.setdefault(j["kind"], {"injected": 0, "expected_state": 0, "max_ticks": 0})
+        k = by_kind.setdefault(j["kind"], {"injected": 0, "judged": 0, "expected_state": 0,
+                                           "max_ticks": 0, "bound_ticks": 0})
         k["injected"] += 1
-        k["expected_state"] += j["ok"]
-        if j["delay_ticks"] is not None:
+        k["judged"] += j["judged"]
+        k["expected_state"] += j["judged"] and j["ok"]
+        k["bound_ticks"] = max(k["bound_ticks"], j["within_ticks"])
+        if j["judged"] and j["delay_ticks"] is not None:
             k["max_ticks"] = max(k["max_ticks"], j["delay_ticks"])
-    bad = [j for j in judged if not j["ok"]]
-    c.check(f"all {len(judged)} faults reached their state in time and recovered", not bad,
+    mcap = os.path.join(a.work, "soak.mcap")
+    extra_text = ["%.3f s %s -> %s (%s)%s" % (t + ((
+        ": drive fault bits " + drive_faults_at(a.bin, mcap, t[0]))
+        if "DRIVE_FAULT" in conditions(t) or "DRIVE_HOT" in conditions(t) else "",))
+        for t in extra]
+    c.check(f"the {len(extra)} faults the soak did not inject (host timing, the drives' own) "
+            "were of a known kind and each took the robot to a safe state",
+            all(conditions(t) & UNPROMPTED_OK and conditions(t) <= UNPROMPTED_OK | {
+                "REPLY_STALE", "IMU_STALE"} for t in extra), "; ".join(extra_text[:10]))
+    n_judged = sum(j["judged"] for j in judged)
+    c.check(f"at least {a.min_judged:.0%} of the faults judged ({n_judged} of {len(judged)}: "
+            "the others met an unprompted fault)", n_judged >= a.min_judged * len(judged),
+            f"{n_judged} of {len(judged)}")
+    bad = [j for j in judged if j["judged"] and not j["ok"]]
+    c.check(f"all {n_judged} judged faults reached their state in time and recovered", not bad,
             "; ".join("%.3f s %s%s: %s after %s ticks, recovered %s" % (
                 j["t_s"], j["kind"], " " + j["joint"] if j["joint"] else "", j["first"],
                 j["delay_ticks"], j["recovered"]) for j in bad[:10]))
@@ -282,7 +378,9 @@ def main():
             f"{rss_warm} kB -> {rss_end} kB ({len(samples)} samples), chunk index {index_kb} kB")
     result = {
         "ticks": ticks, "loop_s": s["loop_s"], "wall_s": round(wall_s, 1), "seed": a.seed,
-        "faults_injected": len(judged), "faults_expected_state": sum(j["ok"] for j in judged),
+        "faults_injected": len(judged), "faults_judged": n_judged,
+        "faults_expected_state": sum(j["judged"] and j["ok"] for j in judged),
+        "unprompted_faults": extra_text,
         "by_kind": by_kind, "transitions": len(transitions),
         "rss_kb": {"first": samples[0][1] if samples else None, "after_warmup": rss_warm,
                    "end": rss_end, "max": max((r for _, r in samples), default=None),
@@ -303,10 +401,11 @@ def main():
 def write_results(a, r):
     os.makedirs(a.results, exist_ok=True)
     json.dump(r, open(os.path.join(a.results, "soak.json"), "w"), indent=1)
-    rows = "\n".join("| %s | %d | %d | %d |" % (k, v["injected"], v["expected_state"],
-                                                  v["max_ticks"])
-                     for k, v in sorted(r["by_kind"].items()))
+    rows = "\n".join("| %s | %d | %d | %d | %d | %d |" % (
+        k, v["injected"], v["judged"], v["expected_state"], v["max_ticks"], v["bound_ticks"])
+        for k, v in sorted(r["by_kind"].items()))
     m = r["rss_kb"]
+    extra = "; ".join(r["unprompted_faults"]) or "none"
     md = f"""# Soak
 
 `make soak` (tools/soak.py --ticks {a.ticks} --seed {a.seed} --period {a.period}),
@@ -314,11 +413,15 @@ def write_results(a, r):
 lockstep among the default crowd (24 people pressing, rear-row surges), the robot on its hoist,
 a fault every {a.period:g} s and the operator's recovery after it; {r['wall_s']} s wall.
 
-| fault | injected | expected state reached in time, then ACTIVE again | slowest (ticks) |
-|---|---|---|---|
+| fault | injected | judged | expected state reached in time, then ACTIVE again | slowest (ticks) | bound (ticks) |
+|---|---|---|---|---|---|
 {rows}
 
-Faults handled: {r['faults_expected_state']} of {r['faults_injected']}. Commands outside the
+Faults handled: {r['faults_expected_state']} of {r['faults_judged']} judged ({r['faults_injected']}
+injected). Not judged: a fault in whose window, or before which, a fault the soak did not
+inject took the robot to a safe state: lockstep judges a late policy and overruns on the loop
+thread's CPU time, which a loaded host inflates, and the plant's own drives can overheat when a
+surge presses the robot sideways. Those faults: {extra}. Commands outside the
 limits: {r['commands_out_of_limits']}. After init on the loop thread: {r['after_init']['mallocs']}
 mallocs, {r['after_init']['frees']} frees, {r['after_init']['locks']} locks.
 Recorder: {r['recorder']['records']} records ({r['recorder']['bytes']} bytes of MCAP), lost
