@@ -43,6 +43,10 @@ TOOL_PKGS  := rt-tests can-utils
 TEST_PKGS  := can-utils systemd gnuplot-nox libcamera-ipa udev \
               python3 python3-numpy python3-onnx python3-hypothesis python3-torch \
               python3-yaml python3-tqdm
+# The fuzz targets (tests/fuzz/, docs/fuzzing.md): clang with libFuzzer and
+# its sanitizer runtimes (libclang-rt-14-dev is only a recommendation of
+# clang-14's, so it is named).
+TEST_PKGS  += clang-14 libclang-rt-14-dev
 # Extra packages `make bench` needs: load generator, plots, the analysis script,
 # GNU parallel for the push-recovery grid (bench/push.py), OpenBLAS and
 # libtorch for the inference comparison (bench/policy.sh).
@@ -128,6 +132,7 @@ HW_SRCS := $(wildcard tests/hw/test_hw_*.c)
 HW_BINS := $(patsubst tests/hw/%.c,$(BUILD)/tests/hw/%,$(HW_SRCS))
 QEMU_WORK ?= $(BUILD)/qemu
 
+.PHONY: fuzz
 .PHONY: all deps deps-build deps-test deps-npm deps-bench deps-train run test test-hw clean format help \
         bench bench-hw train install deb test-deb aarch64-test-bins soak test-build
 all: $(BUILD)/pushstep $(CAMERA_SO)
@@ -141,6 +146,9 @@ help:
 	@echo "             options pass through: make run ARGS=\"--duration 5 --lockstep\""
 	@echo "make test    deps + build + run the whole cmocka suite, test-hw included"
 	@echo "             (skipped with a message where qemu cannot be installed)"
+	@echo "make fuzz    every libFuzzer target (tests/fuzz/) for FUZZ_SECONDS (default 60)"
+	@echo "             each (FUZZ_TARGETS=\"fuzz_mit ...\" for some): bench/results/fuzz.json"
+	@echo "             and fuzz.md (docs/fuzzing.md)"
 	@echo "make test-hw the real drivers (SocketCAN, libgpiod) in a Debian kernel"
 	@echo "             booted under qemu with vcan, vxcan and gpio-mockup"
 	@echo "make bench   latency beside cyclictest, tick share, bus load, allocations,"
@@ -251,6 +259,48 @@ $(HW_BINS): $(BUILD)/tests/hw/%: $(BUILD)/obj/tests/hw/%.o $(LIB_OBJS) $(FAKE_OB
 	@mkdir -p $(@D)
 	$(CC) $(CFLAGS) -o $@ $^ $(LDLIBS) -lcmocka
 
+# ---- fuzzing (docs/fuzzing.md) --------------------------------------------
+# libFuzzer targets, one file each in tests/fuzz/, built with Debian's clang
+# and AddressSanitizer + UBSan. The parsers they call are built again with
+# coverage into an archive (only the modules of outside input and what they
+# need), so a target links only what it uses.
+FUZZ_CC      ?= clang-14
+FUZZ_CFLAGS  := -O1 -g -std=c11 -D_GNU_SOURCE -pthread $(WARN) -MMD -MP -fno-omit-frame-pointer
+FUZZ_SAN     := -fsanitize=address,undefined -fno-sanitize-recover=undefined
+FUZZ_LIB_SRCS := drivers/ps_actuator.c drivers/ps_mit.c drivers/ps_robstride.c drivers/ps_moteus.c \
+                 drivers/ps_imu.c drivers/ps_imu_msg.c drivers/ps_imu_xsens.c drivers/ps_candump.c \
+                 drivers/ps_can_replay.c drivers/ps_gpio_gpiod.c drivers/ps_camera.c drivers/ps_canbus.c \
+                 $(wildcard policy/*.c) \
+                 rt/ps_err.c rt/ps_clock.c rt/ps_config_board.c rt/ps_config_common.c \
+                 rt/ps_config_robot.c rt/ps_config_scenario.c rt/ps_mcap.c rt/ps_rosmsg.c \
+                 rt/ps_reclog.c rt/ps_args.c rt/ps_sm.c sim/ps_crowd.c sim/ps_social.c
+FUZZ_SRCS    := $(wildcard tests/fuzz/fuzz_*.c)
+FUZZ_BINS    := $(patsubst tests/fuzz/%.c,$(BUILD)/fuzz/%,$(FUZZ_SRCS))
+FUZZ_LIB     := $(BUILD)/fuzz/libps_fuzz.a
+FUZZ_LDLIBS  := -lmujoco -lcyaml -lyaml -lcjson -lgpiod -lmnl -lzstd -llz4 -lz -lm -pthread
+FUZZ_SECONDS ?= 60
+
+$(BUILD)/fuzz/obj/%.o: %.c
+	@mkdir -p $(@D)
+	$(FUZZ_CC) $(FUZZ_CFLAGS) $(FUZZ_SAN) -fsanitize=fuzzer-no-link -c $< -o $@
+
+$(FUZZ_LIB): $(patsubst %.c,$(BUILD)/fuzz/obj/%.o,$(FUZZ_LIB_SRCS))
+	@rm -f $@
+	ar rcs $@ $^
+
+$(FUZZ_BINS): $(BUILD)/fuzz/%: tests/fuzz/%.c $(FUZZ_LIB)
+	$(FUZZ_CC) $(FUZZ_CFLAGS) $(FUZZ_SAN) -fsanitize=fuzzer -MF $(BUILD)/fuzz/obj/$(@F).d -o $@ $< $(FUZZ_LIB) $(FUZZ_LDLIBS)
+
+# make fuzz: every target (or FUZZ_TARGETS, e.g. "fuzz_mit fuzz_mcap") for
+# FUZZ_SECONDS (default 60) from its seeds and what earlier runs found
+# ($(BUILD)/fuzz/corpus), into bench/results/fuzz.json and fuzz.md (each
+# target's latest run); crashes are kept in $(BUILD)/fuzz/crashes.
+FUZZ_TARGETS ?= $(notdir $(FUZZ_BINS))
+fuzz: deps-test
+	@$(MAKE) --no-print-directory -j$(or $(NPROC),1) $(addprefix $(BUILD)/fuzz/,$(FUZZ_TARGETS))
+	@BUILD=$(BUILD) FUZZ_SECONDS=$(FUZZ_SECONDS) bash tools/fuzz.sh \
+	    $(addprefix $(BUILD)/fuzz/,$(FUZZ_TARGETS))
+
 run: deps-build $(BUILD)/pushstep $(CAMERA_SO)
 	$(BUILD)/pushstep --board sim $(ARGS)
 
@@ -272,14 +322,16 @@ test: deps-test
 	@# check then fails (tests/test_e2e_recorder.c) and says why
 	@bash tools/npm-deps.sh $(BUILD)/npm || echo "make test: continuing without the MCAP readers"
 	@PUSHSTEP_BIN=$(BUILD)/pushstep PUSHSTEP_NPM=$(BUILD)/npm QEMU_WORK=$(QEMU_WORK) \
-	    HW_BINS="$(HW_BINS)" AARCH64_BUILD=$(AARCH64_BUILD) bash tools/run-tests.sh \
+	    HW_BINS="$(HW_BINS)" AARCH64_BUILD=$(AARCH64_BUILD) BUILD=$(BUILD) FUZZ_BINS="$(FUZZ_BINS)" \
+	    bash tools/run-tests.sh \
 	    tools/check-layers.sh $(TEST_BINS) $(TSAN_BINS) tests/test_tsan_threads.sh \
 	    tests/test_asan_cli.sh \
 	    tests/test_soak_short.sh policy/train/test_tools.py \
-	    tests/test_train_smoke.sh tools/test-install.sh tools/test-aarch64.sh tools/qemu/test-hw.sh
+	    tests/test_train_smoke.sh tests/test_fuzz.sh tools/test-install.sh tools/test-aarch64.sh \
+	    tools/qemu/test-hw.sh
 
 test-build: $(BUILD)/pushstep $(CAMERA_SO) $(BUILD)/libpsenv.so $(TEST_BINS) $(TSAN_BINS) \
-            $(TSAN_PUSHSTEP) $(ASAN_PUSHSTEP) $(HW_BINS) aarch64-test-bins
+            $(TSAN_PUSHSTEP) $(ASAN_PUSHSTEP) $(HW_BINS) $(FUZZ_BINS) aarch64-test-bins
 
 AARCH64_BUILD := build-aarch64
 aarch64-test-bins:
@@ -369,4 +421,4 @@ format:
 clean:
 	rm -rf $(BUILD)
 
--include $(shell find $(BUILD)/obj $(BUILD)/san $(BUILD)/pic $(BUILD)/tsan -name '*.d' -type f 2>/dev/null)
+-include $(shell find $(BUILD)/obj $(BUILD)/san $(BUILD)/pic $(BUILD)/tsan $(BUILD)/fuzz -name '*.d' -type f 2>/dev/null)

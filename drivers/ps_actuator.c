@@ -101,8 +101,7 @@ int ps_act_check_motor(const ps_act_motor_t *m, char *err, size_t err_len)
     }
     if (!isfinite(m->no_load_speed_rad_s) || !isfinite(m->rated_speed_rad_s) ||
         !(m->rated_speed_rad_s >= 0.0f) || !(m->rated_speed_rad_s < m->no_load_speed_rad_s)) {
-        ps_err_format(err, err_len,
-                      "rated_speed_rad_s: %g is not in [0, no_load_speed_rad_s %g)",
+        ps_err_format(err, err_len, "rated_speed_rad_s: %g is not in [0, no_load_speed_rad_s %g)",
                       (double)m->rated_speed_rad_s, (double)m->no_load_speed_rad_s);
         return -EINVAL;
     }
@@ -265,9 +264,14 @@ int ps_act_decode_reply(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_act_m
     const int rc = p->decode_reply(a, f, &m);
     if (rc < 0)
         return rc;
-    const int64_t t_ns = out_joint->t_ns;
-    ps_act_meas_from_motor(a, &m, out_joint);
-    out_joint->t_ns = t_ns;
+    ps_act_meas_t j;
+    ps_act_meas_from_motor(a, &m, &j);
+    /* A protocol without a packing range (moteus floats) can report a value
+     * that is finite on the motor side and not once geared to the joint. */
+    if (!isfinite(j.q_rad) || !isfinite(j.qd_rad_s) || !isfinite(j.tau_nm))
+        return -PS_ERR_PROTOCOL;
+    j.t_ns = out_joint->t_ns;
+    *out_joint = j;
     return 0;
 }
 

@@ -268,7 +268,9 @@ int ps_act_encode_request(const ps_act_cfg_t *a, ps_act_request_t req, ps_can_fr
                           size_t max);
 
 /** Match and decode a reply into a joint measurement (t_ns not written).
- *  @return 0 | -ENOENT not this drive's reply | -PS_ERR_PROTOCOL malformed
+ *  @post *out_joint written on success only, every value finite
+ *  @return 0 | -ENOENT not this drive's reply | -PS_ERR_PROTOCOL malformed, or
+ *          a value that is not finite once converted to the joint
  *  @rt RT-SAFE O(1) */
 int ps_act_decode_reply(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_act_meas_t *out_joint);
 

@@ -174,6 +174,9 @@ static int read_ifname(line_reader_t *r, char *ifname, size_t ifname_len)
     while (r->line[r->at] != ' ' && r->line[r->at] != '\0' && r->line[r->at] != '\n') {
         if (n + 1 >= PS_CANDUMP_IFNAME_MAX || n + 1 >= ifname_len)
             return refuse(r, "interface name longer than 15 bytes");
+        /* what ps_candump_is_valid_ifname refuses: no line could carry it back */
+        if (r->line[r->at] == '(' || r->line[r->at] == '\t')
+            return refuse(r, "'(' or a tab in the interface name");
         ifname[n++] = r->line[r->at++];
     }
     ifname[n] = '\0';

@@ -41,6 +41,16 @@ static int16_t get_le16(const uint8_t *p)
     return (int16_t)(uint16_t)((uint16_t)p[0] | ((uint16_t)p[1] << 8));
 }
 
+/* Components in +-32767 LSB: -32768 lies outside the message (the encoder
+ * never sends it) and is refused, not decoded beyond the stated range. */
+static bool is_in_scale(const uint8_t *data)
+{
+    for (unsigned a = 0; a < 3; a++)
+        if (get_le16(&data[2 * a]) < -RAW_MAX)
+            return false;
+    return true;
+}
+
 void ps_imu_msg_encode(uint32_t base_id, const ps_imu_sample_t *s, ps_can_frame_t out[2])
 {
     bool is_gyro_sat = false, is_accel_sat = false;
@@ -78,7 +88,7 @@ int ps_imu_msg_rx_feed(ps_imu_msg_rx_t *rx, const ps_can_frame_t *f, ps_imu_samp
     const bool is_accel = f->id == rx->base_id + 1u;
     if (f->is_ext || (!is_gyro && !is_accel))
         return -ENOENT;
-    if (f->len != 8) {
+    if (f->len != 8 || !is_in_scale(f->data)) {
         /* The stream is broken; pairing across it could mix two samples. */
         rx->has_gyro = 0;
         return -PS_ERR_PROTOCOL;

@@ -79,7 +79,8 @@ void ps_imu_msg_rx_init(ps_imu_msg_rx_t *rx, uint32_t base_id);
  *  @post *out written only when a complete sample is formed (status from the
  *        gyro frame, t_ns of the gyro frame)
  *  @return 1 sample complete | 0 frame consumed, no sample yet | -ENOENT not an IMU frame
- *          | -PS_ERR_PROTOCOL wrong length or seq mismatch  @rt RT-SAFE O(1) */
+ *          | -PS_ERR_PROTOCOL wrong length, seq mismatch, or a component of
+ *          -32768 LSB (outside +-32767: no sender writes it)  @rt RT-SAFE O(1) */
 int ps_imu_msg_rx_feed(ps_imu_msg_rx_t *rx, const ps_can_frame_t *f, ps_imu_sample_t *out);
 
 #endif /* PS_IMU_MSG_H */

@@ -489,13 +489,17 @@ static int mo_decode_cmd(const ps_act_cfg_t *a, const ps_can_frame_t *f, ps_act_
     const float tau = has(&v, S_CMD_TORQUE) ? v.v[S_CMD_TORQUE] : 0.0f;
     const float kp = has(&v, S_KP_SCALE) ? v.v[S_KP_SCALE] : 1.0f;
     const float kd = has(&v, S_KD_SCALE) ? v.v[S_KD_SCALE] : 1.0f;
-    if (!isfinite(q) || !isfinite(qd) || !isfinite(tau) || !isfinite(kp) || !isfinite(kd))
+    /* finite after the scaling too: a float beyond 5e37 rev is inf in rad */
+    const float q_rad = q * TWO_PI, qd_rad_s = qd * TWO_PI;
+    const float kp_nm_rad = kp * a->wire.kp_max_nm_rad, kd_nm_s_rad = kd * a->wire.kd_max_nm_s_rad;
+    if (!isfinite(q_rad) || !isfinite(qd_rad_s) || !isfinite(tau) || !isfinite(kp_nm_rad) ||
+        !isfinite(kd_nm_s_rad))
         return -PS_ERR_PROTOCOL;
-    out->q_rad = q * TWO_PI;
-    out->qd_rad_s = qd * TWO_PI;
+    out->q_rad = q_rad;
+    out->qd_rad_s = qd_rad_s;
     out->tau_ff_nm = tau;
-    out->kp_nm_rad = kp * a->wire.kp_max_nm_rad;
-    out->kd_nm_s_rad = kd * a->wire.kd_max_nm_s_rad;
+    out->kp_nm_rad = kp_nm_rad;
+    out->kd_nm_s_rad = kd_nm_s_rad;
     return 0;
 }
 

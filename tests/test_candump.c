@@ -219,6 +219,11 @@ static void test_parse_refusals_name_column_and_problem(void **state)
     assert_refused("(1.000000) can0 123#000102030405060708", "column 37:", "more than 8");
     assert_refused("(1.000000) can0 123##8", "column 22:", "flags nibble");
     assert_refused("(1.000000) can0 123##1000102030405060708", "column 41:", "carries 0..8, 12");
+    /* Found by tests/fuzz/fuzz_candump: a name ps_candump_is_valid_ifname
+     * refuses (and ps_candump_format would not write) was read. */
+    assert_refused("(0000000001.376820) 8(0000000001a0n 02c003FD#7C70",
+                   "column 22:", "'(' or a tab in the interface name");
+    assert_refused("(1.000000) can\t0 123#00", "column 15:", "'(' or a tab");
 }
 
 /* ---- can-utils reads what the runtime writes ---------------------------- */

@@ -211,6 +211,39 @@ static void test_rx_feed_wrong_len_protocol_error(void **state)
     assert_int_equal(ps_imu_msg_rx_feed(&rx, &f[1], &out), -PS_ERR_PROTOCOL);
 }
 
+/* Found by tests/fuzz/fuzz_imu_msg: an accel y of 0x8000 (-32768 LSB) decoded
+ * to -65.536 m/s^2, outside the message's +-65.534 (no encoder sends it).
+ * Such a frame is refused, gyro and accel alike, and breaks the pair. */
+static void test_rx_feed_minus_32768_lsb_protocol_error(void **state)
+{
+    (void)state;
+    const ps_imu_sample_t s = {.seq = 1};
+    ps_can_frame_t f[2];
+    ps_imu_msg_encode(BASE, &s, f);
+    ps_imu_msg_rx_t rx;
+    ps_imu_msg_rx_init(&rx, BASE);
+    ps_imu_sample_t out = {.seq = 99};
+    ps_can_frame_t g = f[1];
+    g.data[2] = 0x00;
+    g.data[3] = 0x80;
+    assert_int_equal(ps_imu_msg_rx_feed(&rx, &f[0], &out), 0);
+    assert_int_equal(ps_imu_msg_rx_feed(&rx, &g, &out), -PS_ERR_PROTOCOL);
+    assert_int_equal(out.seq, 99); /* not written */
+    assert_int_equal(ps_imu_msg_rx_feed(&rx, &f[1], &out), -PS_ERR_PROTOCOL);
+    g = f[0];
+    g.data[4] = 0x00;
+    g.data[5] = 0x80;
+    assert_int_equal(ps_imu_msg_rx_feed(&rx, &g, &out), -PS_ERR_PROTOCOL);
+    assert_int_equal(ps_imu_msg_rx_feed(&rx, &f[1], &out), -PS_ERR_PROTOCOL);
+    /* -32767 is the edge of the scale and decodes */
+    g = f[1];
+    g.data[2] = 0x01;
+    g.data[3] = 0x80;
+    assert_int_equal(ps_imu_msg_rx_feed(&rx, &f[0], &out), 0);
+    assert_int_equal(ps_imu_msg_rx_feed(&rx, &g, &out), 1);
+    assert_float_equal(out.accel_body_m_s2[1], -65.534f, 1e-4f);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -223,6 +256,7 @@ int main(void)
         cmocka_unit_test(test_rx_feed_newer_gyro_replaces_unpaired),
         cmocka_unit_test(test_rx_feed_other_id_enoent),
         cmocka_unit_test(test_rx_feed_wrong_len_protocol_error),
+        cmocka_unit_test(test_rx_feed_minus_32768_lsb_protocol_error),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

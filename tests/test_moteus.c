@@ -32,6 +32,7 @@
 #include "../drivers/ps_actuator.h"
 #include "../drivers/ps_moteus.h"
 #include "../rt/ps_err.h"
+#include "fakes/ps_test_wire.h"
 
 #define PI_F     3.14159265f
 #define TWO_PI_F 6.28318548f
@@ -40,27 +41,7 @@
 
 static ps_act_cfg_t drive(void)
 {
-    ps_act_cfg_t a;
-    memset(&a, 0, sizeof a);
-    a.protocol = PS_ACT_PROTO_MOTEUS;
-    a.can_id = 0x0B;
-    a.reply_id = 0x05;
-    a.wire = (ps_act_range_t){.p_min_rad = -4.0f * PI_F,
-                              .p_max_rad = 4.0f * PI_F,
-                              .v_min_rad_s = -20.0f,
-                              .v_max_rad_s = 20.0f,
-                              .kp_max_nm_rad = 200.0f,
-                              .kd_max_nm_s_rad = 5.0f,
-                              .t_min_nm = -30.0f,
-                              .t_max_nm = 30.0f,
-                              .i_min_a = -60.0f,
-                              .i_max_a = 60.0f};
-    a.gear_ratio = 1.0f;
-    a.direction = 1.0f;
-    a.kt_nm_a = 1.0f;
-    a.temp_max_c = 80.0f;
-    a.rate_div = 1;
-    return a;
+    return ps_test_wire_moteus();
 }
 
 /* An FD frame with a 29-bit id and these bytes, the rest NOP-free zero. */
@@ -304,6 +285,26 @@ static void test_ps_act_decode_reply_moteus_hand_vector(void **state)
     assert_int_equal(m.fault_bits, 0);
 }
 
+/* Found by tests/fuzz/fuzz_moteus: moteus sends floats, so a reply can hold
+ * a torque that is finite on the motor side (1e38 Nm) and inf on a joint
+ * geared 9:1; ps_act_decode_reply gave the loop that inf. Refused now, the
+ * measurement untouched; the same reply on a direct drive still decodes. */
+static void test_ps_act_decode_reply_moteus_not_finite_geared_refused(void **state)
+{
+    (void)state;
+    ps_act_cfg_t a = drive();
+    ps_can_frame_t f = fd_frame(REPLY_ID, REPLY, 32);
+    memcpy(&f.data[15], (const uint8_t[]){0x99, 0x76, 0x96, 0x7e}, 4); /* 1e38 Nm */
+    ps_act_meas_t m = {.q_rad = 3.0f, .t_ns = 7};
+    assert_int_equal(ps_act_decode_reply(&a, &f, &m), 0);
+    assert_float_equal(m.tau_nm, 1e38f, 1e31f);
+    a.gear_ratio = 9.0f;
+    m = (ps_act_meas_t){.q_rad = 3.0f, .t_ns = 7};
+    assert_int_equal(ps_act_decode_reply(&a, &f, &m), -PS_ERR_PROTOCOL);
+    assert_float_equal(m.q_rad, 3.0f, 0.0f);
+    assert_int_equal(m.t_ns, 7);
+}
+
 /* can.md's own example reply, int16 values, 16 bytes:
  *   24 04 00  reply int16 x4 (varuint count) at 0x000
  *   0A 00     mode 10
@@ -355,6 +356,33 @@ static void test_ps_moteus_decode_cmd_vendor_example(void **state)
     assert_float_equal(c.tau_ff_nm, -1.76f, 1e-6f);
     assert_float_equal(c.kp_nm_rad, 200.0f, 0.0f);
     assert_float_equal(c.kd_nm_s_rad, 5.0f, 0.0f);
+}
+
+/* Found by tests/fuzz/fuzz_moteus: a position set-point of 1.27e38 rev is
+ * finite but inf in rad; the decoded command was inf. Refused now, output
+ * untouched; a large finite one still decodes. */
+static void test_ps_moteus_decode_cmd_overflowing_scale_refused(void **state)
+{
+    (void)state;
+    const ps_act_cfg_t a = drive();
+    /* mode 10; write 5 floats at 0x020: position 0x7ec00000, velocity and
+     * torque 0, kp and kd scale 1; NOP padding */
+    static const uint8_t CRASH[32] = {0x01, 0x00, 0x0a, 0x0c, 0x05, 0x20, 0x00, 0x00,
+                                      0xc0, 0x7e, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,
+                                      0x00, 0x00, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00,
+                                      0x80, 0x3f, 0x50, 0x50, 0x50, 0x50, 0x50, 0x50};
+    ps_can_frame_t f = fd_frame(0x810b, CRASH, 32);
+    ps_act_cmd_t c = {.q_rad = 7.0f};
+    assert_int_equal(ps_moteus_proto.decode_cmd(&a, &f, &c), -PS_ERR_PROTOCOL);
+    assert_float_equal(c.q_rad, 7.0f, 0.0f);
+    f.data[9] = 0x4e;  /* 1.6e9 rev: finite in rad */
+    f.data[21] = 0x7f; /* and a kp scale of 3e38 is inf in Nm/rad */
+    f.data[20] = 0x70;
+    assert_int_equal(ps_moteus_proto.decode_cmd(&a, &f, &c), -PS_ERR_PROTOCOL);
+    f.data[21] = 0x3f;
+    f.data[20] = 0x80;
+    assert_int_equal(ps_moteus_proto.decode_cmd(&a, &f, &c), 0);
+    assert_true(isfinite(c.q_rad) && isfinite(c.qd_rad_s));
 }
 
 /* Malformed replies and commands: -PS_ERR_PROTOCOL, output untouched. */
@@ -597,8 +625,10 @@ int main(void)
         cmocka_unit_test(test_ps_moteus_encode_cmd_refuses_out_of_range),
         cmocka_unit_test(test_ps_act_encode_request_moteus_frames),
         cmocka_unit_test(test_ps_act_decode_reply_moteus_hand_vector),
+        cmocka_unit_test(test_ps_act_decode_reply_moteus_not_finite_geared_refused),
         cmocka_unit_test(test_ps_moteus_decode_reply_vendor_example),
         cmocka_unit_test(test_ps_moteus_decode_cmd_vendor_example),
+        cmocka_unit_test(test_ps_moteus_decode_cmd_overflowing_scale_refused),
         cmocka_unit_test(test_ps_moteus_malformed_frames_refused),
         cmocka_unit_test(test_ps_moteus_match_reply_and_filter),
         cmocka_unit_test(test_ps_moteus_encode_reply_round_trip),

@@ -9,8 +9,10 @@ Supported graphs: one input, one output, a single chain of dense layers
 bias) each optionally followed by one activation (Relu, Elu with alpha 1,
 Tanh, Sigmoid, SiLU written as x * Sigmoid(x), Identity). Weights and
 biases must be initializers. Anything else (another operator, a branch, a
-weight computed at run time, a Gemm with transA or scaling) is refused with
-the node and the reason. CONTRACT.json gives what the graph cannot: joints,
+weight computed at run time, a Gemm with transA or scaling, a bias that is
+not one value per output, a node with the wrong number of inputs, a cycle)
+is refused with the node and the reason; a file that is not ONNX, with
+what the parser said. A refusal writes no file (exit status 2). CONTRACT.json gives what the graph cannot: joints,
 gains, stance, policy_hz, observation layout and normalisation, action joints
 and scale (policy/ps_weights.h, docs/policy.md); the activations come from
 the graph. python3-onnx and numpy only.
@@ -22,6 +24,7 @@ import sys
 
 import numpy as np
 import onnx
+from google.protobuf.message import DecodeError
 from onnx import numpy_helper
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -59,6 +62,7 @@ def parse(model):
     layers = []
     nodes = list(g.node)
     used = set()
+    seen = {cur}  # tensors computed so far on the chain
 
     def single_consumer(name):
         cs = consumers.get(name, [])
@@ -86,6 +90,15 @@ def parse(model):
             continue
         n = nxt
         used.add(id(n))
+        arity = {"Gemm": (2, 3), "MatMul": (2, 2), "Add": (2, 2)}.get(
+            n.op_type, (1, 1) if n.op_type in ACT_OPS else (0, 99))
+        if not arity[0] <= len(n.input) <= arity[1] or len(n.output) != 1:
+            raise Unsupported("%s: %d inputs and %d outputs" % (_where(n), len(n.input),
+                                                                len(n.output)))
+        if n.output[0] in seen:
+            raise Unsupported("%s: its output %s is computed earlier in the chain (a cycle)"
+                              % (_where(n), n.output[0]))
+        seen.add(n.output[0])
         if n.op_type == "Gemm":
             a = _attrs(n)
             if a.get("alpha", 1.0) != 1.0 or a.get("beta", 1.0) != 1.0 or a.get("transA", 0):
@@ -94,11 +107,13 @@ def parse(model):
                     len(n.input) > 2 and n.input[2] not in inits):
                 raise Unsupported("%s: weights must be initializers on the chain" % _where(n))
             w = inits[n.input[1]]
+            if w.ndim != 2:
+                raise Unsupported("%s: weight of shape %s, not a matrix" % (_where(n), w.shape))
             w = w if a.get("transB", 0) else w.T
             b = inits[n.input[2]] if len(n.input) > 2 else None
-            if b is not None and b.ndim != 1:
-                raise Unsupported("%s: bias of shape %s (broadcast biases are not supported)"
-                                  % (_where(n), b.shape))
+            if b is not None and b.shape != (w.shape[0],):
+                raise Unsupported("%s: bias of shape %s for %d outputs (broadcast biases are "
+                                  "not supported)" % (_where(n), b.shape, w.shape[0]))
             layers.append([w, b, None])
         elif n.op_type == "MatMul":
             if n.input[0] != cur or n.input[1] not in inits or inits[n.input[1]].ndim != 2:
@@ -109,6 +124,10 @@ def parse(model):
             if (not layers or layers[-1][1] is not None or layers[-1][2] is not None or
                     len(other) != 1 or other[0] not in inits or inits[other[0]].ndim != 1):
                 raise Unsupported("%s: Add is only supported as the bias of a MatMul" % _where(n))
+            if inits[other[0]].shape != (layers[-1][0].shape[0],):
+                raise Unsupported("%s: bias of shape %s for %d outputs (broadcast biases are "
+                                  "not supported)" % (_where(n), inits[other[0]].shape,
+                                                      layers[-1][0].shape[0]))
             layers[-1][1] = inits[other[0]]
         elif n.op_type in ACT_OPS:
             if not layers or layers[-1][2] is not None:
@@ -161,6 +180,9 @@ def main():
         return 2
     except (OSError, ValueError, KeyError, onnx.onnx_cpp2py_export.checker.ValidationError) as e:
         sys.stderr.write("onnx2policy: %s\n" % e)
+        return 2
+    except DecodeError as e:
+        sys.stderr.write("onnx2policy: %s: not an ONNX model (%s)\n" % (a.model, e))
         return 2
     print("%s: %d layers (%s) -> %s" % (a.model, len(layers), ", ".join(
         "%dx%d %s" % (w.shape[1], w.shape[0], act) for w, _, act in layers), a.out))

@@ -1,9 +1,12 @@
 #!/usr/bin/python3
 """Tests of the Python policy tools (make test runs this file): the ONNX
 importer (policy/train/onnx2policy.py) on graphs built with onnx.helper and
-on torch's export in tests/data/policy, its refusals, and a property test
-(python3-hypothesis): any supported chain imports to a policy file whose
-forward pass equals the graph's. Prints cmocka's summary lines for
+on torch's export in tests/data/policy, its refusals, and two property
+tests (python3-hypothesis): any supported chain imports to a policy file
+whose forward pass equals the graph's; any one change to such a graph
+(operator, node, initializer, shape, wiring, attribute, output, bytes) is
+refused with a message and no file, or imports to a file that computes
+what the changed graph computes. Prints cmocka's summary lines for
 tools/run-tests.sh.
 """
 import json
@@ -151,6 +154,50 @@ class Onnx2Policy(unittest.TestCase):
             onnx2policy.convert(p, contract(4), os.path.join(self.d, "p.safetensors"))
         self.assertIn("first layer takes 14 inputs, the observation has 15", str(cm.exception))
 
+    # Found by Malformed below (each crashed the importer or wrote a file the
+    # graph does not compute); refused now with the node and the reason.
+    def test_refuses_bias_not_one_per_output(self):
+        rng = np.random.default_rng(9)
+        layers = rand_layers(rng, [15, 4], ["identity"])
+        m = graph(layers)
+        m.graph.initializer[1].CopyFrom(numpy_helper.from_array(
+            np.zeros(5, np.float32), m.graph.initializer[1].name))
+        self._refused(m, "bias of shape (5,) for 4 outputs")
+        m = graph(layers, matmul=True)
+        m.graph.initializer[1].CopyFrom(numpy_helper.from_array(
+            np.zeros(1, np.float32), m.graph.initializer[1].name))
+        self._refused(m, "bias of shape (1,) for 4 outputs")
+
+    def test_refuses_known_operator_with_missing_input(self):
+        rng = np.random.default_rng(10)
+        m = graph(rand_layers(rng, [15, 4], ["relu"]))
+        m.graph.node[1].op_type = "Gemm"  # the Relu, one input
+        self._refused(m, "node a0 (Gemm): 1 inputs and 1 outputs")
+
+    def test_refuses_cycle(self):
+        rng = np.random.default_rng(11)
+        m = graph(rand_layers(rng, [15, 8, 4], ["relu", "identity"]))
+        m.graph.node[1].output[0] = m.graph.node[1].input[0]  # Relu(y0) -> y0
+        self._refused(m, "computed earlier in the chain (a cycle)")
+        # a square Gemm writing its own input: the old importer looped forever
+        m = graph(rand_layers(rng, [15, 15], ["identity"]))
+        m.graph.node[0].output[0] = m.graph.node[0].input[0]  # Gemm(x) -> x
+        self._refused(m, "node g0 (Gemm): its output x is computed earlier")
+
+    def test_cli_not_onnx_exit_status(self):
+        rng = np.random.default_rng(12)
+        p = os.path.join(self.d, "cut.onnx")
+        with open(p, "wb") as f:
+            f.write(graph(rand_layers(rng, [15, 4], ["relu"])).SerializeToString()[:1])
+        cpath = os.path.join(self.d, "c.json")
+        with open(cpath, "w") as f:
+            json.dump(contract(4), f)
+        out = os.path.join(self.d, "o")
+        status, err = run_cli(p, cpath, out)
+        self.assertEqual(status, 2)
+        self.assertIn("not an ONNX model", err)
+        self.assertFalse(os.path.exists(out))
+
     def test_cli_refusal_exit_status(self):
         rng = np.random.default_rng(8)
         m = graph(rand_layers(rng, [15, 4], ["identity"]))
@@ -190,6 +237,183 @@ class Property(unittest.TestCase):
                 onnx2policy.convert(p, contract(4), out)
                 x = rng.standard_normal((3, 15))
                 assert np.abs(psfile.forward(out, x) - direct(layers, x)).max() < 1e-5
+
+        prop()
+
+
+# ---- malformed graphs ------------------------------------------------------
+
+def ref_eval(model, x):
+    """An independent numpy evaluation of the graph as ONNX defines it, for
+    the operators an MLP uses; raises on anything else (another operator, a
+    shape that does not fit, a tensor never computed)."""
+    g = model.graph
+    env = {i.name: numpy_helper.to_array(i).astype(np.float64) for i in g.initializer}
+    inputs = [i.name for i in g.input if i.name not in env]
+    if len(inputs) != 1 or len(g.output) != 1:
+        raise ValueError("not one input and one output")
+    env[inputs[0]] = np.asarray(x, dtype=np.float64)
+    pending = list(g.node)
+    while pending:  # any order the graph allows; a cycle never becomes ready
+        ready = [n for n in pending if all(i in env for i in n.input)]
+        if not ready:
+            raise ValueError("a node never gets its inputs")
+        n = ready[0]
+        pending.remove(n)
+        a = {t.name: helper.get_attribute_value(t) for t in n.attribute}
+        v = [env[i] for i in n.input]
+        if n.op_type == "Gemm":
+            A = v[0].T if a.get("transA", 0) else v[0]
+            B = v[1].T if a.get("transB", 0) else v[1]
+            if A.ndim != 2 or B.ndim != 2:
+                raise ValueError("Gemm of a non-matrix")
+            y = a.get("alpha", 1.0) * (A @ B)
+            if len(v) > 2:
+                y = y + a.get("beta", 1.0) * v[2]
+        elif n.op_type == "MatMul":
+            y = v[0] @ v[1]
+        elif n.op_type == "Add":
+            y = v[0] + v[1]
+        elif n.op_type == "Mul":
+            y = v[0] * v[1]
+        elif n.op_type == "Relu":
+            y = np.maximum(v[0], 0)
+        elif n.op_type == "Tanh":
+            y = np.tanh(v[0])
+        elif n.op_type == "Sigmoid":
+            y = 1 / (1 + np.exp(-v[0]))
+        elif n.op_type == "Identity":
+            y = v[0]
+        elif n.op_type == "Elu":
+            al = a.get("alpha", 1.0)
+            y = np.where(v[0] > 0, v[0], al * np.expm1(np.minimum(v[0], 0)))
+        else:
+            raise ValueError("operator %s" % n.op_type)
+        if len(n.output) != 1:
+            raise ValueError("%d outputs" % len(n.output))
+        env[n.output[0]] = y
+    return env[g.output[0].name]
+
+
+MUTATIONS = ("op", "drop_node", "drop_init", "bias_len", "weight_shape", "rewire", "attr",
+             "extra_output", "self_loop", "bytes")
+OPS = ("Gemm", "MatMul", "Add", "Mul", "Relu", "Tanh", "Sigmoid", "Elu", "Identity", "Conv",
+       "Softmax", "Sub", "Reshape", "LSTM")
+
+
+def mutate(model, kind, k, r):
+    """One change to a valid graph; k and r pick what and how (any ints).
+    Returns the model, or the serialized bytes for "bytes"."""
+    g = model.graph
+    nodes, inits = g.node, g.initializer
+    if kind == "op":
+        nodes[k % len(nodes)].op_type = OPS[r % len(OPS)]
+    elif kind == "drop_node":
+        del nodes[k % len(nodes)]
+    elif kind == "drop_init":
+        del inits[k % len(inits)]
+    elif kind in ("bias_len", "weight_shape"):
+        cands = [i for i, t in enumerate(inits) if (len(t.dims) == 1) == (kind == "bias_len")]
+        i = cands[k % len(cands)]
+        a = numpy_helper.to_array(inits[i])
+        if kind == "bias_len":
+            n = (a.shape[0] + 1, max(a.shape[0] - 1, 0), 1)[r % 3]
+            a = np.resize(a, n).astype(np.float32)
+        else:
+            a = (a.T, a[None], a[:-1] if a.shape[0] > 1 else a[:, :0])[r % 3].copy()
+        inits[i].CopyFrom(numpy_helper.from_array(np.ascontiguousarray(a), inits[i].name))
+    elif kind == "rewire":
+        n = nodes[k % len(nodes)]
+        names = ["x"] + [o for m in nodes for o in m.output] + [t.name for t in inits]
+        n.input[r % len(n.input)] = names[(k + r) % len(names)]
+    elif kind == "attr":
+        n = nodes[k % len(nodes)]
+        name = ("alpha", "beta", "transA", "transB")[r % 4]
+        val = (0.5, 2.0, 0, 1)[(k + r) % 4]
+        n.attribute.append(helper.make_attribute(name, float(val) if name in ("alpha", "beta")
+                                                 else int(val)))
+    elif kind == "extra_output":
+        g.output.append(helper.make_tensor_value_info(nodes[k % len(nodes)].output[0],
+                                                      TensorProto.FLOAT, None))
+    elif kind == "self_loop":
+        n = nodes[k % len(nodes)]
+        n.output[0] = n.input[0]
+    elif kind == "bytes":
+        b = bytearray(model.SerializeToString())
+        if r % 2:
+            return bytes(b[:k % len(b)])
+        b[k % len(b)] ^= 1 + r % 255
+        return bytes(b)
+    return model
+
+
+def run_cli(src, contract_path, out):
+    """onnx2policy's command line, in this process: (exit status, stderr)."""
+    import contextlib
+    import io
+    err = io.StringIO()
+    argv = sys.argv
+    sys.argv = ["onnx2policy.py", src, "--contract", contract_path, "--out", out]
+    try:
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            status = onnx2policy.main()
+    finally:
+        sys.argv = argv
+    return status, err.getvalue()
+
+
+class Malformed(unittest.TestCase):
+    def test_malformed_graphs_refused_clearly_or_imported_exactly(self):
+        """Any one change to a valid graph: the importer either refuses with
+        exit status 2 and a message, writing no file, or writes a file whose
+        forward pass equals the changed graph's own (ref_eval), never
+        raising, hanging or writing a file the graph does not compute."""
+        try:
+            from hypothesis import given, settings, strategies as st
+        except ImportError:
+            self.skipTest("python3-hypothesis not installed")
+        import signal
+
+        def on_alarm(signum, frame):
+            raise TimeoutError("the importer ran 10 s on a small graph")
+
+        @settings(max_examples=60, deadline=None, database=None)
+        @given(hidden=st.lists(st.integers(1, 12), min_size=0, max_size=2),
+               act_list=st.lists(st.sampled_from(["identity", "relu", "tanh", "silu"]),
+                                 min_size=3, max_size=3),
+               matmul=st.booleans(), kind=st.sampled_from(MUTATIONS),
+               k=st.integers(0, 1000), r=st.integers(0, 1000), seed=st.integers(0, 1000))
+        def prop(hidden, act_list, matmul, kind, k, r, seed):
+            rng = np.random.default_rng(seed)
+            sizes = [15] + hidden + [4]
+            layers = rand_layers(rng, sizes, act_list[:len(sizes) - 1])
+            m = mutate(graph(layers, matmul=matmul), kind, k, r)
+            with tempfile.TemporaryDirectory() as d:
+                src = os.path.join(d, "m.onnx")
+                with open(src, "wb") as f:
+                    f.write(m if isinstance(m, bytes) else m.SerializeToString())
+                cpath = os.path.join(d, "c.json")
+                with open(cpath, "w") as f:
+                    json.dump(contract(4), f)
+                out = os.path.join(d, "p.safetensors")
+                old = signal.signal(signal.SIGALRM, on_alarm)
+                signal.alarm(10)
+                try:
+                    status, err = run_cli(src, cpath, out)
+                finally:
+                    signal.alarm(0)
+                    signal.signal(signal.SIGALRM, old)
+                assert status in (0, 2), status
+                if status == 2:
+                    assert err.startswith("onnx2policy: ") and len(err) > 20, err
+                    assert not os.path.exists(out), "a refusal left " + out
+                    return
+                x = rng.standard_normal((3, 15))
+                model = m if not isinstance(m, bytes) else onnx.load_from_string(m)
+                want = ref_eval(model, x)  # raises: accepted a graph that computes nothing
+                got = psfile.forward(out, x)
+                assert got.shape == want.shape and np.abs(got - want).max() < 1e-5, \
+                    "imported file differs from the graph (%s)" % kind
 
         prop()
 
