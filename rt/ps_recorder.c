@@ -931,10 +931,13 @@ static void dump_end(writer_t *w)
  * next, the dump in progress's next, a pending trigger's pre window, and
  * with flight dumps on the pre window of a trigger still to come. For the
  * loop's wait in unpaced runs (cfg.is_lossless). */
-static void publish_needed(writer_t *w)
+static void publish_needed(writer_t *w, uint64_t head_at_pop)
 {
     ps_recorder_t *r = w->cont.r;
-    uint64_t need = atomic_load_explicit(&r->head, memory_order_acquire);
+    /* A trigger the pass did not pop has an index of at least head_at_pop
+     * less one (the loop pushes it just after committing its record): its
+     * pre window starts no later than that. */
+    uint64_t need = head_at_pop > 0u ? head_at_pop - 1u : 0u;
     /* A ring shorter than a dump's window (--record-ring below pre + post)
      * loses part of each dump however long the loop waits: the pre window
      * is then not held, or a pending dump would wait on itself. */
@@ -960,6 +963,7 @@ static uint32_t pass(writer_t *w, bool is_final)
 {
     ps_recorder_t *r = w->cont.r;
     uint32_t k = 0;
+    const uint64_t head_at_pop = atomic_load_explicit(&r->head, memory_order_acquire);
     while (w->n_pending < PS_REC_TRIG_QUEUE &&
            ps_ring_pop(&r->trig_ring, &w->pending[w->n_pending]) == 0)
         w->n_pending++;
@@ -988,7 +992,7 @@ static uint32_t pass(writer_t *w, bool is_final)
             dump_end(w);
         }
     }
-    publish_needed(w);
+    publish_needed(w, head_at_pop);
     return k;
 }
 
