@@ -244,6 +244,16 @@ static bool stalled_into_fault(const char *out, const char *emu_json)
     return true;
 }
 
+/* Runs once() until a run tests what it is meant to (at most RUN_TRIES
+ * runs; each rerun says why); fails saying what kept every run from it. */
+static void run_until_tested(bool (*once)(void), const char *why_not)
+{
+    for (int i = 0; i < RUN_TRIES; i++)
+        if (once())
+            return;
+    fail_msg("%s in all %d runs", why_not, RUN_TRIES);
+}
+
 /* One `make run` with the emulator, monitor and candump beside it; false
  * when the VM stalled it into an e-stop (see stalled_into_fault). */
 static bool make_run_once(void)
@@ -330,10 +340,7 @@ static bool make_run_once(void)
 static void test_make_run_goes_standby_ramp_active_damping_over_socketcan(void **state)
 {
     (void)state;
-    for (int i = 0; i < RUN_TRIES; i++)
-        if (make_run_once())
-            return;
-    fail_msg("the VM stalled the loop into an e-stop in all %d runs", RUN_TRIES);
+    run_until_tested(make_run_once, "the VM stalled the loop into a fault stop");
 }
 
 /* The emulator presses the e-stop and reports bus-off at times counted from
@@ -388,10 +395,7 @@ static bool estop_once(void)
 static void test_an_estop_edge_in_active_limps_the_drives_within_four_ticks(void **state)
 {
     (void)state;
-    for (int i = 0; i < RUN_TRIES; i++)
-        if (estop_once())
-            return;
-    fail_msg("the runtime was still ramping at the press in all %d runs", RUN_TRIES);
+    run_until_tested(estop_once, "the runtime was still ramping at the press");
 }
 
 /* One SIGKILL run; false when the runtime never reached ACTIVE (a VM stall
@@ -442,10 +446,7 @@ static bool sigkill_once(void)
 static void test_sigkill_stops_the_heartbeat_within_a_few_ticks(void **state)
 {
     (void)state;
-    for (int i = 0; i < RUN_TRIES; i++)
-        if (sigkill_once())
-            return;
-    fail_msg("the runtime never reached ACTIVE in all %d runs", RUN_TRIES);
+    run_until_tested(sigkill_once, "the runtime never reached ACTIVE");
 }
 
 /* The e-stop latches; the bus itself counts as back on once frames arrive
@@ -472,10 +473,7 @@ static bool bus_off_once(void)
 static void test_a_bus_off_report_in_active_is_an_estop(void **state)
 {
     (void)state;
-    for (int i = 0; i < RUN_TRIES; i++)
-        if (bus_off_once())
-            return;
-    fail_msg("the runtime was still ramping at the bus-off in all %d runs", RUN_TRIES);
+    run_until_tested(bus_off_once, "the runtime was still ramping at the bus-off");
 }
 
 int main(void)
