@@ -488,7 +488,8 @@ static const char *thermal_robot_path(void)
     const size_t n = fread(text, 1, sizeof(text) - 1, in);
     fclose(in);
     text[n] = '\0';
-    const char *hold = strstr(text, "hold_s: 10.0}");
+    const char *thermal = "derate_band_c: 15, hot_margin_c: 5, derate_min: 0.5}";
+    const char *hold = strstr(text, thermal);
     const char *model = strstr(text, "model: ../sim/models/ps1.xml");
     assert_true(hold != NULL && model != NULL && model < hold);
     char cwd[512];
@@ -501,9 +502,9 @@ static const char *thermal_robot_path(void)
     fprintf(out, "%.*smodel: %s/sim/models/ps1.xml%.*s", (int)(model - text), text, cwd,
             (int)(hold - (model + strlen("model: ../sim/models/ps1.xml"))),
             model + strlen("model: ../sim/models/ps1.xml"));
-    fprintf(out, "hold_s: 10.0, derate_band_c: %g, hot_margin_c: %g, derate_min: %g}%s",
+    fprintf(out, "derate_band_c: %g, hot_margin_c: %g, derate_min: %g}%s",
             (double)THERMAL_BAND_C, (double)THERMAL_MARGIN_C, (double)THERMAL_MIN,
-            hold + strlen("hold_s: 10.0}"));
+            hold + strlen(thermal));
     assert_int_equal(fclose(out), 0);
     return thermal_robot;
 }
