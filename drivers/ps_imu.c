@@ -1,7 +1,10 @@
 #include "ps_imu.h"
 
 #include <errno.h>
+#include <math.h>
 #include <string.h>
+
+#include "../rt/ps_err.h"
 
 static const char *const NAMES[PS_IMU_PROTO_COUNT] = {
     [PS_IMU_PROTO_PUSHSTEP] = "pushstep",
@@ -25,17 +28,44 @@ void ps_imu_rx_init(ps_imu_rx_t *rx, const ps_imu_cfg_t *cfg)
 {
     memset(rx, 0, sizeof(*rx));
     rx->protocol = cfg->protocol;
+    rx->frozen_samples = cfg->frozen_samples;
     if (cfg->protocol == PS_IMU_PROTO_XSENS)
         ps_imu_xsens_rx_init(&rx->u.xsens, cfg->base_id);
     else
         ps_imu_msg_rx_init(&rx->u.msg, cfg->base_id);
 }
 
+uint32_t ps_imu_frozen_default(uint32_t imu_hz)
+{
+    const double n = ceil(PS_IMU_FROZEN_DEFAULT_S * (double)imu_hz - 1e-9);
+    return n < 2.0 ? 2u : n > (double)PS_IMU_FROZEN_SAMPLES_MAX ? PS_IMU_FROZEN_SAMPLES_MAX
+                                                                  : (uint32_t)n;
+}
+
+/* The six values, bit for bit, against the run so far. */
+static bool is_frozen(ps_imu_rx_t *rx, const ps_imu_sample_t *s)
+{
+    float v[6];
+    memcpy(v, s->gyro_body_rad_s, sizeof(s->gyro_body_rad_s));
+    memcpy(v + 3, s->accel_body_m_s2, sizeof(s->accel_body_m_s2));
+    if (rx->n_same > 0 && memcmp(v, rx->last_values, sizeof(v)) == 0) {
+        if (rx->n_same < UINT32_MAX)
+            rx->n_same++;
+    } else {
+        memcpy(rx->last_values, v, sizeof(v));
+        rx->n_same = 1;
+    }
+    return rx->frozen_samples != 0 && rx->n_same >= rx->frozen_samples;
+}
+
 int ps_imu_rx_feed(ps_imu_rx_t *rx, const ps_can_frame_t *f, ps_imu_sample_t *out)
 {
-    if (rx->protocol == PS_IMU_PROTO_XSENS)
-        return ps_imu_xsens_rx_feed(&rx->u.xsens, f, out);
-    return ps_imu_msg_rx_feed(&rx->u.msg, f, out);
+    const int rc = rx->protocol == PS_IMU_PROTO_XSENS ? ps_imu_xsens_rx_feed(&rx->u.xsens, f, out)
+                                                      : ps_imu_msg_rx_feed(&rx->u.msg, f, out);
+    if (rc != 1 || !is_frozen(rx, out))
+        return rc;
+    rx->n_frozen_values++;
+    return -PS_ERR_STALE;
 }
 
 int ps_imu_encode(const ps_imu_cfg_t *cfg, const ps_imu_sample_t *s, uint32_t n, int64_t t_ns,

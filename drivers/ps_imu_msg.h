@@ -32,6 +32,8 @@ typedef struct {
                             others at their default offsets from it (11-bit) */
     uint32_t rate_div; /**< one sample every rate_div servo ticks */
     ps_imu_proto_id_t protocol;
+    uint32_t frozen_samples; /**< this many consecutive samples bit-identical on all six
+                                  axes: a frozen sensor, refused (drivers/ps_imu.h); 0: off */
 } ps_imu_cfg_t;
 
 #define PS_IMU_GYRO_LSB_RAD_S       0.001f

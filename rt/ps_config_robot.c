@@ -37,7 +37,20 @@ typedef struct {
     float reply_timeout_s, imu_timeout_s, policy_deadline_s;
     uint32_t overrun_limit;
     float overrun_window_s, hold_s;
+    float derate_band_c, hot_margin_c, derate_min; /* defaults PS_LOOP_DEFAULT_* */
 } control_file_t;
+
+/* The file's `control:` as libcyaml loads it: the optional fields as pointers. */
+typedef struct {
+    control_file_t c; /* everything but the optional fields */
+    float *derate_band_c, *hot_margin_c, *derate_min; /* NULL when absent */
+} control_raw_t;
+
+/* The file's `imu:`: frozen_samples is optional, its default from the rate. */
+typedef struct {
+    ps_imu_cfg_t imu;
+    uint32_t *frozen_samples; /* NULL when absent */
+} imu_raw_t;
 
 typedef struct {
     char name[PS_NAME_LEN];
@@ -78,8 +91,8 @@ typedef struct {
 typedef struct {
     char name[PS_NAME_LEN];
     char model[PS_PATH_LEN];
-    control_file_t control;
-    ps_imu_cfg_t imu;
+    control_raw_t control;
+    imu_raw_t imu;
     ps_kinematics_cfg_t kin;
     ps_sim_devices_cfg_t sim;
     policy_file_t *policy; /* optional */
@@ -119,19 +132,22 @@ static void fill_protocol_names(void)
 }
 
 static const cyaml_schema_field_t CONTROL_FIELDS[] = {
-    CYAML_FIELD_UINT("servo_hz", CYAML_FLAG_DEFAULT, control_file_t, servo_hz),
-    CYAML_FIELD_UINT("policy_hz", CYAML_FLAG_DEFAULT, control_file_t, policy_hz),
-    CYAML_FIELD_FLOAT("ramp_s", CYAML_FLAG_DEFAULT, control_file_t, ramp_s),
-    CYAML_FIELD_FLOAT("damping_s", CYAML_FLAG_DEFAULT, control_file_t, damping_s),
-    CYAML_FIELD_FLOAT("damping_kd_nm_s_rad", CYAML_FLAG_DEFAULT, control_file_t,
-                      damping_kd_nm_s_rad),
-    CYAML_FIELD_FLOAT("still_vel_rad_s", CYAML_FLAG_DEFAULT, control_file_t, still_vel_rad_s),
-    CYAML_FIELD_FLOAT("reply_timeout_s", CYAML_FLAG_DEFAULT, control_file_t, reply_timeout_s),
-    CYAML_FIELD_FLOAT("imu_timeout_s", CYAML_FLAG_DEFAULT, control_file_t, imu_timeout_s),
-    CYAML_FIELD_FLOAT("policy_deadline_s", CYAML_FLAG_DEFAULT, control_file_t, policy_deadline_s),
-    CYAML_FIELD_UINT("overrun_limit", CYAML_FLAG_DEFAULT, control_file_t, overrun_limit),
-    CYAML_FIELD_FLOAT("overrun_window_s", CYAML_FLAG_DEFAULT, control_file_t, overrun_window_s),
-    CYAML_FIELD_FLOAT("hold_s", CYAML_FLAG_DEFAULT, control_file_t, hold_s),
+    CYAML_FIELD_UINT("servo_hz", CYAML_FLAG_DEFAULT, control_raw_t, c.servo_hz),
+    CYAML_FIELD_UINT("policy_hz", CYAML_FLAG_DEFAULT, control_raw_t, c.policy_hz),
+    CYAML_FIELD_FLOAT("ramp_s", CYAML_FLAG_DEFAULT, control_raw_t, c.ramp_s),
+    CYAML_FIELD_FLOAT("damping_s", CYAML_FLAG_DEFAULT, control_raw_t, c.damping_s),
+    CYAML_FIELD_FLOAT("damping_kd_nm_s_rad", CYAML_FLAG_DEFAULT, control_raw_t,
+                      c.damping_kd_nm_s_rad),
+    CYAML_FIELD_FLOAT("still_vel_rad_s", CYAML_FLAG_DEFAULT, control_raw_t, c.still_vel_rad_s),
+    CYAML_FIELD_FLOAT("reply_timeout_s", CYAML_FLAG_DEFAULT, control_raw_t, c.reply_timeout_s),
+    CYAML_FIELD_FLOAT("imu_timeout_s", CYAML_FLAG_DEFAULT, control_raw_t, c.imu_timeout_s),
+    CYAML_FIELD_FLOAT("policy_deadline_s", CYAML_FLAG_DEFAULT, control_raw_t, c.policy_deadline_s),
+    CYAML_FIELD_UINT("overrun_limit", CYAML_FLAG_DEFAULT, control_raw_t, c.overrun_limit),
+    CYAML_FIELD_FLOAT("overrun_window_s", CYAML_FLAG_DEFAULT, control_raw_t, c.overrun_window_s),
+    CYAML_FIELD_FLOAT("hold_s", CYAML_FLAG_DEFAULT, control_raw_t, c.hold_s),
+    CYAML_FIELD_FLOAT_PTR("derate_band_c", CYAML_FLAG_OPTIONAL, control_raw_t, derate_band_c),
+    CYAML_FIELD_FLOAT_PTR("hot_margin_c", CYAML_FLAG_OPTIONAL, control_raw_t, hot_margin_c),
+    CYAML_FIELD_FLOAT_PTR("derate_min", CYAML_FLAG_OPTIONAL, control_raw_t, derate_min),
     CYAML_FIELD_END,
 };
 static const cyaml_strval_t IMU_PROTOCOLS[] = {
@@ -139,11 +155,12 @@ static const cyaml_strval_t IMU_PROTOCOLS[] = {
     {"xsens", PS_IMU_PROTO_XSENS},
 };
 static const cyaml_schema_field_t IMU_FIELDS[] = {
-    CYAML_FIELD_ENUM("protocol", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, ps_imu_cfg_t, protocol,
+    CYAML_FIELD_ENUM("protocol", CYAML_FLAG_OPTIONAL | CYAML_FLAG_STRICT, imu_raw_t, imu.protocol,
                      IMU_PROTOCOLS, CYAML_ARRAY_LEN(IMU_PROTOCOLS)),
-    CYAML_FIELD_UINT("bus", CYAML_FLAG_DEFAULT, ps_imu_cfg_t, bus_idx),
-    CYAML_FIELD_UINT("base_id", CYAML_FLAG_DEFAULT, ps_imu_cfg_t, base_id),
-    CYAML_FIELD_UINT("rate_div", CYAML_FLAG_DEFAULT, ps_imu_cfg_t, rate_div),
+    CYAML_FIELD_UINT("bus", CYAML_FLAG_DEFAULT, imu_raw_t, imu.bus_idx),
+    CYAML_FIELD_UINT("base_id", CYAML_FLAG_DEFAULT, imu_raw_t, imu.base_id),
+    CYAML_FIELD_UINT("rate_div", CYAML_FLAG_DEFAULT, imu_raw_t, imu.rate_div),
+    CYAML_FIELD_UINT_PTR("frozen_samples", CYAML_FLAG_OPTIONAL, imu_raw_t, frozen_samples),
     CYAML_FIELD_END,
 };
 static const cyaml_schema_field_t KIN_FIELDS[] = {
@@ -292,10 +309,18 @@ static const ps_cfg_rule_t ROBOT_RANGES[] = {
     PS_CFG_RULE_F32(0, PS_CFG_RANGE_OPEN_MIN, "control.overrun_window_s", robot_work_t,
                     cfg.control.overrun_window_s, 0.0, 10.0),
     PS_CFG_RULE_F32(0, 0, "control.hold_s", robot_work_t, cfg.control.hold_s, 0.0, 60.0),
+    PS_CFG_RULE_F32(0, PS_CFG_RANGE_OPEN_MIN, "control.derate_band_c", robot_work_t,
+                    cfg.control.derate_band_c, 0.0, 100.0),
+    PS_CFG_RULE_F32(0, 0, "control.hot_margin_c", robot_work_t, cfg.control.hot_margin_c, 0.0,
+                    100.0),
+    PS_CFG_RULE_F32(0, PS_CFG_RANGE_OPEN_MIN, "control.derate_min", robot_work_t,
+                    cfg.control.derate_min, 0.0, 1.0),
     PS_CFG_RULE_U32(0, 0, "imu.bus", robot_work_t, cfg.imu.bus_idx, 0.0, PS_MAX_BUSES - 1u),
     PS_CFG_RULE_U32(0, PS_CFG_RANGE_HEX, "imu.base_id", robot_work_t, cfg.imu.base_id, 1.0,
                     MAX_CAN_ID - 1u),
     PS_CFG_RULE_U32(0, 0, "imu.rate_div", robot_work_t, cfg.imu.rate_div, 1.0, MAX_RATE_DIV),
+    PS_CFG_RULE_U32(0, 0, "imu.frozen_samples", robot_work_t, cfg.imu.frozen_samples, 0.0,
+                    PS_IMU_FROZEN_SAMPLES_MAX),
     PS_CFG_RULE_F32(0, PS_CFG_RANGE_OPEN_MIN, "kinematics.mass_kg", robot_work_t, cfg.kin.mass_kg,
                     0.0, 500.0),
     PS_CFG_RULE_F32(0, 0, "kinematics.hip_offset_y_m", robot_work_t, cfg.kin.hip_offset_y_m, 0.0,
@@ -652,6 +677,22 @@ static int check_robot(ps_cfg_ctx_t *c, robot_work_t *w)
     const int trc = check_timing(c, w);
     if (trc != 0)
         return trc;
+    /* The derating band needs a width; the message names a field the file
+     * has (either may be left at its default). */
+    if (!(ctl->derate_band_c > ctl->hot_margin_c)) {
+        if (ps_cfg_line_of(c, "control.derate_band_c") == 0)
+            return ps_cfg_fail_field(c, "control.hot_margin_c",
+                                     "value %g not below derate_band_c %g (its default): "
+                                     "derating must start before the drive is hot",
+                                     (double)ctl->hot_margin_c, (double)ctl->derate_band_c);
+        return ps_cfg_fail_field(c, "control.derate_band_c",
+                                 "value %g not above hot_margin_c %g: derating must start "
+                                 "before the drive is hot",
+                                 (double)ctl->derate_band_c, (double)ctl->hot_margin_c);
+    }
+    if (w->cfg.imu.frozen_samples == 1u)
+        return ps_cfg_fail_field(c, "imu.frozen_samples",
+                                 "value 1 is neither 0 (off) nor a run of at least 2 samples");
     const policy_file_t *pol = &w->cfg.policy;
     if (pol->controller[0] != '\0' && ps_config_policy_find(pol->controller) < 0)
         return ps_cfg_fail_field(c, "policy.controller", "\"%s\" is not one of %s",
@@ -748,6 +789,9 @@ static void compose_robot(const robot_file_t *f, ps_robot_cfg_t *out)
         .overrun_limit = c->overrun_limit,
         .overrun_window_s = c->overrun_window_s,
         .hold_s = c->hold_s,
+        .derate_band_c = c->derate_band_c,
+        .hot_margin_c = c->hot_margin_c,
+        .derate_min = c->derate_min,
     };
     out->servo_common.damping_kd_nm_s_rad = c->damping_kd_nm_s_rad;
     out->n_joints = f->n_joints;
@@ -831,8 +875,22 @@ static int load_robot_file(const char *path, ps_robot_cfg_t *out, ps_sim_devices
         robot_file_t *r = &w->cfg;
         memcpy(r->name, raw->name, sizeof(r->name));
         memcpy(r->model, raw->model, sizeof(r->model));
-        r->control = raw->control;
-        r->imu = raw->imu;
+        r->control = raw->control.c;
+        const control_raw_t *cr = &raw->control;
+        r->control.derate_band_c =
+            cr->derate_band_c != NULL ? *cr->derate_band_c : PS_LOOP_DEFAULT_DERATE_BAND_C;
+        r->control.hot_margin_c =
+            cr->hot_margin_c != NULL ? *cr->hot_margin_c : PS_LOOP_DEFAULT_HOT_MARGIN_C;
+        r->control.derate_min =
+            cr->derate_min != NULL ? *cr->derate_min : PS_LOOP_DEFAULT_DERATE_MIN;
+        r->imu = raw->imu.imu;
+        /* Default: as many samples as the IMU sends in PS_IMU_FROZEN_DEFAULT_S
+         * (servo_hz and rate_div are range-checked later; guard the division). */
+        const uint32_t imu_div = raw->imu.imu.rate_div > 0 ? raw->imu.imu.rate_div : 1u;
+        r->imu.frozen_samples =
+            raw->imu.frozen_samples != NULL
+                ? *raw->imu.frozen_samples
+                : ps_imu_frozen_default(raw->control.c.servo_hz / imu_div);
         r->kin = raw->kin;
         r->sim = raw->sim;
         if (raw->policy != NULL)

@@ -50,6 +50,25 @@ static void build_reply_table(ps_loop_t *loop)
     }
 }
 
+/* The fastest speed a joint's reply may plausibly show (rt/ps_loop.h): the
+ * factor times the largest of its command limit, its driver's wire range
+ * and no-load speed (seen from the joint); the jump test's slack in LSB. */
+static void init_reply_bounds(ps_loop_t *loop)
+{
+    const ps_robot_cfg_t *r = loop->cfg.robot;
+    for (uint32_t j = 0; j < r->n_joints; j++) {
+        const ps_act_cfg_t *a = &r->act[j];
+        const ps_act_range_t *w = &r->servo[j].wire;
+        float v = r->servo[j].lim.vel_max_rad_s;
+        v = fmaxf(v, fmaxf(fabsf(w->v_min_rad_s), fabsf(w->v_max_rad_s)));
+        v = fmaxf(v, a->motor.no_load_speed_rad_s / a->gear_ratio);
+        loop->reply_max_vel_rad_s[j] = PS_LOOP_REPLY_VEL_FACTOR * v;
+        float lsb[5];
+        ps_act_joint_lsb(a, lsb);
+        loop->reply_margin_rad[j] = PS_LOOP_REPLY_MARGIN_LSB * lsb[0];
+    }
+}
+
 /* The config loader checks all of this too; the loop checks again because it
  * indexes its fixed tables with these values on every tick. */
 static bool is_schedule_valid(const ps_board_cfg_t *b, const ps_robot_cfg_t *r)
@@ -81,6 +100,10 @@ int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg)
     if (cfg->gpio.ops == NULL || !is_schedule_valid(cfg->board, cfg->robot) ||
         !(c->ramp_s > 0.0f) || !(c->damping_s > 0.0f))
         return -EINVAL;
+    /* The derating band must have a width (torque_scale divides by it). */
+    if (!(c->hot_margin_c >= 0.0f) || !(c->derate_band_c > c->hot_margin_c) ||
+        !(c->derate_min > 0.0f) || !(c->derate_min <= 1.0f))
+        return -EINVAL;
     if (cfg->neighbours != NULL && (!cfg->board->has_perception ||
                                      !(cfg->board->perception.max_age_s > 0)))
         return -EINVAL;
@@ -105,6 +128,7 @@ int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg)
     if (rc < 0)
         return rc;
     build_reply_table(loop);
+    init_reply_bounds(loop);
     for (uint32_t j = 0; j < PS_MAX_JOINTS; j++)
         loop->fault_grace_until_ns[j] = INT64_MAX; /* drives not enabled yet */
     ps_imu_rx_init(&loop->imu_rx, &cfg->robot->imu);
@@ -123,6 +147,27 @@ void ps_loop_deinit(ps_loop_t *loop)
 }
 
 /* ---- READ ------------------------------------------------------------- */
+
+/* Payload corruption that keeps the frame's length: a position no drive can
+ * have reached since the last reply taken, or a velocity no drive makes
+ * (rt/ps_loop.h). The time between the two replies is the larger of the
+ * ticks that took them and their receive stamps (two replies may arrive in
+ * one tick after a late batch), plus one servo period of slack. */
+static bool is_reply_plausible(const ps_loop_t *loop, uint32_t j, const ps_act_meas_t *m,
+                               int64_t rx_ns)
+{
+    const ps_act_meas_t *prev = &loop->meas.joints[j];
+    const float v_max = loop->reply_max_vel_rad_s[j];
+    if (!(fabsf(m->qd_rad_s) <= v_max))
+        return false;
+    if (prev->t_ns == 0)
+        return true; /* nothing to compare with */
+    int64_t dt_ns = loop->t_deadline_ns - prev->t_ns;
+    if (rx_ns - loop->reply_rx_ns[j] > dt_ns)
+        dt_ns = rx_ns - loop->reply_rx_ns[j];
+    const float dt_s = (float)(dt_ns + loop->period_ns) * 1e-9f;
+    return fabsf(m->q_rad - prev->q_rad) <= v_max * dt_s + loop->reply_margin_rad[j];
+}
 
 /* @return true if a joint on the bus claimed the frame (decoded or bad). */
 static bool take_reply(ps_loop_t *loop, uint32_t bus_idx, const ps_can_frame_t *f)
@@ -152,6 +197,12 @@ static bool take_reply(ps_loop_t *loop, uint32_t bus_idx, const ps_can_frame_t *
             loop->counters.n_rx_bad++;
             return true;
         }
+        if (!is_reply_plausible(loop, j, &m, f->t_ns)) {
+            loop->counters.n_reply_implausible++;
+            loop->counters.n_rx_bad++;
+            return true;
+        }
+        loop->reply_rx_ns[j] = f->t_ns;
         m.t_ns = loop->t_deadline_ns;
         loop->meas.joints[j] = m;
         if (f->t_ns > loop->newest_reply_rx_ns)
@@ -178,6 +229,8 @@ static void take_frame(ps_loop_t *loop, uint32_t bus_idx, const ps_can_frame_t *
     int rc = ps_imu_rx_feed(&loop->imu_rx, f, &sample);
     if (rc == -ENOENT) {
         loop->counters.n_rx_unknown++;
+    } else if (rc == -PS_ERR_STALE) {
+        loop->counters.n_imu_frozen++; /* values frozen while the seq goes on: not fresh */
     } else if (rc < 0) {
         loop->counters.n_rx_bad++;
     } else if (rc == 1 && (sample.status & IMU_STATUS_REJECTED)) {
@@ -379,7 +432,7 @@ static uint32_t watchdog_conditions(const ps_loop_t *loop)
         else if (now >= loop->fault_grace_until_ns[j] &&
                  ((m->fault_bits | loop->fault_report_bits[j]) != 0u || m->temp_c > a->temp_max_c))
             cond |= PS_SM_C_DRIVE_FAULT;
-        else if (m->temp_c >= a->temp_max_c - PS_LOOP_HOT_MARGIN_C)
+        else if (m->temp_c >= a->temp_max_c - r->control.hot_margin_c)
             cond |= PS_SM_C_DRIVE_HOT; /* damp before its own protection trips */
     }
     if (is_stale(loop->meas.imu.t_ns, now,
@@ -594,15 +647,15 @@ static void disable_joint(ps_loop_t *loop, uint32_t j)
         loop->is_entered[j] = false;
 }
 
-float ps_loop_torque_scale(float temp_c, float temp_max_c)
+float ps_loop_torque_scale(const ps_control_cfg_t *c, float temp_c, float temp_max_c)
 {
-    const float start_c = temp_max_c - PS_LOOP_DERATE_BAND_C;
-    const float end_c = temp_max_c - PS_LOOP_HOT_MARGIN_C;
+    const float start_c = temp_max_c - c->derate_band_c;
+    const float end_c = temp_max_c - c->hot_margin_c;
     if (!(temp_c > start_c)) /* NaN too */
         return 1.0f;
     if (temp_c >= end_c)
-        return PS_LOOP_DERATE_MIN;
-    return 1.0f - (1.0f - PS_LOOP_DERATE_MIN) * (temp_c - start_c) / (end_c - start_c);
+        return c->derate_min;
+    return 1.0f - (1.0f - c->derate_min) * (temp_c - start_c) / (end_c - start_c);
 }
 
 static void servo_joint(ps_loop_t *loop, uint32_t j, const ps_servo_mode_t *mode)
@@ -612,7 +665,8 @@ static void servo_joint(ps_loop_t *loop, uint32_t j, const ps_servo_mode_t *mode
     /* A hot drive gets a smaller torque budget: the servo layer clamps the
      * feed-forward and the spring's reach into it (docs/safety.md). */
     ps_servo_joint_cfg_t derated = r->servo[j];
-    derated.lim.torque_max_nm *= ps_loop_torque_scale(loop->meas.joints[j].temp_c, a->temp_max_c);
+    derated.lim.torque_max_nm *=
+        ps_loop_torque_scale(&r->control, loop->meas.joints[j].temp_c, a->temp_max_c);
     const ps_servo_joint_cfg_t *sj = &derated;
     ps_act_cmd_t cmd;
     if (ps_servo_command(sj, &r->servo_common, mode, j, &loop->targets, &cmd) < 0)

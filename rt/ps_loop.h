@@ -34,9 +34,20 @@
  * fault clears there; after a reset the next write tells again.
  *
  * Hot drives: a joint whose last reply reports a temperature within
- * PS_LOOP_DERATE_BAND_C of its temp_max_c is commanded with a derated torque
- * budget (ps_loop_torque_scale); within PS_LOOP_HOT_MARGIN_C it raises
+ * control.derate_band_c of its temp_max_c is commanded with a derated torque
+ * budget (ps_loop_torque_scale); within control.hot_margin_c it raises
  * DRIVE_HOT, which damps.
+ *
+ * Implausible replies (payload corruption that keeps a valid length): a
+ * reply whose position moved farther since the joint's last taken reply than
+ * PS_LOOP_REPLY_VEL_FACTOR times the joint's fastest plausible speed allows
+ * (the largest of its vel_max_rad_s, its driver's wire velocity range and
+ * no-load speed, seen from the joint) in the time between them plus one
+ * servo period, with PS_LOOP_REPLY_MARGIN_LSB position LSB of slack, or whose
+ * velocity is beyond that speed, is counted (n_reply_implausible, n_rx_bad)
+ * and not used: a run of them leaves the joint without a fresh reply, so
+ * REPLY_STALE, exactly as a silent drive. The first reply (and the first
+ * after ESTOP's reset) is taken as it is.
  *
  * Stale-data rule: a joint's reply is stale when older than
  * control.reply_timeout_s + rate_div servo periods (a joint commanded every
@@ -90,16 +101,26 @@ typedef struct {
     uint32_t overrun_limit;  /**< this many overruns within overrun_window_s: OVERRUN */
     float overrun_window_s;  /**< window of the overrun count */
     float hold_s;            /**< longest HOLD before DAMPING; 0: one tick of HOLD */
+    /* Drive temperature (docs/safety.md "Hot drives"): from derate_band_c
+     * below a joint's temp_max_c its torque budget (torque_max_nm of every
+     * command) is derated linearly, down to derate_min of it at hot_margin_c
+     * below temp_max_c, where DRIVE_HOT damps the robot before the drive's
+     * own protection trips (above temp_max_c: DRIVE_FAULT, ESTOP). */
+    float derate_band_c; /**< derating starts this far below temp_max_c; > hot_margin_c */
+    float hot_margin_c;  /**< DRIVE_HOT from this far below temp_max_c; >= 0 */
+    float derate_min;    /**< share of torque_max_nm left at hot_margin_c; (0, 1] */
 } ps_control_cfg_t;
 
-/** Drive temperature (docs/safety.md "Hot drives"): from this far below a
- *  joint's temp_max_c its torque budget (torque_max_nm of every command) is
- *  derated linearly, down to PS_LOOP_DERATE_MIN of it at PS_LOOP_HOT_MARGIN_C
- *  below temp_max_c, where DRIVE_HOT damps the robot before the drive's own
- *  protection trips (above temp_max_c: DRIVE_FAULT, ESTOP). */
-#define PS_LOOP_DERATE_BAND_C 15.0f
-#define PS_LOOP_HOT_MARGIN_C  5.0f
-#define PS_LOOP_DERATE_MIN    0.5f
+/** Defaults of the robot file's control.derate_band_c, hot_margin_c and
+ *  derate_min (the loader applies them; the loop refuses other invalid sets). */
+#define PS_LOOP_DEFAULT_DERATE_BAND_C 15.0f
+#define PS_LOOP_DEFAULT_HOT_MARGIN_C  5.0f
+#define PS_LOOP_DEFAULT_DERATE_MIN    0.5f
+
+/** Reply plausibility (see the top comment): the factor on a joint's fastest
+ *  plausible speed and the position slack in wire LSB. */
+#define PS_LOOP_REPLY_VEL_FACTOR  2.0f
+#define PS_LOOP_REPLY_MARGIN_LSB  4.0f
 
 /** Largest control.overrun_limit: the loop keeps that many overrun times. */
 #define PS_LOOP_MAX_OVERRUN_LIMIT 64u
@@ -212,6 +233,9 @@ typedef struct {
     uint64_t n_imu_rejected;  /**< IMU samples with a saturated gyro or failed self-test */
     uint64_t n_rx_capped;     /**< ticks a bus still had frames after PS_LOOP_MAX_RX_BATCHES */
     uint64_t n_imu_repeated;  /**< IMU samples whose seq did not advance (ignored) */
+    uint64_t n_imu_frozen;    /**< IMU samples refused as frozen values (drivers/ps_imu.h) */
+    uint64_t n_reply_implausible; /**< replies refused as corrupt: a position jump or a
+                                       velocity no drive makes (also in n_rx_bad) */
     uint64_t n_tx_frames;
     uint64_t n_tx_refused; /**< frames a bus would not queue */
     uint64_t n_bus_errors; /**< -errno from a port */
@@ -279,6 +303,9 @@ struct ps_loop {
     uint32_t bus_off_mask;
     uint8_t bus_joint[PS_MAX_BUSES][PS_MAX_JOINTS]; /**< joints on each bus, in order */
     uint32_t n_bus_joints[PS_MAX_BUSES];
+    float reply_max_vel_rad_s[PS_MAX_JOINTS]; /**< plausible |qd| bound per joint (init) */
+    float reply_margin_rad[PS_MAX_JOINTS];    /**< position slack of the jump test (init) */
+    int64_t reply_rx_ns[PS_MAX_JOINTS];       /**< receive stamp of the last reply taken */
     ps_imu_rx_t imu_rx;
     bool has_imu_seq;
     uint8_t imu_seq; /**< seq of the last IMU sample taken */
@@ -299,7 +326,8 @@ struct ps_loop {
 
 /** @pre every pointer in cfg valid and outliving loop; estimator geometry in robot
  *  @post loop in STANDBY, histograms zeroed and touched (prefaulted)
- *  @return 0 | -EINVAL | -ENOENT (a leg joint missing for the estimator)  @rt INIT */
+ *  @return 0 | -EINVAL (also: thermal settings not 0 <= hot_margin_c <
+ *          derate_band_c, derate_min in (0, 1]) | -ENOENT (a leg joint missing for the estimator)  @rt INIT */
 int ps_loop_init(ps_loop_t *loop, const ps_loop_cfg_t *cfg);
 
 /** Run one tick now, at the given deadline (no waiting).  @rt RT-SAFE, loop thread */
@@ -343,11 +371,12 @@ void ps_loop_request_stop(ps_loop_t *loop);
 void ps_loop_request(ps_loop_t *loop, uint32_t request_bits);
 
 /** The share of a joint's torque_max_nm it may be commanded at temp_c: 1 up
- *  to temp_max_c - PS_LOOP_DERATE_BAND_C, then linearly down to
- *  PS_LOOP_DERATE_MIN at temp_max_c - PS_LOOP_HOT_MARGIN_C and beyond; 1 for
- *  a temperature that is not a number (never reported).
- *  @units degC  @rt RT-SAFE O(1), pure */
-float ps_loop_torque_scale(float temp_c, float temp_max_c);
+ *  to temp_max_c - c->derate_band_c, then linearly down to c->derate_min at
+ *  temp_max_c - c->hot_margin_c and beyond; 1 for a temperature that is not a
+ *  number (never reported).
+ *  @pre c's thermal fields valid (ps_loop_init checks)  @units degC
+ *  @rt RT-SAFE O(1), pure */
+float ps_loop_torque_scale(const ps_control_cfg_t *c, float temp_c, float temp_max_c);
 
 /** @return name of a stage, e.g. "wake"  @rt RT-SAFE */
 const char *ps_loop_stage_name(ps_stage_t s);

@@ -133,6 +133,11 @@ static ps_monitor_kind_t describe_imu(ps_monitor_t *m, const ps_can_frame_t *f, 
                  s.status);
         return PS_MONITOR_IMU;
     }
+    if (rc == -PS_ERR_STALE) {
+        snprintf(out, len, "imu sample %u refused: the same six values %u times in a row (frozen)",
+                 s.seq, m->imu_rx.n_same);
+        return PS_MONITOR_MALFORMED;
+    }
     if (rc == 0) {
         if (m->imu_rx.protocol == PS_IMU_PROTO_XSENS)
             snprintf(out, len, "imu xsens frame %03X [%u] of a sample", f->id, f->len);

@@ -115,6 +115,8 @@ static cJSON *counters_json(const ps_loop_counters_t *c)
     cJSON_AddNumberToObject(o, "rx_capped_ticks", (double)c->n_rx_capped);
     cJSON_AddNumberToObject(o, "imu_rejected", (double)c->n_imu_rejected);
     cJSON_AddNumberToObject(o, "imu_repeated", (double)c->n_imu_repeated);
+    cJSON_AddNumberToObject(o, "imu_frozen", (double)c->n_imu_frozen);
+    cJSON_AddNumberToObject(o, "replies_implausible", (double)c->n_reply_implausible);
     cJSON_AddNumberToObject(o, "tx_frames", (double)c->n_tx_frames);
     cJSON_AddNumberToObject(o, "tx_refused", (double)c->n_tx_refused);
     cJSON_AddNumberToObject(o, "bus_errors", (double)c->n_bus_errors);
@@ -393,12 +395,13 @@ void ps_summary_print(const ps_summary_t *s, FILE *out)
     fprintf(out,
             " policy runs %llu (late %llu), transitions %llu, requests refused %llu, "
             "commands replaced %llu\n rx bad %llu, unknown %llu, capped ticks %llu; IMU samples "
-            "rejected %llu, repeated %llu\n",
+            "rejected %llu, repeated %llu, frozen %llu; replies implausible %llu\n",
             (unsigned long long)c->n_policy_runs, (unsigned long long)c->n_policy_late,
             (unsigned long long)c->n_transitions, (unsigned long long)c->n_refused,
             (unsigned long long)c->n_cmd_replaced, (unsigned long long)c->n_rx_bad,
             (unsigned long long)c->n_rx_unknown, (unsigned long long)c->n_rx_capped,
-            (unsigned long long)c->n_imu_rejected, (unsigned long long)c->n_imu_repeated);
+            (unsigned long long)c->n_imu_rejected, (unsigned long long)c->n_imu_repeated,
+            (unsigned long long)c->n_imu_frozen, (unsigned long long)c->n_reply_implausible);
     fprintf(out, " fall detected: %s\n", loop->counters.has_fallen ? "yes" : "no");
     if (s->has_truth)
         fprintf(out,

@@ -422,9 +422,14 @@ static void test_load_robot_fixture_exact_values(void **state)
     assert_int_equal(r->control.overrun_limit, 5);
     assert_true(r->control.overrun_window_s == 1.0f);
     assert_true(r->control.hold_s == 10.0f);
+    /* thermal settings and the frozen-IMU run not written: the defaults */
+    assert_true(r->control.derate_band_c == 15.0f);
+    assert_true(r->control.hot_margin_c == 5.0f);
+    assert_true(r->control.derate_min == 0.5f);
     assert_int_equal(r->imu.bus_idx, 1);
     assert_int_equal(r->imu.base_id, 0x80); /* hex in the file */
     assert_int_equal(r->imu.rate_div, 1);
+    assert_int_equal(r->imu.frozen_samples, 50); /* 50 ms at 1000 Hz */
     assert_true(r->kin.mass_kg == 32.0f);
     assert_true(r->kin.fall_com_height_m == 0.4f);
 
@@ -981,6 +986,77 @@ static void test_load_robot_overrun_limit_zero_rejected(void **state)
     want(f, "%s:%d: control.overrun_limit: value 0 outside [1, 64]", f->path,
          line_of(f, "overrun_limit: 0"));
     expect_robot_error(f);
+}
+
+/* Drive temperature thresholds (docs/safety.md "Hot drives"), optional in
+ * `control:`: taken as written; refused outside their ranges, and when the
+ * derating band has no width (the message names a field the file has). */
+static void test_load_robot_thermal_settings_taken(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "hold_s: 10.0", "hold_s: 10.0, derate_band_c: 30, hot_margin_c: 0, derate_min: 1");
+    assert_int_equal(ps_config_load_robot(f->path, &f->robot, f->err, sizeof(f->err)), 0);
+    assert_true(f->robot.control.derate_band_c == 30.0f);
+    assert_true(f->robot.control.hot_margin_c == 0.0f);
+    assert_true(f->robot.control.derate_min == 1.0f);
+}
+
+static void test_load_robot_thermal_settings_rejected(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "hold_s: 10.0", "hold_s: 10.0, derate_band_c: 5, hot_margin_c: 5");
+    want(f,
+         "%s:%d: control.derate_band_c: value 5 not above hot_margin_c 5: derating must start "
+         "before the drive is hot",
+         f->path, line_of(f, "derate_band_c: 5"));
+    expect_robot_error(f);
+    edit(f, ROBOT_OK, "hold_s: 10.0", "hold_s: 10.0, hot_margin_c: 20");
+    want(f,
+         "%s:%d: control.hot_margin_c: value 20 not below derate_band_c 15 (its default): "
+         "derating must start before the drive is hot",
+         f->path, line_of(f, "hot_margin_c: 20"));
+    expect_robot_error(f);
+    edit(f, ROBOT_OK, "hold_s: 10.0", "hold_s: 10.0, hot_margin_c: -1");
+    want(f, "%s:%d: control.hot_margin_c: value -1 outside [0, 100]", f->path,
+         line_of(f, "hot_margin_c: -1"));
+    expect_robot_error(f);
+    edit(f, ROBOT_OK, "hold_s: 10.0", "hold_s: 10.0, derate_band_c: 0");
+    want(f, "%s:%d: control.derate_band_c: value 0 outside (0, 100]", f->path,
+         line_of(f, "derate_band_c: 0"));
+    expect_robot_error(f);
+    edit(f, ROBOT_OK, "hold_s: 10.0", "hold_s: 10.0, derate_min: 0");
+    want(f, "%s:%d: control.derate_min: value 0 outside (0, 1]", f->path,
+         line_of(f, "derate_min: 0"));
+    expect_robot_error(f);
+    edit(f, ROBOT_OK, "hold_s: 10.0", "hold_s: 10.0, derate_min: 1.5");
+    want(f, "%s:%d: control.derate_min: value 1.5 outside (0, 1]", f->path,
+         line_of(f, "derate_min: 1.5"));
+    expect_robot_error(f);
+    edit(f, ROBOT_OK, "hold_s: 10.0", "hold_s: 10.0, derate_min: half");
+    want(f, "%s:%d: control.derate_min: value \"half\" is not a number in (0, 1]", f->path,
+         line_of(f, "derate_min: half"));
+    expect_robot_error(f);
+}
+
+/* imu.frozen_samples: 0 (off) or a run of 2..10000; its default follows the
+ * IMU's rate (50 ms of samples). */
+static void test_load_robot_imu_frozen_samples_checked(void **state)
+{
+    fx_t *f = *state;
+    edit(f, ROBOT_OK, "rate_div: 1}", "rate_div: 1, frozen_samples: 0}");
+    assert_int_equal(ps_config_load_robot(f->path, &f->robot, f->err, sizeof(f->err)), 0);
+    assert_int_equal(f->robot.imu.frozen_samples, 0);
+    edit(f, ROBOT_OK, "rate_div: 1}", "rate_div: 1, frozen_samples: 1}");
+    want(f, "%s:%d: imu.frozen_samples: value 1 is neither 0 (off) nor a run of at least 2 samples",
+         f->path, line_of(f, "frozen_samples: 1"));
+    expect_robot_error(f);
+    edit(f, ROBOT_OK, "rate_div: 1}", "rate_div: 1, frozen_samples: 10001}");
+    want(f, "%s:%d: imu.frozen_samples: value 10001 outside [0, 10000]", f->path,
+         line_of(f, "frozen_samples: 10001"));
+    expect_robot_error(f);
+    edit(f, ROBOT_OK, "rate_div: 1}", "rate_div: 5}"); /* 200 Hz: 10 samples */
+    assert_int_equal(ps_config_load_robot(f->path, &f->robot, f->err, sizeof(f->err)), 0);
+    assert_int_equal(f->robot.imu.frozen_samples, 10);
 }
 
 /* The file takes 29-bit identifiers; an 11-bit protocol refuses one above 0x7ff. */
@@ -1755,6 +1831,9 @@ int main(void)
         T(test_load_robot_missing_field_rejected),
         T(test_load_robot_duplicate_can_id_rejected),
         T(test_load_robot_reply_id_on_imu_rejected),
+        T(test_load_robot_thermal_settings_taken),
+        T(test_load_robot_thermal_settings_rejected),
+        T(test_load_robot_imu_frozen_samples_checked),
         T(test_load_robot_can_id_high_rejected),
         T(test_load_robot_robstride_ids_checked),
         T(test_load_robot_robstride_shared_host_id_ok),

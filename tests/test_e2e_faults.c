@@ -86,6 +86,7 @@ typedef enum {
     IMU_FROZEN,    /* the same two frames (same seq) again and again */
     IMU_NAN,       /* the sensor's gyro reads NaN (its encoder flags it) */
     IMU_SATURATED, /* gyro beyond its range */
+    IMU_FROZEN_VALUES, /* the same six values, the seq advancing */
 } imu_fault_t;
 
 typedef struct {
@@ -96,6 +97,7 @@ typedef struct {
     int silent_joint;    /* -1: none; its commands and replies vanish */
     int drop_reply_joint;
     int truncate_reply_joint; /* replies cut to 3 bytes (a corrupt DLC) */
+    int flip_reply_joint;     /* replies with their position's top bit flipped, length kept */
     int bus_mode_bus;         /* -1: none */
     ps_can_bus_mode_t bus_mode;
     int64_t burn_recv_ns; /* CPU burnt in bus 0's recv while burn_ticks_left > 0 */
@@ -118,7 +120,8 @@ static knobs_t k;
 static void reset_knobs(void)
 {
     memset(&k, 0, sizeof(k));
-    k.silent_joint = k.drop_reply_joint = k.truncate_reply_joint = k.bus_mode_bus = -1;
+    k.silent_joint = k.drop_reply_joint = k.truncate_reply_joint = k.flip_reply_joint =
+        k.bus_mode_bus = -1;
 }
 
 /* ---- the system ---------------------------------------------------------- */
@@ -206,9 +209,11 @@ static void check_tx(fault_port_t *p, const ps_can_frame_t *f)
     p->n_unknown++;
 }
 
-static bool is_for_joint(const ps_can_frame_t *f, int j, bool is_reply)
+/* Ids repeat across buses (l_knee's reply id is r_knee's on bus 1): the
+ * frame must be on the joint's bus too. */
+static bool is_for_joint(const fault_port_t *p, const ps_can_frame_t *f, int j, bool is_reply)
 {
-    if (j < 0)
+    if (j < 0 || app.robot.act[j].bus_idx != p->bus_idx)
         return false;
     const ps_act_cfg_t *a = &app.robot.act[j];
     const ps_act_proto_t *pr = ps_act_proto_get(a->protocol);
@@ -226,7 +231,7 @@ static int port_send(void *ctx, const ps_can_frame_t *frames, size_t n)
     ps_can_frame_t keep[PS_LOOP_MAX_TX];
     size_t n_keep = 0;
     for (size_t i = 0; i < n && n_keep < PS_LOOP_MAX_TX; i++)
-        if (!is_for_joint(&frames[i], k.silent_joint, false))
+        if (!is_for_joint(p, &frames[i], k.silent_joint, false))
             keep[n_keep++] = frames[i];
     const int rc = ps_can_send_batch(&p->inner, keep, n_keep);
     return rc < 0 ? rc : (int)n; /* the controller took them all */
@@ -244,11 +249,13 @@ static bool is_imu_frame(const fault_port_t *p, const ps_can_frame_t *f, bool *o
 /* @return false when the frame is to vanish */
 static bool alter_rx(fault_port_t *p, ps_can_frame_t *f)
 {
-    if (k.drop_rx_all[p->bus_idx] || is_for_joint(f, k.silent_joint, true) ||
-        is_for_joint(f, k.drop_reply_joint, true))
+    if (k.drop_rx_all[p->bus_idx] || is_for_joint(p, f, k.silent_joint, true) ||
+        is_for_joint(p, f, k.drop_reply_joint, true))
         return false;
-    if (is_for_joint(f, k.truncate_reply_joint, true))
+    if (is_for_joint(p, f, k.truncate_reply_joint, true))
         f->len = 3;
+    if (is_for_joint(p, f, k.flip_reply_joint, true))
+        f->data[1] ^= 0x80u; /* MIT reply: p16's top bit (half the wire range) */
     bool is_gyro = false;
     if (k.imu == IMU_PASS || !is_imu_frame(p, f, &is_gyro))
         return true;
@@ -267,6 +274,20 @@ static bool alter_rx(fault_port_t *p, ps_can_frame_t *f)
         }
         memcpy(f->data, p->imu_frozen[is_gyro ? 0 : 1].data, sizeof(f->data));
         return true;
+    case IMU_FROZEN_VALUES: {
+        /* The sensor stopped; its interface goes on: the first sample's
+         * values under each new seq (gyro frame byte 6, accel frame byte 7). */
+        const unsigned seq_at = is_gyro ? 6u : 7u;
+        if (!p->has_imu_frozen) {
+            p->imu_frozen[is_gyro ? 0 : 1] = *f;
+            p->has_imu_frozen = !is_gyro;
+            return true;
+        }
+        const uint8_t seq = f->data[seq_at];
+        memcpy(f->data, p->imu_frozen[is_gyro ? 0 : 1].data, sizeof(f->data));
+        f->data[seq_at] = seq;
+        return true;
+    }
     case IMU_NAN:
     case IMU_SATURATED:
         if (is_gyro) {
@@ -450,12 +471,54 @@ static void write_scenario(const char *extra_events)
     assert_int_equal(close(fd), 0);
 }
 
-static void start_system(const char *extra_events, double ring_s)
+/* ps1 with other drive temperature thresholds (control.derate_band_c,
+ * hot_margin_c, derate_min): written once, removed at the end. */
+#define THERMAL_BAND_C   30.0f
+#define THERMAL_MARGIN_C 10.0f
+#define THERMAL_MIN      0.3f
+static char thermal_robot[64];
+
+static const char *thermal_robot_path(void)
+{
+    if (thermal_robot[0] != '\0')
+        return thermal_robot;
+    FILE *in = fopen("robots/ps1.yaml", "r");
+    assert_non_null(in);
+    static char text[1 << 16];
+    const size_t n = fread(text, 1, sizeof(text) - 1, in);
+    fclose(in);
+    text[n] = '\0';
+    const char *thermal = "derate_band_c: 15, hot_margin_c: 5, derate_min: 0.5}";
+    const char *hold = strstr(text, thermal);
+    const char *model = strstr(text, "model: ../sim/models/ps1.xml");
+    assert_true(hold != NULL && model != NULL && model < hold);
+    char cwd[512];
+    assert_non_null(getcwd(cwd, sizeof(cwd)));
+    snprintf(thermal_robot, sizeof(thermal_robot), "/tmp/ps_faults_robot_XXXXXX.yaml");
+    const int fd = mkstemps(thermal_robot, 5);
+    assert_true(fd >= 0);
+    FILE *out = fdopen(fd, "w");
+    assert_non_null(out);
+    fprintf(out, "%.*smodel: %s/sim/models/ps1.xml%.*s", (int)(model - text), text, cwd,
+            (int)(hold - (model + strlen("model: ../sim/models/ps1.xml"))),
+            model + strlen("model: ../sim/models/ps1.xml"));
+    fprintf(out, "derate_band_c: %g, hot_margin_c: %g, derate_min: %g}%s",
+            (double)THERMAL_BAND_C, (double)THERMAL_MARGIN_C, (double)THERMAL_MIN,
+            hold + strlen(thermal));
+    assert_int_equal(fclose(out), 0);
+    return thermal_robot;
+}
+
+static void start_system_robot(const char *robot, const char *extra_events, double ring_s)
 {
     reset_knobs();
     write_scenario(extra_events);
     char err[PS_ERR_MSG_LEN] = "";
-    ps_app_opts_t o = {.data_dir = ".", .board = "sim", .scenario = scen_path, .is_lockstep = true};
+    ps_app_opts_t o = {.data_dir = ".",
+                       .board = "sim",
+                       .robot = robot,
+                       .scenario = scen_path,
+                       .is_lockstep = true};
     const int rc = ps_app_init(&app, &o, err, sizeof(err));
     (void)unlink(scen_path);
     if (rc != 0)
@@ -482,6 +545,11 @@ static void start_system(const char *extra_events, double ring_s)
     ps_app_attach_recorder(&app, &rec); /* the ring only: no writer thread */
     assert_int_equal(ps_sim_start(app.sim, START_NS), 0);
     assert_int_equal(ps_loop_start(&app.loop, START_NS), 0);
+}
+
+static void start_system(const char *extra_events, double ring_s)
+{
+    start_system_robot(NULL, extra_events, ring_s);
 }
 
 static int teardown(void **state)
@@ -625,6 +693,9 @@ static void expect_stays(ps_sm_state_t s, double t_s)
  * the IMU after 10 ms + 1 tick. */
 #define REPLY_STALE_TICKS 16u
 #define IMU_STALE_TICKS   14u
+/* Frozen values: refused from the 50th sample in a row (ps1's
+ * imu.frozen_samples default, 50 ms at 1 kHz), then stale as above. */
+#define IMU_FROZEN_TICKS (50u + IMU_STALE_TICKS)
 /* The policy runs every 20 ticks; the state machine sees its result next tick. */
 #define POLICY_TICKS 22u
 #define L_KNEE       3 /* ps1's joint 3 */
@@ -642,13 +713,15 @@ typedef struct {
     rec_pred_t evidence;      /* a recorded tick that shows the fault (NULL: the transition) */
     const void *evidence_arg; /* for evidence */
     void (*check)(void);      /* further checks after the run (NULL: none) */
+    bool is_thermal_robot;    /* ps1 with other temperature thresholds (thermal_robot_path) */
 } row_t;
 
 static void run_row(void **state)
 {
     const row_t *r = *state;
     begin_row(r->name, ps_sm_state_name(r->to));
-    start_system(r->events, r->ring_s > 0 ? r->ring_s : 4.0);
+    start_system_robot(r->is_thermal_robot ? thermal_robot_path() : NULL, r->events,
+                       r->ring_s > 0 ? r->ring_s : 4.0);
     step_until(INJECT_S);
     assert_int_equal(app.loop.state, PS_SM_ACTIVE);
     const uint64_t inj = app.loop.counters.n_ticks;
@@ -711,6 +784,7 @@ static void arm_delay_20ms(void)
 }
 
 static uint64_t n_rx_bad_at_arm;
+static uint64_t head_at_arm_flip;
 
 static bool has_rx_bad(const ps_rec_tick_t *r, const void *arg)
 {
@@ -812,28 +886,61 @@ static bool has_l_knee_over_temp(const ps_rec_tick_t *r, const void *arg)
     return r->temp_c[L_KNEE] > app.robot.act[L_KNEE].temp_max_c;
 }
 
+/* The temperature thresholds the row's robot file gives: the defaults, or
+ * those written into thermal_robot_path's file (not read back from the
+ * loaded config, so that a loader that dropped them fails the row). */
+typedef struct {
+    float band_c, margin_c, min_share;
+} thresholds_t;
+
+static thresholds_t thr;
+
+static void expect_thresholds(bool is_thermal_robot)
+{
+    thr = is_thermal_robot ? (thresholds_t){THERMAL_BAND_C, THERMAL_MARGIN_C, THERMAL_MIN}
+                           : (thresholds_t){15.0f, 5.0f, 0.5f};
+}
+
 static bool has_l_knee_over_temp_band(const ps_rec_tick_t *r, const void *arg)
 {
     (void)arg;
-    return r->temp_c[L_KNEE] > app.robot.act[L_KNEE].temp_max_c - 15.0f;
+    return r->temp_c[L_KNEE] > app.robot.act[L_KNEE].temp_max_c - thr.band_c;
 }
 
 /* The torque budget a drive at temp_c may be commanded, written from the
  * spec (docs/safety.md "Hot drives"), not from the loop's function. */
 static float budget_nm(float temp_c, float temp_max_c, float torque_max_nm)
 {
-    const float x = (temp_c - (temp_max_c - 15.0f)) / 10.0f; /* 0 at the band's start, 1 hot */
-    const float share = x <= 0.0f ? 1.0f : x >= 1.0f ? 0.5f : 1.0f - 0.5f * x;
+    /* 0 at the band's start, 1 at the hot margin */
+    const float x = (temp_c - (temp_max_c - thr.band_c)) / (thr.band_c - thr.margin_c);
+    const float share = x <= 0.0f   ? 1.0f
+                        : x >= 1.0f ? thr.min_share
+                                    : 1.0f - (1.0f - thr.min_share) * x;
     return share * torque_max_nm;
 }
 
-static void arm_warm_l_knee_full_feed_forward(void)
+static void warm_l_knee_full_feed_forward(double under_c)
 {
-    const double t = (double)app.robot.act[L_KNEE].temp_max_c - 6.0; /* in the band */
+    const double t = (double)app.robot.act[L_KNEE].temp_max_c - under_c; /* in the band */
     assert_int_equal(ps_sim_set_actuator_temp(app.sim, L_KNEE, t), 0);
     k.policy_fault = 4; /* the policy asks for the whole torque_max as feed-forward */
     k.policy_tau_ff_nm = app.robot.servo[L_KNEE].lim.torque_max_nm;
     n_rx_bad_at_arm = atomic_load(&rec.head); /* the first record of the row */
+}
+
+static void arm_warm_l_knee_full_feed_forward(void)
+{
+    expect_thresholds(false);
+    warm_l_knee_full_feed_forward(6.0);
+}
+
+/* 20 degC under temp_max_c: no derating with the defaults (15 degC band),
+ * 0.65 of the torque with the robot file's 30 degC band down to 0.3 at 10. */
+static void arm_warm_l_knee_robot_file_thresholds(void)
+{
+    expect_thresholds(true);
+    assert_true(app.robot.control.derate_band_c == THERMAL_BAND_C); /* the file was read */
+    warm_l_knee_full_feed_forward(20.0);
 }
 
 /* Every command l_knee got from the injection on stays inside the budget
@@ -869,6 +976,15 @@ static void check_derated(void)
     assert_true(n_sent > 100);
     assert_true(n_at_cap > 100);
     assert_true(least_budget < 0.7f * tq_max);
+}
+
+/* 8 degC under temp_max_c: only derating with the defaults (hot from 5 degC
+ * under), DRIVE_HOT with the robot file's 10 degC margin. */
+static void arm_hot_l_knee_robot_file_thresholds(void)
+{
+    assert_true(app.robot.control.hot_margin_c == THERMAL_MARGIN_C);
+    const double t = (double)app.robot.act[L_KNEE].temp_max_c - 8.0;
+    assert_int_equal(ps_sim_set_actuator_temp(app.sim, L_KNEE, t), 0);
 }
 
 static void arm_hot_l_knee(void)
@@ -926,6 +1042,48 @@ static void check_imu_repeated(void)
 static void check_imu_rejected(void)
 {
     assert_true(app.loop.counters.n_imu_rejected > 0);
+}
+
+static void arm_imu_frozen_values(void)
+{
+    k.imu = IMU_FROZEN_VALUES;
+}
+
+/* Refused as frozen, not as repeated (the seq advanced) nor as a bad reading. */
+static void check_imu_frozen_values(void)
+{
+    print_message("      %llu samples refused as frozen (imu.frozen_samples %u)\n",
+                  (unsigned long long)app.loop.counters.n_imu_frozen,
+                  app.robot.imu.frozen_samples);
+    assert_true(app.loop.counters.n_imu_frozen > 0);
+    assert_int_equal(app.loop.counters.n_imu_repeated, 0);
+    assert_int_equal(app.loop.counters.n_imu_rejected, 0);
+}
+
+static void arm_flip_l_knee_replies(void)
+{
+    n_rx_bad_at_arm = app.loop.counters.n_rx_bad;
+    head_at_arm_flip = atomic_load(&rec.head);
+    k.flip_reply_joint = L_KNEE;
+}
+
+/* Each flipped reply refused as implausible; none of them reached the
+ * estimator: l_knee's recorded position stays where the knee is. */
+static void check_flipped_replies_unused(void)
+{
+    print_message("      %llu replies refused as implausible (%llu ticks, rx_bad +%llu)\n",
+                  (unsigned long long)app.loop.counters.n_reply_implausible,
+                  (unsigned long long)(atomic_load(&rec.head) - head_at_arm_flip),
+                  (unsigned long long)(app.loop.counters.n_rx_bad - n_rx_bad_at_arm));
+    assert_true(app.loop.counters.n_reply_implausible >= 20);
+    const ps_act_limits_t *l = &app.robot.servo[L_KNEE].lim;
+    const uint64_t head = atomic_load(&rec.head);
+    for (uint64_t i = head_at_arm_flip; i < head; i++) {
+        assert_int_equal(ps_recorder_read(&rec, i, &rtick), 0);
+        if (rtick.q_rad[L_KNEE] < l->pos_min_rad || rtick.q_rad[L_KNEE] > l->pos_max_rad)
+            fail_msg("tick %llu: l_knee measured at %.3f rad",
+                     (unsigned long long)rtick.tick, (double)rtick.q_rad[L_KNEE]);
+    }
 }
 
 /* -- e-stop, heartbeat -- */
@@ -1158,6 +1316,9 @@ static const row_t ROWS[] = {
     {.name = "can_corrupt_replies_one_joint", .arm = arm_truncate_l_knee_replies,
      .to = PS_SM_HOLD, .cond = PS_SM_C_REPLY_STALE, .within = REPLY_STALE_TICKS,
      .watch_s = 0.2, .evidence = has_rx_bad},
+    {.name = "can_corrupt_payload", .arm = arm_flip_l_knee_replies, .to = PS_SM_HOLD,
+     .cond = PS_SM_C_REPLY_STALE, .within = REPLY_STALE_TICKS, .watch_s = 0.2,
+     .evidence = has_rx_bad, .check = check_flipped_replies_unused},
     {.name = "can_duplicate_frames", .arm = arm_duplicate, .to = PS_SM_ACTIVE, .watch_s = 0.3,
      .evidence = has_more_imu_bus_rx, .check = check_duplicate},
     {.name = "can_out_of_order_frames", .arm = arm_reverse, .to = PS_SM_HOLD,
@@ -1182,10 +1343,19 @@ static const row_t ROWS[] = {
     {.name = "actuator_over_temperature", .arm = arm_overheat_l_knee, .to = PS_SM_ESTOP,
      .cond = PS_SM_C_DRIVE_FAULT, .within = 6, .watch_s = 0.2,
      .evidence = has_l_knee_over_temp, .check = check_power_cut},
+    {.name = "actuator_warm_derated_robot_file", .is_thermal_robot = true,
+     .arm = arm_warm_l_knee_robot_file_thresholds, .to = PS_SM_ACTIVE, .watch_s = 0.3,
+     .evidence = has_l_knee_over_temp_band, .check = check_derated},
+    {.name = "actuator_hot_damps_robot_file", .is_thermal_robot = true,
+     .arm = arm_hot_l_knee_robot_file_thresholds, .to = PS_SM_DAMPING,
+     .cond = PS_SM_C_DRIVE_HOT, .within = 6, .watch_s = 0.15, .check = check_hot_no_start},
     {.name = "imu_stale", .arm = arm_imu_drop, .to = PS_SM_HOLD, .cond = PS_SM_C_IMU_STALE,
      .within = IMU_STALE_TICKS, .watch_s = 0.2},
     {.name = "imu_frozen", .arm = arm_imu_frozen, .to = PS_SM_HOLD, .cond = PS_SM_C_IMU_STALE,
      .within = IMU_STALE_TICKS, .watch_s = 0.2, .check = check_imu_repeated},
+    {.name = "imu_frozen_values", .arm = arm_imu_frozen_values, .to = PS_SM_HOLD,
+     .cond = PS_SM_C_IMU_STALE, .within = IMU_FROZEN_TICKS, .watch_s = 0.2,
+     .check = check_imu_frozen_values},
     {.name = "imu_nan", .arm = arm_imu_nan, .to = PS_SM_HOLD, .cond = PS_SM_C_IMU_STALE,
      .within = IMU_STALE_TICKS, .watch_s = 0.2, .check = check_imu_rejected},
     {.name = "imu_saturated", .arm = arm_imu_saturated, .to = PS_SM_HOLD,
@@ -1363,6 +1533,8 @@ static int print_figures(void **state)
         n_ok += outcomes[i].is_as_expected;
     print_message("fault matrix: %u faults injected, %u ended in the expected state (%.0f %%)\n",
                   n_outcomes, n_ok, n_outcomes ? 100.0 * n_ok / n_outcomes : 0.0);
+    if (thermal_robot[0] != '\0')
+        (void)unlink(thermal_robot);
     const char *path = getenv("PUSHSTEP_FAULTS_JSON");
     if (path == NULL || path[0] == '\0')
         return 0;

@@ -236,8 +236,9 @@ static void test_lockstep_stand_10s_no_fall_no_alloc_no_fault(void **state)
     assert_int_equal(t.n_cmd_out_of_limits, 0);
     assert_int_equal(t.n_bad_frames, 0);
     assert_int_equal(app.loop.counters.n_cmd_replaced, 0);
-    assert_int_equal(app.loop.counters.n_rx_bad, 0);
+    assert_int_equal(app.loop.counters.n_rx_bad, 0); /* implausible replies count here too */
     assert_int_equal(app.loop.counters.n_rx_unknown, 0);
+    assert_int_equal(app.loop.counters.n_imu_frozen, 0); /* the sim's IMU is noisy */
     /* In lockstep a tick overruns when it computes for a period of CPU time
      * (test_lockstep_slow_policy_overruns_counted shows this can fail).
      * One overrun in 10,100 ticks came in 3 of 12 runs while two compilers
@@ -640,8 +641,10 @@ static void stands_3_to_8_s_guarded(const char *what, ps_sim_truth_t *out)
     ps_sim_get_truth(app.sim, out);
     assert_false(out->is_fallen);
     assert_true(out->min_com_height_active_m > 0.6);
-    assert_int_equal(app.loop.counters.n_rx_bad, 0);
+    assert_int_equal(app.loop.counters.n_rx_bad, 0); /* implausible replies count here too */
     assert_int_equal(app.loop.counters.n_rx_unknown, 0);
+    assert_int_equal(app.loop.counters.n_imu_frozen, 0);
+    assert_int_equal(app.loop.counters.n_reply_implausible, 0);
     assert_int_equal(app.loop.counters.n_transitions, 2);
 }
 

@@ -245,6 +245,60 @@ static void test_the_imu_port_dispatches_by_protocol(void **state)
     assert_int_equal(ps_imu_encode(&p, &s, 7, 0, f), 2);
 }
 
+/* Frozen values, the same check for every protocol behind the port: the
+ * frozen_samples-th sample in a row with the same six values (while the seq
+ * or counter and the Xsens SampleTime advance) is refused with
+ * -PS_ERR_STALE, and so is each after it, until a value changes; one LSB on
+ * one axis is a change. 0 turns the check off. */
+static void feed_sample(ps_imu_rx_t *rx, const ps_imu_cfg_t *c, float gyro_x, uint32_t n,
+                        int want_rc)
+{
+    const ps_imu_sample_t s = {.gyro_body_rad_s = {gyro_x, 0.01f, -0.02f},
+                               .accel_body_m_s2 = {0.1f, 0.2f, 9.81f},
+                               .seq = (uint8_t)n};
+    ps_can_frame_t f[PS_IMU_MAX_FRAMES];
+    const int n_frames = ps_imu_encode(c, &s, n, (int64_t)n * 2000000, f);
+    ps_imu_sample_t out;
+    int rc = 0;
+    for (int i = 0; i < n_frames; i++)
+        rc = ps_imu_rx_feed(rx, &f[i], &out);
+    assert_int_equal(rc, want_rc);
+}
+
+static void test_the_imu_port_refuses_frozen_values_every_protocol(void **state)
+{
+    (void)state;
+    for (int proto = 0; proto < PS_IMU_PROTO_COUNT; proto++) {
+        const ps_imu_cfg_t c = {.bus_idx = 3,
+                                .base_id = 0x205,
+                                .rate_div = 2,
+                                .protocol = (ps_imu_proto_id_t)proto,
+                                .frozen_samples = 4};
+        ps_imu_rx_t rx;
+        ps_imu_rx_init(&rx, &c);
+        uint32_t n = 1;
+        feed_sample(&rx, &c, 0.5f, n++, 1);
+        for (int i = 0; i < 2; i++) /* 3 in a row: still taken */
+            feed_sample(&rx, &c, 0.5f, n++, 1);
+        feed_sample(&rx, &c, 0.5f, n++, -PS_ERR_STALE); /* the 4th */
+        feed_sample(&rx, &c, 0.5f, n++, -PS_ERR_STALE);
+        assert_int_equal(rx.n_frozen_values, 2);
+        feed_sample(&rx, &c, 0.5f + 0.004f, n++, 1); /* a value moved */
+        for (int i = 0; i < 3; i++)
+            feed_sample(&rx, &c, 0.5f + 0.004f, n++, i < 2 ? 1 : -PS_ERR_STALE);
+        ps_imu_cfg_t off = c;
+        off.frozen_samples = 0;
+        ps_imu_rx_init(&rx, &off);
+        for (int i = 0; i < 100; i++)
+            feed_sample(&rx, &off, 0.5f, n++, 1);
+        assert_int_equal(rx.n_frozen_values, 0);
+    }
+    assert_int_equal(ps_imu_frozen_default(1000), 50); /* 50 ms */
+    assert_int_equal(ps_imu_frozen_default(500), 25);
+    assert_int_equal(ps_imu_frozen_default(30), 2); /* 1.5, rounded up */
+    assert_int_equal(ps_imu_frozen_default(10), 2); /* a run is at least 2 */
+}
+
 /* ---- the robot file's imu.protocol ------------------------------------- */
 
 static int load_variant(const char *from, const char *to, char *err, size_t len)
@@ -298,6 +352,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_encode_matches_the_hand_worked_frames),
         cmocka_unit_test(test_encode_clips_and_flags),
+        cmocka_unit_test(test_the_imu_port_refuses_frozen_values_every_protocol),
         cmocka_unit_test(test_a_group_decodes_back_within_one_lsb),
         cmocka_unit_test(test_status_word_maps_to_the_sample_status),
         cmocka_unit_test(test_sample_time_and_status_are_optional),

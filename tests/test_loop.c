@@ -62,6 +62,8 @@ typedef struct {
     uint8_t fault[PS_MAX_JOINTS];
     bool is_imu_mute;
     bool is_imu_frozen; /* repeats the same seq */
+    bool is_imu_values_frozen; /* the same values with an advancing seq */
+    float reply_jump_rad[PS_MAX_JOINTS]; /* added to the reported position */
     uint8_t imu_status;
     uint8_t imu_seq;
     float policy_value;             /* NAN: the policy returns a NaN target */
@@ -103,7 +105,7 @@ static void answer(fake_bus_t *b, int j)
         return;
     ps_mit_reply_t rep = {.motor_id = (uint8_t)(jc->can_id & 0xf),
                           .fault = fx->fault[j],
-                          .p_rad = jc_s->stance_rad,
+                          .p_rad = jc_s->stance_rad + fx->reply_jump_rad[j],
                           .temp_mos_c = 30,
                           .temp_rotor_c = 30};
     if (fx->is_reply_late && b->n_late >= MAX_SENT)
@@ -152,7 +154,10 @@ static int fake_recv(void *ctx, ps_can_frame_t *out, size_t max)
         return (int)n;
     }
     if (b->bus_idx == fx->robot.imu.bus_idx && !fx->is_imu_mute && max >= 2) {
-        ps_imu_sample_t s = {.accel_body_m_s2 = {fx->is_imu_tipped ? -9.81f : 0.0f, 0,
+        /* A MEMS IMU's readings always carry noise: a dither of one LSB. */
+        const float dither = fx->is_imu_values_frozen ? 0.0f : 0.001f * (float)(fx->imu_seq & 1u);
+        ps_imu_sample_t s = {.gyro_body_rad_s = {dither, 0, 0},
+                             .accel_body_m_s2 = {fx->is_imu_tipped ? -9.81f : 0.0f, 0,
                                                  fx->is_imu_tipped ? 0.0f : 9.81f},
                              .seq = fx->is_imu_frozen ? fx->imu_seq : fx->imu_seq++,
                              .status = fx->imu_status};
@@ -799,15 +804,34 @@ static void test_loop_torque_scale_derates_in_band(void **state)
 {
     (void)state;
     const float tmax = 90.0f;
-    assert_float_equal(ps_loop_torque_scale(25.0f, tmax), 1.0f, 0.0f);
-    assert_float_equal(ps_loop_torque_scale(75.0f, tmax), 1.0f, 1e-6f);
-    assert_float_equal(ps_loop_torque_scale(80.0f, tmax), 0.75f, 1e-6f);
-    assert_float_equal(ps_loop_torque_scale(84.0f, tmax), 0.55f, 1e-6f);
-    assert_float_equal(ps_loop_torque_scale(85.0f, tmax), 0.5f, 0.0f);
-    assert_float_equal(ps_loop_torque_scale(120.0f, tmax), 0.5f, 0.0f);
-    assert_float_equal(ps_loop_torque_scale(NAN, tmax), 1.0f, 0.0f);
+    /* The defaults (the robot file's when it names none: tests/test_config.c) */
+    const ps_control_cfg_t d = {.derate_band_c = PS_LOOP_DEFAULT_DERATE_BAND_C,
+                                .hot_margin_c = PS_LOOP_DEFAULT_HOT_MARGIN_C,
+                                .derate_min = PS_LOOP_DEFAULT_DERATE_MIN};
+    const ps_control_cfg_t *c = &d;
+    assert_float_equal(c->derate_band_c, 15.0f, 0.0f);
+    assert_float_equal(c->hot_margin_c, 5.0f, 0.0f);
+    assert_float_equal(c->derate_min, 0.5f, 0.0f);
+    assert_float_equal(ps_loop_torque_scale(c, 25.0f, tmax), 1.0f, 0.0f);
+    assert_float_equal(ps_loop_torque_scale(c, 75.0f, tmax), 1.0f, 1e-6f);
+    assert_float_equal(ps_loop_torque_scale(c, 80.0f, tmax), 0.75f, 1e-6f);
+    assert_float_equal(ps_loop_torque_scale(c, 84.0f, tmax), 0.55f, 1e-6f);
+    assert_float_equal(ps_loop_torque_scale(c, 85.0f, tmax), 0.5f, 0.0f);
+    assert_float_equal(ps_loop_torque_scale(c, 120.0f, tmax), 0.5f, 0.0f);
+    assert_float_equal(ps_loop_torque_scale(c, NAN, tmax), 1.0f, 0.0f);
     for (float t = 70.0f; t < 90.0f; t += 0.25f) /* never rises with temperature */
-        assert_true(ps_loop_torque_scale(t + 0.25f, tmax) <= ps_loop_torque_scale(t, tmax));
+        assert_true(ps_loop_torque_scale(c, t + 0.25f, tmax) <= ps_loop_torque_scale(c, t, tmax));
+    /* Other settings: from 30 degC under down to 0.3 at 10 degC under. */
+    ps_control_cfg_t o = *c;
+    o.derate_band_c = 30.0f;
+    o.hot_margin_c = 10.0f;
+    o.derate_min = 0.3f;
+    assert_float_equal(ps_loop_torque_scale(&o, 60.0f, tmax), 1.0f, 0.0f);
+    assert_float_equal(ps_loop_torque_scale(&o, 70.0f, tmax), 0.65f, 1e-6f);
+    assert_float_equal(ps_loop_torque_scale(&o, 80.0f, tmax), 0.3f, 0.0f);
+    o.hot_margin_c = 0.0f; /* damping only at temp_max_c itself */
+    assert_float_equal(ps_loop_torque_scale(&o, 90.0f, tmax), 0.3f, 0.0f);
+    assert_float_equal(ps_loop_torque_scale(&o, 75.0f, tmax), 0.65f, 1e-6f);
 }
 
 static void test_loop_drive_fault_estops(void **state)
@@ -968,6 +992,60 @@ static void test_loop_frozen_imu_seq_goes_stale(void **state)
     assert_int_equal(fx->loop.state, PS_SM_HOLD);
 }
 
+/* The same six values with an advancing seq: from the imu.frozen_samples-th
+ * such sample on each is refused, so the IMU goes stale and ACTIVE holds;
+ * the samples before it still count (ps1's default: 50 at 1 kHz). */
+static void test_loop_frozen_imu_values_go_stale(void **state)
+{
+    (void)state;
+    go_active();
+    const uint32_t n = fx->robot.imu.frozen_samples;
+    assert_int_equal(n, 50);
+    fx->is_imu_values_frozen = true;
+    steps(n - 1u);
+    assert_int_equal(fx->loop.counters.n_imu_frozen, 0);
+    assert_int_equal(fx->loop.state, PS_SM_ACTIVE);
+    steps(1);
+    assert_int_equal(fx->loop.counters.n_imu_frozen, 1);
+    steps((unsigned)(fx->robot.control.imu_timeout_s * 1000) + fx->robot.imu.rate_div + 2);
+    assert_int_equal(fx->loop.state, PS_SM_HOLD);
+    assert_int_equal(fx->loop.counters.n_imu_repeated, 0);
+    assert_int_equal(fx->loop.counters.n_imu_rejected, 0);
+}
+
+/* A reply whose position jumped farther than its joint can move since the
+ * last one is refused and counted; one such reply changes nothing, a run of
+ * them leaves the joint stale (HOLD, as a silent drive); once its bound has
+ * grown past the jump, the position counts again. */
+static void test_loop_implausible_reply_refused_run_goes_stale(void **state)
+{
+    (void)state;
+    go_active();
+    const uint32_t j = 3; /* l_knee, every 2 ticks */
+    assert_int_equal(fx->loop.counters.n_reply_implausible, 0);
+    fx->reply_jump_rad[j] = 1.0f; /* 1 rad in 2 ms: 500 rad/s */
+    for (unsigned i = 0; i < 4 && fx->loop.counters.n_reply_implausible == 0; i++)
+        steps(1); /* the reply to the next command carries it */
+    fx->reply_jump_rad[j] = 0.0f;
+    assert_int_equal(fx->loop.counters.n_reply_implausible, 1);
+    assert_true(fx->loop.meas.joints[j].q_rad < fx->robot.servo[j].stance_rad + 0.01f);
+    steps(20);
+    assert_int_equal(fx->loop.state, PS_SM_ACTIVE);
+    assert_int_equal(fx->loop.counters.n_reply_implausible, 1);
+    const uint64_t n_bad = fx->loop.counters.n_rx_bad;
+    fx->reply_jump_rad[j] = 1.0f; /* from now on */
+    const unsigned stale_ticks =
+        (unsigned)(fx->robot.control.reply_timeout_s * 1000) + fx->robot.act[j].rate_div + 2;
+    steps(stale_ticks);
+    assert_int_equal(fx->loop.state, PS_SM_HOLD);
+    assert_true(fx->loop.counters.n_reply_implausible >= 5);
+    assert_true(fx->loop.counters.n_rx_bad >= n_bad + 5);
+    /* The bound, 2 x 20.9 rad/s (rs04's no-load speed) over the time since the
+     * last reply taken, passes 1 rad after about 24 ms: taken again. */
+    steps(30);
+    assert_float_equal(fx->loop.meas.joints[j].q_rad, fx->robot.servo[j].stance_rad + 1.0f, 0.01f);
+}
+
 static void test_loop_init_rejects_unsafe_tables(void **state)
 {
     (void)state;
@@ -984,6 +1062,19 @@ static void test_loop_init_rejects_unsafe_tables(void **state)
     assert_int_equal(ps_loop_init(&other, &lc), -EINVAL);
     robot = fx->robot;
     robot.control.ramp_s = 0.0f;
+    assert_int_equal(ps_loop_init(&other, &lc), -EINVAL);
+    robot = fx->robot;
+    robot.control.derate_band_c = robot.control.hot_margin_c; /* a band of no width */
+    assert_int_equal(ps_loop_init(&other, &lc), -EINVAL);
+    robot = fx->robot;
+    robot.control.hot_margin_c = -1.0f;
+    assert_int_equal(ps_loop_init(&other, &lc), -EINVAL);
+    robot = fx->robot;
+    robot.control.derate_min = 0.0f;
+    assert_int_equal(ps_loop_init(&other, &lc), -EINVAL);
+    robot.control.derate_min = 1.5f;
+    assert_int_equal(ps_loop_init(&other, &lc), -EINVAL);
+    robot.control.derate_min = NAN;
     assert_int_equal(ps_loop_init(&other, &lc), -EINVAL);
     robot = fx->robot;
     lc.gpio.ops = NULL;
@@ -1282,6 +1373,8 @@ int main(void)
         T(test_loop_stop_with_start_in_same_tick_still_stops),
         T(test_loop_saturated_imu_sample_rejected),
         T(test_loop_frozen_imu_seq_goes_stale),
+        T(test_loop_frozen_imu_values_go_stale),
+        T(test_loop_implausible_reply_refused_run_goes_stale),
         T(test_loop_init_rejects_unsafe_tables),
         T(test_loop_babbling_bus_read_capped),
         T(test_loop_bad_sff_id_counted_not_indexed),

@@ -118,6 +118,35 @@ static void test_imu_halves_pair_and_strangers_are_unknown(void **state)
     assert_string_equal(text, "unknown 7F0 [2] DE AD");
 }
 
+/* The same six values imu.frozen_samples times in a row, the seq going on:
+ * the monitor says the sample was refused as frozen. */
+static void test_imu_frozen_values_named(void **state)
+{
+    (void)state;
+    ps_monitor_t m;
+    ps_monitor_init(&m, &g_robot);
+    const uint32_t n = g_robot.imu.frozen_samples;
+    assert_true(n >= 2);
+    int j;
+    char text[256];
+    ps_monitor_kind_t kind = PS_MONITOR_IMU;
+    for (uint32_t i = 0; i < n; i++) {
+        ps_imu_sample_t s = {.accel_body_m_s2 = {0.0f, 0.0f, 9.81f}, .seq = (uint8_t)i};
+        ps_can_frame_t f[2];
+        ps_imu_msg_encode(g_robot.imu.base_id, &s, f);
+        (void)ps_monitor_describe(&m, &g_robot, g_robot.imu.bus_idx, &f[0], &j, text, 256);
+        kind = ps_monitor_describe(&m, &g_robot, g_robot.imu.bus_idx, &f[1], &j, text, 256);
+        if (i + 1u < n)
+            assert_int_equal(kind, PS_MONITOR_IMU);
+    }
+    assert_int_equal(kind, PS_MONITOR_MALFORMED);
+    char want[128];
+    snprintf(want, sizeof(want),
+             "imu sample %u refused: the same six values %u times in a row (frozen)",
+             (unsigned)(uint8_t)(n - 1u), n);
+    assert_string_equal(text, want);
+}
+
 static void test_a_short_frame_to_a_joint_is_malformed(void **state)
 {
     (void)state;
@@ -139,6 +168,7 @@ int main(void)
         cmocka_unit_test(test_commands_of_both_protocols_are_named_and_decoded),
         cmocka_unit_test(test_replies_and_requests_are_named),
         cmocka_unit_test(test_imu_halves_pair_and_strangers_are_unknown),
+        cmocka_unit_test(test_imu_frozen_values_named),
         cmocka_unit_test(test_a_short_frame_to_a_joint_is_malformed),
     };
     return cmocka_run_group_tests(tests, setup, NULL);

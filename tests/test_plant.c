@@ -99,8 +99,20 @@ static void build_robot(ps_robot_cfg_t *r)
     memset(r, 0, sizeof(*r));
     (void)snprintf(r->name, sizeof(r->name), "ps1");
     (void)snprintf(r->model, sizeof(r->model), "../sim/models/ps1.xml");
-    r->control =
-        (ps_control_cfg_t){1000, 50, 1.0f, 2.0f, 0.05f, 0.01f, 0.005f, 0.0005f, 5, 1.0f, 10.0f};
+    r->control = (ps_control_cfg_t){.servo_hz = 1000,
+                                    .policy_hz = 50,
+                                    .ramp_s = 1.0f,
+                                    .damping_s = 2.0f,
+                                    .still_vel_rad_s = 0.05f,
+                                    .reply_timeout_s = 0.01f,
+                                    .imu_timeout_s = 0.005f,
+                                    .policy_deadline_s = 0.0005f,
+                                    .overrun_limit = 5,
+                                    .overrun_window_s = 1.0f,
+                                    .hold_s = 10.0f,
+                                    .derate_band_c = PS_LOOP_DEFAULT_DERATE_BAND_C,
+                                    .hot_margin_c = PS_LOOP_DEFAULT_HOT_MARGIN_C,
+                                    .derate_min = PS_LOOP_DEFAULT_DERATE_MIN};
     r->servo_common.damping_kd_nm_s_rad = 2.0f;
     r->imu = (ps_imu_cfg_t){.bus_idx = 3, .base_id = 0x080, .rate_div = 1};
     r->kin = KIN;

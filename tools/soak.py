@@ -347,6 +347,12 @@ def main():
     truth = s.get("sim_truth", {})
     c.check("no command outside the limits", truth.get("commands_out_of_limits") == 0,
             str(truth.get("commands_out_of_limits")))
+    cnt = s.get("counters", {})
+    c.check("no IMU sample refused as frozen, no actuator reply refused as implausible "
+            "(the crowd's pushes and falls are real motion, the sim's IMU is noisy)",
+            cnt.get("imu_frozen") == 0 and cnt.get("replies_implausible") == 0,
+            "imu_frozen %s, replies_implausible %s" % (cnt.get("imu_frozen"),
+                                                       cnt.get("replies_implausible")))
     g = s["after_init"]
     c.check("nothing allocated, freed or locked on the loop thread after init",
             g["mallocs"] == 0 and g["frees"] == 0 and g["locks"] == 0, json.dumps(g))
