@@ -108,22 +108,32 @@ static int describe_joint(const ps_robot_cfg_t *r, uint32_t bus_idx, const ps_ca
     return 0;
 }
 
-static bool is_imu_id(const ps_imu_cfg_t *imu, const ps_can_frame_t *f)
+/* The length an IMU frame with f's id has (0: not one of the IMU's ids). */
+static uint8_t imu_frame_len(const ps_imu_cfg_t *imu, const ps_can_frame_t *f)
 {
     uint32_t ids[PS_IMU_MAX_FRAMES];
     uint8_t lens[PS_IMU_MAX_FRAMES];
     const unsigned n = ps_imu_frames(imu, ids, lens);
     for (unsigned i = 0; i < n && !f->is_ext; i++)
         if (f->id == ids[i])
-            return true;
-    return false;
+            return lens[i];
+    return 0;
 }
 
-static ps_monitor_kind_t describe_imu(ps_monitor_t *m, const ps_can_frame_t *f, char *out,
-                                      size_t len)
+static ps_monitor_kind_t describe_imu(ps_monitor_t *m, const ps_imu_cfg_t *imu,
+                                      const ps_can_frame_t *f, char *out, size_t len)
 {
     ps_imu_sample_t s;
     const int rc = ps_imu_rx_feed(&m->imu_rx, f, &s);
+    if (rc >= 0)
+        m->has_imu_start = true;
+    if (rc < 0 && rc != -PS_ERR_STALE && !m->has_imu_start && f->len == imu_frame_len(imu, f)) {
+        /* a capture (candump, the live monitor) that begins between a
+         * sample's frames sees the rest of that sample first */
+        snprintf(out, len, "imu frame %03X [%u] of a sample begun before the capture", f->id,
+                 f->len);
+        return PS_MONITOR_IMU;
+    }
     if (rc == 1) {
         snprintf(out, len,
                  "imu sample %u gyro %+.3f %+.3f %+.3f rad/s accel %+.3f %+.3f %+.3f m/s2 %d C "
@@ -158,8 +168,8 @@ ps_monitor_kind_t ps_monitor_describe(ps_monitor_t *m, const ps_robot_cfg_t *r, 
     ps_monitor_kind_t kind = PS_MONITOR_UNKNOWN;
     if (describe_joint(r, bus_idx, f, out_joint, out, len, &kind))
         return kind;
-    if (bus_idx == r->imu.bus_idx && is_imu_id(&r->imu, f))
-        return describe_imu(m, f, out, len);
+    if (bus_idx == r->imu.bus_idx && imu_frame_len(&r->imu, f) != 0)
+        return describe_imu(m, &r->imu, f, out, len);
     raw(f, out, len);
     return PS_MONITOR_UNKNOWN;
 }

@@ -36,6 +36,9 @@ typedef enum {
 /** State the decoder keeps: the IMU's half samples. */
 typedef struct {
     ps_imu_rx_t imu_rx;
+    /** an IMU frame has started or completed a sample: before it, a frame
+     *  that does not pair is the rest of a sample begun before the capture */
+    bool has_imu_start;
 } ps_monitor_t;
 
 /** @rt INIT */

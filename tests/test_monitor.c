@@ -103,6 +103,11 @@ static void test_imu_halves_pair_and_strangers_are_unknown(void **state)
     ps_monitor_init(&m, &g_robot);
     int j;
     char text[256];
+    /* A capture that begins between a sample's halves sees the accel half
+     * first: the rest of a sample, not a malformed frame. */
+    assert_int_equal(ps_monitor_describe(&m, &g_robot, g_robot.imu.bus_idx, &f[1], &j, text, 256),
+                     PS_MONITOR_IMU);
+    assert_non_null(strstr(text, "of a sample begun before the capture"));
     assert_int_equal(ps_monitor_describe(&m, &g_robot, g_robot.imu.bus_idx, &f[0], &j, text, 256),
                      PS_MONITOR_IMU);
     assert_string_equal(text, "imu gyro half (seq 7)");
@@ -110,9 +115,17 @@ static void test_imu_halves_pair_and_strangers_are_unknown(void **state)
                      PS_MONITOR_IMU);
     assert_non_null(strstr(text, "imu sample 7"));
     assert_non_null(strstr(text, "+9.810 m/s2"));
-    /* An accel half with no gyro half before it does not pair. */
+    /* After that, an accel half with no gyro half before it does not pair,
+     * nor does a frame of the wrong length at the start of a capture. */
     assert_int_equal(ps_monitor_describe(&m, &g_robot, g_robot.imu.bus_idx, &f[1], &j, text, 256),
                      PS_MONITOR_MALFORMED);
+    ps_monitor_t fresh;
+    ps_monitor_init(&fresh, &g_robot);
+    ps_can_frame_t short_accel = f[1];
+    short_accel.len = 7;
+    assert_int_equal(
+        ps_monitor_describe(&fresh, &g_robot, g_robot.imu.bus_idx, &short_accel, &j, text, 256),
+        PS_MONITOR_MALFORMED);
     ps_can_frame_t x = {.id = 0x7f0, .len = 2, .data = {0xde, 0xad}};
     assert_int_equal(describe(&x, 0, &j, text), PS_MONITOR_UNKNOWN);
     assert_string_equal(text, "unknown 7F0 [2] DE AD");
