@@ -3,8 +3,11 @@
 # line "N passed, N failed" summed over all binaries (tests that crash before
 # cmocka's summary count as one failure each). Exit 1 if anything failed.
 # A binary that exits 77 after a line "[  SKIPPED ] why" is listed as skipped.
+# Tests cmocka skipped inside a binary, and the checks a sanitized build
+# reports rather than asserts (lines "[ NOT ASSERTED ] what: n (why)",
+# tests/fakes/ps_san.h), are counted on a line of their own.
 set -uo pipefail
-passed=0; failed=0; crashed=(); skipped=()
+passed=0; failed=0; crashed=(); skipped=(); n_skipped_tests=0; n_not_asserted=0
 for bin in "$@"; do
     echo "=== $(basename "$bin")"
     out=$("$bin" 2>&1); rc=$?
@@ -22,8 +25,14 @@ for bin in "$@"; do
         crashed+=("$(basename "$bin") (rc $rc)"); f=1
     fi
     passed=$((passed + p)); failed=$((failed + f))
+    ns=$(printf '%s\n' "$out" | sed -n 's/^\[  SKIPPED \] \([0-9]\+\) test(s), listed below:/\1/p' | awk '{s+=$1} END {print s+0}')
+    n_skipped_tests=$((n_skipped_tests + ns))
+    n_not_asserted=$((n_not_asserted + $(grep -c '^\[ NOT ASSERTED \]' <<<"$out")))
 done
 for s in "${skipped[@]}"; do printf 'skipped: %s\n' "$s"; done
 [ ${#crashed[@]} -gt 0 ] && printf 'did not finish cleanly: %s\n' "${crashed[*]}"
+[ $((n_skipped_tests + n_not_asserted)) -gt 0 ] &&
+    printf '%d tests skipped inside their binaries, %d checks not asserted in a sanitized build (lines above say why)\n' \
+        "$n_skipped_tests" "$n_not_asserted"
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]
