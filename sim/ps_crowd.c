@@ -242,6 +242,13 @@ static int bind_parts(ps_crowd_t *c, const mjModel *m)
     return 0;
 }
 
+/* The farthest one agent acts on another in the social force: repulsion
+ * within range_m, evasion of those ahead within evasive_range_m. */
+static double neighbour_reach_m(const ps_social_params_t *sp)
+{
+    return sp->range_m > sp->evasive_range_m ? (double)sp->range_m : (double)sp->evasive_range_m;
+}
+
 int ps_crowd_create(const ps_crowd_cfg_t *cfg, const ps_crowd_agent_spec_t *agents,
                     uint32_t n_agents, mjModel *m, const unsigned char *is_robot_body,
                     int robot_root_body, ps_crowd_t **out, char *err, size_t err_len)
@@ -267,10 +274,14 @@ int ps_crowd_create(const ps_crowd_cfg_t *cfg, const ps_crowd_agent_spec_t *agen
     c->is_robot = is_robot_body;
     c->robot_root = robot_root_body;
     const ps_crowd_rect_t *ar = &cfg->arena;
-    const double margin = 2.0 * (double)cfg->social.range_m;
+    /* A cell as wide as the farthest a neighbour counts (repulsion or
+     * evasion): the pass over a cell and its eight neighbours then sees
+     * every pair within reach, wherever the cells' edges fall. */
+    const double reach = neighbour_reach_m(&cfg->social);
+    const double margin = 2.0 * reach;
     const double w = (double)ar->x_max_m - ar->x_min_m + 2.0 * margin;
     const double h = (double)ar->y_max_m - ar->y_min_m + 2.0 * margin;
-    const double cell = cfg->social.range_m > 0.3f ? (double)cfg->social.range_m : 0.3;
+    const double cell = reach > 0.3 ? reach : 0.3;
     const uint32_t n_cells = ps_social_grid_cells(w, h, cell);
     c->a = calloc(n_agents > 0 ? n_agents : 1u, sizeof(*c->a));
     c->xy = calloc(2u * (n_agents > 0 ? n_agents : 1u), sizeof(*c->xy));
@@ -432,8 +443,7 @@ static void neighbour_acts(const ps_crowd_t *c, agent_t *a, const double xi[2], 
 static void neighbour_pass(ps_crowd_t *c)
 {
     const ps_social_params_t *sp = &c->cfg.social;
-    const double reach =
-        sp->range_m > sp->evasive_range_m ? (double)sp->range_m : (double)sp->evasive_range_m;
+    const double reach = neighbour_reach_m(sp);
     const double reach2 = reach * reach, range2 = (double)sp->range_m * sp->range_m;
     for (uint32_t i = 0; i < c->n; i++) {
         agent_t *a = &c->a[i];

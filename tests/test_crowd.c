@@ -340,6 +340,42 @@ static void test_crowd_free_speed_within_10_percent(void **state)
     }
 }
 
+/* Whether someone ahead blocks an agent (RESCUE's evasive term) may not
+ * depend on where the neighbour grid's cells happen to fall: a person
+ * walking at a standing one 1.3 m ahead (inside evasive_range_m, 1.5 m,
+ * beyond the 1 m repulsion range) with a walker at their side steps aside
+ * the same wherever the scene stands. Before the grid's cells covered the
+ * evasion's reach, the pair was missed when they fell two cells apart. */
+static void test_crowd_blocking_ahead_independent_of_grid(void **state)
+{
+    (void)state;
+    double lateral0 = 0.0;
+    const double offsets_m[] = {0.0, 0.3, 0.6, 0.9};
+    for (int k = 0; k < 4; k++) {
+        const float x0 = (float)(-5.0 + offsets_m[k]);
+        ps_crowd_cfg_t c = base_cfg();
+        c.n_groups = 2;
+        line_group(&c, 2, 0.6f, x0, 0.0f, x0, 1.0f); /* A at (x0, 0), its neighbour 0.6 m left */
+        c.groups[0].goal = PS_CROWD_GOAL_DIRECTION;
+        c.groups[0].goal_xy[0] = 1.0f;
+        c.groups[0].speed_m_s = 1.29f;
+        c.groups[1] = c.groups[0];
+        (void)snprintf(c.groups[1].name, sizeof(c.groups[1].name), "ahead");
+        c.groups[1].count = 1;
+        c.groups[1].goal = PS_CROWD_GOAL_HOLD;
+        c.groups[1].region = (ps_crowd_rect_t){x0 + 1.3f, 0.0f, x0 + 2.3f, 0.0f};
+        ps_plant_t *p = make_plant(&c, 0, -10, 1);
+        run_s(p, 0.2);
+        const double lateral = agent(p, 0).com_m[1];
+        printf("blocked walker at x0 %+.2f m: lateral %.6f m after 0.2 s\n", (double)x0, lateral);
+        if (k == 0)
+            lateral0 = lateral;
+        else
+            assert_true(fabs(lateral - lateral0) < 1e-6);
+        ps_plant_destroy(p);
+    }
+}
+
 /* Depth and normal force of the contact between two geoms (0 if none). */
 static double pair_depth(ps_plant_t *p, int geom_a, int geom_b, double *out_force_n)
 {
@@ -984,6 +1020,7 @@ int main(void)
         cmocka_unit_test(test_social_pair_repulsion_equals_both_sides),
         cmocka_unit_test(test_social_wall_repulsion_hand_computed),
         cmocka_unit_test(test_social_evasive_steps_aside_away_from_neighbours),
+        cmocka_unit_test(test_crowd_blocking_ahead_independent_of_grid),
         cmocka_unit_test(test_social_grid_finds_every_neighbour_in_range),
         cmocka_unit_test(test_scene_place_seeded_lattice_density_and_clearance),
         cmocka_unit_test(test_scene_loads_around_unchanged_robot_with_sizes),
