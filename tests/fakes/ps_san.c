@@ -48,7 +48,16 @@ static const char *reason(ps_san_why_t why)
     return "?";
 }
 
-void ps_san_assert_zero(uint64_t n, ps_san_why_t why, const char *what)
+/* cmocka's fail_msg, at the caller's file and line */
+#define FAIL_AT(file, line, ...)                                                                   \
+    do {                                                                                           \
+        print_error("ERROR: " __VA_ARGS__);                                                        \
+        print_error("\n");                                                                         \
+        _fail(file, line);                                                                         \
+    } while (0)
+
+void ps_san_assert_zero_at(uint64_t n, ps_san_why_t why, const char *what, const char *file,
+                           int line)
 {
     if (IS_ASAN) {
         print_message("%s %s: %llu (%s; the plain build asserts 0)\n", PS_SAN_NOT_ASSERTED, what,
@@ -56,10 +65,11 @@ void ps_san_assert_zero(uint64_t n, ps_san_why_t why, const char *what)
         return;
     }
     if (n != 0)
-        fail_msg("%s: %llu, want 0", what, (unsigned long long)n);
+        FAIL_AT(file, line, "%s: %llu, want 0", what, (unsigned long long)n);
 }
 
-void ps_san_assert_true(bool is_ok, ps_san_why_t why, const char *what)
+void ps_san_assert_true_at(bool is_ok, ps_san_why_t why, const char *what, const char *file,
+                           int line)
 {
     if (IS_ASAN) {
         print_message("%s %s: %s (%s; the plain build asserts it)\n", PS_SAN_NOT_ASSERTED, what,
@@ -67,23 +77,24 @@ void ps_san_assert_true(bool is_ok, ps_san_why_t why, const char *what)
         return;
     }
     if (!is_ok)
-        fail_msg("%s: does not hold", what);
+        FAIL_AT(file, line, "%s: does not hold", what);
 }
 
-void ps_san_assert_guard_clean(const ps_guard_counts_t *c, const char *what)
+void ps_san_assert_guard_clean_at(const ps_guard_counts_t *c, const char *what, const char *file,
+                                  int line)
 {
-    assert_true(ps_guard_counts_allocs());
-    assert_true(ps_guard_counts_locks());
+    if (!ps_guard_counts_allocs() || !ps_guard_counts_locks())
+        FAIL_AT(file, line, "%s: this build's guard counts no allocations or locks", what);
     if (c->n_allocs != 0 || c->n_frees != 0 || c->n_locks != 0)
-        fail_msg("%s: %llu mallocs, %llu frees, %llu locks on the loop thread, want 0", what,
-                 (unsigned long long)c->n_allocs, (unsigned long long)c->n_frees,
-                 (unsigned long long)c->n_locks);
+        FAIL_AT(file, line, "%s: %llu mallocs, %llu frees, %llu locks on the loop thread, want 0",
+                what, (unsigned long long)c->n_allocs, (unsigned long long)c->n_frees,
+                (unsigned long long)c->n_locks);
     char faults[160];
     snprintf(faults, sizeof(faults), "%s, page faults", what);
-    ps_san_assert_zero(c->n_faults, PS_SAN_PAGE_FAULTS, faults);
+    ps_san_assert_zero_at(c->n_faults, PS_SAN_PAGE_FAULTS, faults, file, line);
 }
 
-void ps_san_assert_no_report(const char *output)
+void ps_san_assert_no_report_at(const char *output, const char *file, int line)
 {
     static const char *const MARKS[] = {"ERROR: AddressSanitizer", "ERROR: LeakSanitizer",
                                         "runtime error: "};
@@ -91,6 +102,6 @@ void ps_san_assert_no_report(const char *output)
         if (strstr(output, MARKS[i]) != NULL) {
             /* stderr: cmocka cuts a message at 1 KiB */
             fprintf(stderr, "%.3000s\n", output);
-            fail_msg("a sanitizer's report (\"%s\") in the output above", MARKS[i]);
+            FAIL_AT(file, line, "a sanitizer's report (\"%s\") in the output above", MARKS[i]);
         }
 }

@@ -43,20 +43,30 @@ typedef enum {
 /** @return true in a build with AddressSanitizer  @rt RT-SAFE */
 bool ps_san_is_asan(void);
 
+/* Each check below is a macro, so that a failure names the caller's line. */
+
 /** Plain build: assert n == 0 (a failure names what and n). ASan build:
  *  print "PS_SAN_NOT_ASSERTED what: n (why)" and go on. */
-void ps_san_assert_zero(uint64_t n, ps_san_why_t why, const char *what);
+#define ps_san_assert_zero(n, why, what) ps_san_assert_zero_at(n, why, what, __FILE__, __LINE__)
+void ps_san_assert_zero_at(uint64_t n, ps_san_why_t why, const char *what, const char *file,
+                           int line);
 
 /** Plain build: assert is_ok (a failure names what). ASan build: print
  *  "PS_SAN_NOT_ASSERTED what: holds|does not hold (why)" and go on. */
-void ps_san_assert_true(bool is_ok, ps_san_why_t why, const char *what);
+#define ps_san_assert_true(is_ok, why, what)                                                       \
+    ps_san_assert_true_at(is_ok, why, what, __FILE__, __LINE__)
+void ps_san_assert_true_at(bool is_ok, ps_san_why_t why, const char *what, const char *file,
+                           int line);
 
 /** The loop thread after init: no allocation, free or lock (both builds),
  *  no page fault (plain build; reported under ASan). what names the span. */
-void ps_san_assert_guard_clean(const ps_guard_counts_t *c, const char *what);
+#define ps_san_assert_guard_clean(c, what) ps_san_assert_guard_clean_at(c, what, __FILE__, __LINE__)
+void ps_san_assert_guard_clean_at(const ps_guard_counts_t *c, const char *what, const char *file,
+                                  int line);
 
 /** A sanitizer's report in a child's captured output fails the test (the
  *  output's first 3000 characters on stderr). */
-void ps_san_assert_no_report(const char *output);
+#define ps_san_assert_no_report(output) ps_san_assert_no_report_at(output, __FILE__, __LINE__)
+void ps_san_assert_no_report_at(const char *output, const char *file, int line);
 
 #endif /* PS_SAN_H */
