@@ -6,9 +6,8 @@
  *
  * Built twice: plain, and with ASan and UBSan (build/tests/san/): the loop
  * thread's allocations, frees and locks are counted and asserted zero in
- * both; its page faults and its CPU time against the period (overruns) are
- * asserted in the plain build and reported in the sanitized one
- * (tests/fakes/ps_san.h says why).
+ * both; its page faults are asserted in the plain build and reported in
+ * the sanitized one (tests/fakes/ps_san.h says why).
  */
 #include <math.h>
 #include <setjmp.h>
@@ -162,6 +161,14 @@ static void drain_ring(void)
     }
 }
 
+/* Lockstep overruns a test lets pass over n_ticks of a fast loop: one per
+ * thousand ticks, at least one. A tick that is really too slow overruns
+ * every time it runs; a vCPU the host deschedules mid-tick makes one. */
+static uint64_t host_hiccups_allowed(uint64_t n_ticks)
+{
+    return n_ticks / 1000u > 1u ? n_ticks / 1000u : 1u;
+}
+
 /* ---- tests -------------------------------------------------------------- */
 
 /* The robot stands 10 simulated seconds after the harness lets go, every
@@ -233,8 +240,17 @@ static void test_lockstep_stand_10s_no_fall_no_alloc_no_fault(void **state)
     assert_int_equal(app.loop.counters.n_rx_bad, 0);
     assert_int_equal(app.loop.counters.n_rx_unknown, 0);
     /* In lockstep a tick overruns when it computes for a period of CPU time
-     * (test_lockstep_slow_policy_overruns_counted shows this can fail). */
-    ps_san_assert_zero(app.loop.pacer.n_overruns, PS_SAN_CPU_TIME, "stood 10 s, overruns");
+     * (test_lockstep_slow_policy_overruns_counted shows this can fail).
+     * One overrun in 10,100 ticks came in 3 of 12 runs while two compilers
+     * shared this 2-CPU VM (0 in the other 9), most likely its vCPU
+     * descheduled by the host mid-tick: this guest accounts no steal time
+     * (/proc/stat), so the thread's CPU clock runs on. A tick that is too
+     * slow overruns on every tick it is slow. Asserted in the sanitized
+     * build too: its ticks take at most about 120 us of the 1 ms period
+     * (a sanitized run's summary here), so its overruns are the host's. */
+    print_message("%llu lockstep overruns in %llu ticks\n",
+                  (unsigned long long)app.loop.pacer.n_overruns, (unsigned long long)n_ticks);
+    assert_true(app.loop.pacer.n_overruns <= host_hiccups_allowed(n_ticks));
 
     /* Ctrl-C path: through DAMPING to STANDBY, never straight out. */
     ps_loop_request_stop(&app.loop);
@@ -546,7 +562,8 @@ static void test_lockstep_slow_policy_overruns_counted(void **state)
     sp = (slow_policy_t){.inner = app.loop.cfg.policy};
     app.loop.cfg.policy = (ps_policy_t){.ops = &SLOW_OPS, .ctx = &sp};
     step_until(1.0);
-    ps_san_assert_zero(app.loop.pacer.n_overruns, PS_SAN_CPU_TIME, "fast policy, overruns");
+    /* fast policy: none, but for the host's hiccups (see the stand test) */
+    assert_true(app.loop.pacer.n_overruns <= host_hiccups_allowed(app.loop.counters.n_ticks));
     sp.is_slow = true;
     step_until(1.5);
     sp.is_slow = false;
@@ -557,9 +574,11 @@ static void test_lockstep_slow_policy_overruns_counted(void **state)
     assert_true(app.loop.pacer.n_overruns >= n_slow);
     assert_int_equal(app.loop.pacer.n_missed, 0); /* no deadline of the sim clock skipped */
     const uint64_t n_after_slow = app.loop.pacer.n_overruns;
+    const uint64_t ticks_after_slow = app.loop.counters.n_ticks;
     step_until(2.0);
-    ps_san_assert_zero(app.loop.pacer.n_overruns - n_after_slow, PS_SAN_CPU_TIME,
-                       "fast again, overruns");
+    /* fast again: none more, but for the host's hiccups */
+    assert_true(app.loop.pacer.n_overruns - n_after_slow <=
+                host_hiccups_allowed(app.loop.counters.n_ticks - ticks_after_slow));
 }
 
 /* The case that used to stay ACTIVE: a 1.5 ms policy in a 1 ms loop (it

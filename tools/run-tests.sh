@@ -9,7 +9,9 @@
 set -uo pipefail
 passed=0; failed=0; crashed=(); skipped=(); n_skipped_tests=0; n_not_asserted=0
 for bin in "$@"; do
-    echo "=== $(basename "$bin")"
+    name=$(basename "$bin")
+    case "$bin" in */tests/san/*) name="san/$name" ;; esac # the sanitized e2e build
+    echo "=== $name"
     out=$("$bin" 2>&1); rc=$?
     printf '%s\n' "$out"
     # grep on a here-string: `printf | grep -q` dies of SIGPIPE under pipefail
@@ -20,9 +22,9 @@ for bin in "$@"; do
     p=$(printf '%s\n' "$out" | sed -n 's/^\[  PASSED  \] \([0-9]\+\) test(s)\./\1/p' | awk '{s+=$1} END {print s+0}')
     f=$(printf '%s\n' "$out" | sed -n 's/^\[  FAILED  \] \([0-9]\+\) test(s), listed below:/\1/p' | awk '{s+=$1} END {print s+0}')
     if ! grep -q '^\[  PASSED  \]' <<<"$out"; then
-        crashed+=("$(basename "$bin") (rc $rc)"); f=$((f + 1))
+        crashed+=("$name (rc $rc)"); f=$((f + 1))
     elif [ "$rc" -ne 0 ] && [ "$f" -eq 0 ]; then
-        crashed+=("$(basename "$bin") (rc $rc)"); f=1
+        crashed+=("$name (rc $rc)"); f=1
     fi
     passed=$((passed + p)); failed=$((failed + f))
     ns=$(printf '%s\n' "$out" | sed -n 's/^\[  SKIPPED \] \([0-9]\+\) test(s), listed below:/\1/p' | awk '{s+=$1} END {print s+0}')

@@ -9,9 +9,8 @@
  *    memory spans terabytes; the runtime does not lock or prefault under
  *    sanitizers), so the first touch of a page, or of its shadow, faults
  *    where the plain build faults nothing;
- *  - CPU time against the loop's period (overruns in lockstep), and how
- *    fresh the camera's lists are in real time: the instrumented code runs
- *    two to three times slower.
+ *  - how fresh the camera's lists are in real time: the instrumented
+ *    perception runs two to three times slower.
  *
  * Allocations, frees and locks of the loop thread are counted in both
  * builds (rt/ps_guard.h: interposed plain, ASan's allocator hooks here) and
