@@ -1009,7 +1009,7 @@ static void finish_summary(ps_summary_t *sum)
     sum->loop = &g.app.loop;
     sum->logger = &g.logger;
     sum->guard = g.guard;
-    sum->is_guard_exact = !PS_IS_SANITIZED; /* the guard does not interpose then */
+    sum->is_guard_exact = ps_guard_counts_allocs() && ps_guard_counts_locks(); /* not under TSan */
     sum->rt_missing = g.rt_missing;
     sum->priority = g.app.board.rt.priority;
     sum->loop_cpu = g.app.board.rt.loop_cpu;

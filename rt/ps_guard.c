@@ -20,11 +20,20 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+/* Under AddressSanitizer (PS_GUARD_ASAN_HOOKS) ASan owns malloc: the guard
+ * counts through the allocator hooks ASan calls on every allocation and free
+ * it serves, and interposes the lock calls as the plain build does (each
+ * forwards to the next definition, ASan's interceptor, then glibc's). Under
+ * ThreadSanitizer or MemorySanitizer (PS_GUARD_NO_INTERPOSE) nothing is
+ * interposed or hooked. */
+#if defined(__SANITIZE_ADDRESS__)
+#define PS_GUARD_ASAN_HOOKS 1
+#elif defined(__SANITIZE_THREAD__)
 #define PS_GUARD_NO_INTERPOSE 1
 #elif defined(__has_feature)
-#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer) ||                         \
-    __has_feature(memory_sanitizer)
+#if __has_feature(address_sanitizer)
+#define PS_GUARD_ASAN_HOOKS 1
+#elif __has_feature(thread_sanitizer) || __has_feature(memory_sanitizer)
 #define PS_GUARD_NO_INTERPOSE 1
 #endif
 #endif
@@ -44,7 +53,38 @@ static inline bool is_counting(void)
     return g_is_armed && !g_is_paused;
 }
 
-#ifndef PS_GUARD_NO_INTERPOSE
+#ifdef PS_GUARD_ASAN_HOOKS
+
+/* sanitizer/allocator_interface.h, which GCC does not ship: ASan calls each
+ * installed pair after every allocation and before every free it serves
+ * (a failed allocation and free(NULL) do not reach them; a realloc that
+ * moves a block is one allocation and one free). @return nonzero if installed */
+int __sanitizer_install_malloc_and_free_hooks(void (*malloc_hook)(const volatile void *, size_t),
+                                              void (*free_hook)(const volatile void *));
+
+static void on_asan_malloc(const volatile void *ptr, size_t size)
+{
+    (void)ptr;
+    (void)size;
+    if (is_counting())
+        g_n_allocs++;
+}
+
+static void on_asan_free(const volatile void *ptr)
+{
+    (void)ptr;
+    if (is_counting())
+        g_n_frees++;
+}
+
+static bool g_has_hooks; /* written once by the constructor, before main */
+
+__attribute__((constructor)) static void install_asan_hooks(void)
+{
+    g_has_hooks = __sanitizer_install_malloc_and_free_hooks(on_asan_malloc, on_asan_free) != 0;
+}
+
+#elif !defined(PS_GUARD_NO_INTERPOSE)
 
 extern void *__libc_malloc(size_t size);
 extern void *__libc_calloc(size_t n, size_t size);
@@ -133,6 +173,10 @@ void *pvalloc(size_t size)
     }
     return __libc_memalign(page, rounded & ~(page - 1));
 }
+
+#endif /* malloc interposers */
+
+#ifndef PS_GUARD_NO_INTERPOSE
 
 /* ---- locks ------------------------------------------------------------ */
 
@@ -279,7 +323,9 @@ int sem_timedwait(sem_t *s, const struct timespec *abstime)
 
 bool ps_guard_counts_allocs(void)
 {
-#ifdef PS_GUARD_NO_INTERPOSE
+#if defined(PS_GUARD_ASAN_HOOKS)
+    return g_has_hooks;
+#elif defined(PS_GUARD_NO_INTERPOSE)
     return false;
 #else
     return true;
@@ -288,7 +334,11 @@ bool ps_guard_counts_allocs(void)
 
 bool ps_guard_counts_locks(void)
 {
-    return ps_guard_counts_allocs(); /* interposed together */
+#ifdef PS_GUARD_NO_INTERPOSE
+    return false;
+#else
+    return true;
+#endif
 }
 
 static uint64_t thread_faults(void)

@@ -22,11 +22,17 @@
  * itself (stdio, the malloc arena) do not go through these symbols and are
  * not counted; their callers (printf, malloc) are what the rules forbid.
  *
- * Sanitizers: under AddressSanitizer (or ThreadSanitizer) the sanitizer
- * owns malloc, so ps_guard.c defines no interposers: n_allocs and n_frees
- * then always read 0 (ps_guard_counts_allocs() says so), and no lock
- * interposers either (n_locks reads 0), while n_faults still
- * works. Tests that check allocation counts must be built without sanitizers.
+ * Sanitizers: under AddressSanitizer, which owns malloc, ps_guard.c
+ * defines no malloc interposers but installs ASan's allocator hooks
+ * (__sanitizer_install_malloc_and_free_hooks), which ASan calls for every
+ * allocation and free it serves: n_allocs and n_frees count those (a failed
+ * allocation and free(NULL) do not reach them; a realloc that moves a block
+ * counts one allocation and one free), and the lock interposers stay
+ * (forwarding through ASan's interceptors). Zero means zero in both builds.
+ * Under ThreadSanitizer nothing is interposed or hooked: n_allocs, n_frees
+ * and n_locks read 0 (ps_guard_counts_allocs() and _locks() say so). n_faults
+ * works in every build; under ASan, whose mlockall is a no-op and whose
+ * shadow memory maps on first touch, it counts faults the plain build has not.
  *
  * Threads: per-thread state; counters are read by the same thread.
  * Allocation: none.
@@ -68,12 +74,13 @@ void ps_guard_read(ps_guard_counts_t *out);
 /** @return true while the calling thread is armed and not paused  @rt RT-SAFE */
 bool ps_guard_is_armed(void);
 
-/** @return true when this build interposes malloc (false under ASan/TSan:
- *  n_allocs and n_frees stay 0)  @rt RT-SAFE */
+/** @return true when this build counts allocations: interposed malloc, or
+ *  ASan's hooks installed (false under TSan: n_allocs and n_frees stay 0)
+ *  @rt RT-SAFE */
 bool ps_guard_counts_allocs(void);
 
-/** @return true when this build interposes the lock calls (same condition as
- *  ps_guard_counts_allocs: false under ASan/TSan, n_locks stays 0)  @rt RT-SAFE */
+/** @return true when this build interposes the lock calls (false under
+ *  TSan: n_locks stays 0)  @rt RT-SAFE */
 bool ps_guard_counts_locks(void);
 
 #endif /* PS_GUARD_H */

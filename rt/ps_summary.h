@@ -42,7 +42,7 @@ typedef struct {
     const ps_loop_t *loop;
     const ps_logger_t *logger;
     ps_guard_counts_t guard; /**< counted on the loop thread after init */
-    bool is_guard_exact;     /**< false under sanitizers (allocations not interposed) */
+    bool is_guard_exact;     /**< false under TSan (allocations and locks not counted) */
     unsigned rt_missing;     /**< ps_rt_missing_t bits */
     const ps_canbus_plan_t *plan;
     const ps_board_cfg_t *board;

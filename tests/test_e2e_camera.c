@@ -1,6 +1,8 @@
 /*
- * Camera perception end to end (built without sanitizers: it counts the
- * loop thread's allocations and locks):
+ * Camera perception end to end (built plain and with ASan and UBSan,
+ * build/tests/san/, which runs the sanitized runtime and reports the loop
+ * thread's page faults, and in real time how fresh the lists were, rather
+ * than asserting them: tests/fakes/ps_san.h):
  *  - in lockstep, in process: the runtime with the simulated camera
  *    (tests/data/boards/sim-camera.yaml, tests/data/robots/ps1-tags.yaml)
  *    takes neighbour lists into the loop while the loop thread, guarded,
@@ -37,6 +39,7 @@
 #include "../rt/ps_rtsetup.h"
 #include "fakes/ps_camera_fake.h"
 #include "fakes/ps_cli.h"
+#include "fakes/ps_san.h"
 
 #define BOARD    "tests/data/boards/sim-camera.yaml"
 #define ROBOT    "tests/data/robots/ps1-tags.yaml"
@@ -126,10 +129,7 @@ static void test_e2e_camera_lockstep_loop_takes_lists_no_alloc_no_lock(void **st
                   (unsigned long long)c.n_frees, (unsigned long long)c.n_faults,
                   (unsigned long long)c.n_locks);
     assert_true(n_lists > 0);
-    assert_int_equal(c.n_allocs, 0);
-    assert_int_equal(c.n_frees, 0);
-    assert_int_equal(c.n_faults, 0);
-    assert_int_equal(c.n_locks, 0);
+    ps_san_assert_guard_clean(&c, "4 s of lockstep with the camera");
     for (unsigned i = 0; i < n_transitions; i++)
         print_message("transition at %.3f s: %s -> %s (conditions 0x%x)\n",
                       ps_ns_to_s(transitions[i].t_ns - START_NS),
@@ -168,14 +168,12 @@ static void test_e2e_camera_realtime_fresh_lists_summary_no_alloc(void **state)
                   frames, fps, tags, lists, stale, ticks);
     assert_true(frames > 0 && tags > 0);
     assert_true(lists > 0);
-    assert_true(stale < ticks); /* some ticks had a list younger than max_age_s */
+    /* some ticks had a list younger than max_age_s (0.2 s: under ASan on a
+     * loaded machine the slower pipeline has been seen at 1.6 frames/s with
+     * every list older than that) */
+    ps_san_assert_true(stale < ticks, PS_SAN_CPU_TIME, "a list younger than max_age_s");
     cJSON *j = ps_cli_read_json(path);
-    const cJSON *after = ps_cli_obj(j, "after_init");
-    assert_true(cJSON_IsTrue(ps_cli_obj(after, "allocations_counted")));
-    assert_int_equal((int)ps_cli_num(after, "mallocs"), 0);
-    assert_int_equal((int)ps_cli_num(after, "frees"), 0);
-    assert_int_equal((int)ps_cli_num(after, "page_faults"), 0);
-    assert_int_equal((int)ps_cli_num(after, "locks"), 0);
+    ps_cli_assert_after_init_clean(j);
     cJSON_Delete(j);
     unlink(path);
 }

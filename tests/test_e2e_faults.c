@@ -24,7 +24,8 @@
  * that ended in the expected state) and, with PUSHSTEP_FAULTS_JSON set,
  * writes them there as JSON (bench/faults.sh).
  *
- * Built without sanitizers (tests/test_e2e*): it interposes clock_gettime.
+ * Built plain and with ASan and UBSan (build/tests/san/, whose config
+ * reload row runs the sanitized runtime); both interpose clock_gettime.
  */
 #include <dlfcn.h>
 #include <errno.h>
@@ -51,6 +52,7 @@
 #include "../rt/ps_perception.h"
 #include "../rt/ps_recorder.h"
 #include "fakes/ps_cli.h"
+#include "fakes/ps_san.h"
 
 #define START_NS PS_NS_PER_S
 #define INJECT_S 1.5 /* ACTIVE since 1.2 s (start 0.2 s, ramp 1 s), harness on until 2 s */
@@ -1503,6 +1505,7 @@ static void test_fault_config_reload_refused_while_active(void **state)
     close(fds[0]);
     int status = 0;
     assert_int_equal(waitpid(pid, &status, 0), pid);
+    ps_san_assert_no_report(out);
     if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
         fail_msg("pushstep did not exit 0 (status 0x%x):\n%s", status, out);
     assert_int_equal(n_sent, 2);

@@ -4,7 +4,10 @@
  * controller), driven tick by tick so the test can watch the plant's ground
  * truth and every frame the loop puts on the buses.
  *
- * Built without sanitizers: it counts allocations through the interposer.
+ * Built twice: plain, and with ASan and UBSan (build/tests/san/): the loop
+ * thread's allocations, frees and locks are counted and asserted zero in
+ * both; its page faults are asserted in the plain build and reported in
+ * the sanitized one (tests/fakes/ps_san.h says why).
  */
 #include <math.h>
 #include <setjmp.h>
@@ -24,6 +27,7 @@
 #include "../rt/ps_err.h"
 #include "../rt/ps_guard.h"
 #include "../rt/ps_rtsetup.h"
+#include "fakes/ps_san.h"
 
 #define START_NS PS_NS_PER_S
 
@@ -217,10 +221,7 @@ static void test_lockstep_stand_10s_no_fall_no_alloc_no_fault(void **state)
     assert_int_equal(app.loop.state, PS_SM_ACTIVE);
     assert_int_equal(app.loop.counters.n_transitions, 2); /* STANDBY->RAMP->ACTIVE only */
     assert_true(min_com_z > t0.com_m[2] - 0.05);
-    assert_int_equal(counts.n_allocs, 0);
-    assert_int_equal(counts.n_frees, 0);
-    assert_int_equal(counts.n_faults, 0);
-    assert_int_equal(counts.n_locks, 0);
+    ps_san_assert_guard_clean(&counts, "stood 10 s");
 
     uint64_t n_commands = 0;
     for (uint32_t b = 0; b < app.board.n_buses; b++) {
@@ -245,7 +246,9 @@ static void test_lockstep_stand_10s_no_fall_no_alloc_no_fault(void **state)
      * shared this 2-CPU VM (0 in the other 9), most likely its vCPU
      * descheduled by the host mid-tick: this guest accounts no steal time
      * (/proc/stat), so the thread's CPU clock runs on. A tick that is too
-     * slow overruns on every tick it is slow. */
+     * slow overruns on every tick it is slow. Asserted in the sanitized
+     * build too: its ticks take at most about 120 us of the 1 ms period
+     * (a sanitized run's summary here), so its overruns are the host's. */
     print_message("%llu lockstep overruns in %llu ticks\n",
                   (unsigned long long)app.loop.pacer.n_overruns, (unsigned long long)n_ticks);
     assert_true(app.loop.pacer.n_overruns <= host_hiccups_allowed(n_ticks));
@@ -389,10 +392,7 @@ static void assert_no_alloc_lock_fault(const ps_guard_counts_t *c, const char *w
     print_message("%s: %llu mallocs, %llu frees, %llu page faults, %llu locks\n", what,
                   (unsigned long long)c->n_allocs, (unsigned long long)c->n_frees,
                   (unsigned long long)c->n_faults, (unsigned long long)c->n_locks);
-    assert_int_equal(c->n_allocs, 0);
-    assert_int_equal(c->n_frees, 0);
-    assert_int_equal(c->n_faults, 0);
-    assert_int_equal(c->n_locks, 0);
+    ps_san_assert_guard_clean(c, what);
 }
 
 /* The transition from -> to that the records show, or NULL. */

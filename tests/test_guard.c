@@ -1,6 +1,9 @@
 /*
- * Tests of ps_guard. Built WITHOUT sanitizers (the Makefile's NOSAN_TESTS):
- * ASan owns malloc, and then ps_guard counts no allocations.
+ * Tests of ps_guard, built twice: plain (build/tests/test_guard), where the
+ * guard interposes malloc & co. and the lock calls, and with ASan and UBSan
+ * (build/tests/san/test_guard), where ASan owns malloc and the guard counts
+ * through ASan's allocator hooks (the lock calls interposed as in the plain
+ * build). The counts are the same in both except where a test says so.
  *
  * Allocations go through volatile function pointers so the compiler cannot
  * elide a malloc/free pair or fold calloc into malloc + memset. Nothing
@@ -23,6 +26,12 @@
 #include <unistd.h>
 
 #include "../rt/ps_guard.h"
+
+#if defined(__SANITIZE_ADDRESS__)
+#define IS_ASAN 1
+#else
+#define IS_ASAN 0
+#endif
 
 static void *(*volatile p_malloc)(size_t) = malloc;
 static void *(*volatile p_calloc)(size_t, size_t) = calloc;
@@ -52,11 +61,11 @@ static size_t page_size(void)
     return (size_t)sysconf(_SC_PAGESIZE);
 }
 
-static void test_ps_guard_counts_allocs_true_without_sanitizers(void **state)
+/* Plain and under ASan alike (hooks installed): if this fails, every alloc
+ * test below is meaningless. */
+static void test_ps_guard_counts_allocs_true_plain_and_under_asan(void **state)
 {
     (void)state;
-    /* If this fails, test_guard was built with ASan: every alloc test below
-     * would be meaningless. */
     assert_true(ps_guard_counts_allocs());
 }
 
@@ -98,7 +107,9 @@ static void test_ps_guard_arm_malloc_calloc_realloc_free_counted_exactly(void **
     assert_non_null(a);
     assert_non_null(b);
     assert_int_equal(c.n_allocs, 4);
-    assert_int_equal(c.n_frees, 4);
+    /* Plain: four free calls, free(NULL) included. ASan: the realloc that
+     * moved a is an allocation and a free, and free(NULL) reaches no hook. */
+    assert_int_equal(c.n_frees, IS_ASAN ? 1 + 3 : 4);
 }
 
 static void test_ps_guard_arm_aligned_allocs_counted(void **state)
@@ -109,7 +120,12 @@ static void test_ps_guard_arm_aligned_allocs_counted(void **state)
     void *untouched = (void *)0x1;
     ps_guard_arm();
     const int rc_ok = p_posix_memalign(&p[0], 64, 100);
-    const int rc_bad = p_posix_memalign(&untouched, 3, 100);
+    /* A bad alignment: the guard's own posix_memalign refuses it (counted:
+     * the loop asked). Under ASan there is no guard posix_memalign to test
+     * and ASan reports the call as an error, so it is not made. */
+    int rc_bad = EINVAL;
+    if (!IS_ASAN)
+        rc_bad = p_posix_memalign(&untouched, 3, 100);
     p[1] = p_aligned_alloc(128, 256);
     p[2] = p_memalign(256, 10);
     p[3] = p_valloc(10);
@@ -118,6 +134,9 @@ static void test_ps_guard_arm_aligned_allocs_counted(void **state)
         p_free(p[i]);
     ps_guard_disarm(&c);
     assert_int_equal(rc_ok, 0);
+    if (IS_ASAN)
+        print_message("      ASan build: the guard's posix_memalign refusal of a bad alignment "
+                      "is not built, not tested here (the plain build tests it)\n");
     assert_int_equal(rc_bad, EINVAL);
     assert_ptr_equal(untouched, (void *)0x1);
     assert_int_equal((uintptr_t)p[0] % 64, 0);
@@ -125,7 +144,7 @@ static void test_ps_guard_arm_aligned_allocs_counted(void **state)
     assert_int_equal((uintptr_t)p[2] % 256, 0);
     assert_int_equal((uintptr_t)p[3] % page_size(), 0);
     assert_int_equal((uintptr_t)p[4] % page_size(), 0);
-    assert_int_equal(c.n_allocs, 6);
+    assert_int_equal(c.n_allocs, IS_ASAN ? 5 : 6);
     assert_int_equal(c.n_frees, 5);
 }
 
@@ -334,7 +353,7 @@ static void test_ps_guard_arm_pure_arithmetic_zero_counts(void **state)
 
 /* ---- locks --------------------------------------------------------------- */
 
-static void test_ps_guard_counts_locks_true_without_sanitizers(void **state)
+static void test_ps_guard_counts_locks_true_plain_and_under_asan(void **state)
 {
     (void)state;
     assert_true(ps_guard_counts_locks());
@@ -453,7 +472,7 @@ static void test_ps_guard_arm_mutex_on_other_thread_not_counted(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_ps_guard_counts_allocs_true_without_sanitizers),
+        cmocka_unit_test(test_ps_guard_counts_allocs_true_plain_and_under_asan),
         cmocka_unit_test(test_ps_guard_is_armed_follows_arm_pause_disarm),
         cmocka_unit_test(test_ps_guard_arm_malloc_calloc_realloc_free_counted_exactly),
         cmocka_unit_test(test_ps_guard_arm_aligned_allocs_counted),
@@ -464,7 +483,7 @@ int main(void)
         cmocka_unit_test(test_ps_guard_arm_fresh_pages_faults_counted),
         cmocka_unit_test(test_ps_guard_pause_fresh_pages_faults_excluded),
         cmocka_unit_test(test_ps_guard_arm_pure_arithmetic_zero_counts),
-        cmocka_unit_test(test_ps_guard_counts_locks_true_without_sanitizers),
+        cmocka_unit_test(test_ps_guard_counts_locks_true_plain_and_under_asan),
         cmocka_unit_test(test_ps_guard_arm_mutex_rwlock_sem_counted_exactly),
         cmocka_unit_test(test_ps_guard_pause_or_disarm_mutex_not_counted),
         cmocka_unit_test(test_ps_guard_arm_mutex_on_other_thread_not_counted),

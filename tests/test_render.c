@@ -3,9 +3,10 @@
  * crowd pressing on the robot rendered offscreen (EGL surfaceless, no
  * display), written as PNGs that are not blank and show the robot and the
  * people, the density map, the MP4 with one frame per PNG (ffprobe), and
- * the live viewer refusing cleanly without a display. Runs without
- * sanitizers (Mesa's allocations are not ours to leak-check). Run from the
- * repo root; needs ffmpeg.
+ * the live viewer refusing cleanly without a display. Built plain and with
+ * ASan, UBSan and LeakSanitizer (build/tests/san/test_render: our code
+ * around Mesa's, which leaves nothing to report). Run from the repo root;
+ * needs ffmpeg.
  */
 #include <stdarg.h>
 #include <stddef.h>

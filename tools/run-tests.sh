@@ -3,10 +3,15 @@
 # line "N passed, N failed" summed over all binaries (tests that crash before
 # cmocka's summary count as one failure each). Exit 1 if anything failed.
 # A binary that exits 77 after a line "[  SKIPPED ] why" is listed as skipped.
+# Tests cmocka skipped inside a binary, and the checks a sanitized build
+# reports rather than asserts (lines "[ NOT ASSERTED ] what: n (why)",
+# tests/fakes/ps_san.h), are counted on a line of their own.
 set -uo pipefail
-passed=0; failed=0; crashed=(); skipped=()
+passed=0; failed=0; crashed=(); skipped=(); n_skipped_tests=0; n_not_asserted=0
 for bin in "$@"; do
-    echo "=== $(basename "$bin")"
+    name=$(basename "$bin")
+    case "$bin" in */tests/san/*) name="san/$name" ;; esac # the sanitized e2e build
+    echo "=== $name"
     out=$("$bin" 2>&1); rc=$?
     printf '%s\n' "$out"
     # grep on a here-string: `printf | grep -q` dies of SIGPIPE under pipefail
@@ -17,13 +22,19 @@ for bin in "$@"; do
     p=$(printf '%s\n' "$out" | sed -n 's/^\[  PASSED  \] \([0-9]\+\) test(s)\./\1/p' | awk '{s+=$1} END {print s+0}')
     f=$(printf '%s\n' "$out" | sed -n 's/^\[  FAILED  \] \([0-9]\+\) test(s), listed below:/\1/p' | awk '{s+=$1} END {print s+0}')
     if ! grep -q '^\[  PASSED  \]' <<<"$out"; then
-        crashed+=("$(basename "$bin") (rc $rc)"); f=$((f + 1))
+        crashed+=("$name (rc $rc)"); f=$((f + 1))
     elif [ "$rc" -ne 0 ] && [ "$f" -eq 0 ]; then
-        crashed+=("$(basename "$bin") (rc $rc)"); f=1
+        crashed+=("$name (rc $rc)"); f=1
     fi
     passed=$((passed + p)); failed=$((failed + f))
+    ns=$(printf '%s\n' "$out" | sed -n 's/^\[  SKIPPED \] \([0-9]\+\) test(s), listed below:/\1/p' | awk '{s+=$1} END {print s+0}')
+    n_skipped_tests=$((n_skipped_tests + ns))
+    n_not_asserted=$((n_not_asserted + $(grep -c '^\[ NOT ASSERTED \]' <<<"$out")))
 done
 for s in "${skipped[@]}"; do printf 'skipped: %s\n' "$s"; done
 [ ${#crashed[@]} -gt 0 ] && printf 'did not finish cleanly: %s\n' "${crashed[*]}"
+[ "$n_skipped_tests" -gt 0 ] && echo "$n_skipped_tests tests skipped inside their binaries (lines above say why)"
+[ "$n_not_asserted" -gt 0 ] &&
+    echo "$n_not_asserted checks not asserted in a sanitized build (their [ NOT ASSERTED ] lines say why)"
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]

@@ -10,10 +10,16 @@
 
 #include <cmocka.h>
 
+#include "ps_san.h"
+
 #define JSON_MAX (256 * 1024)
 
 const char *ps_cli_bin(void)
 {
+    if (ps_san_is_asan()) {
+        const char *b = getenv("PUSHSTEP_SAN_BIN");
+        return b ? b : "build/san/pushstep";
+    }
     const char *b = getenv("PUSHSTEP_BIN");
     return b ? b : "build/pushstep";
 }
@@ -27,6 +33,7 @@ int ps_cli_run(const char *args, char *out, size_t out_len)
     size_t n = fread(out, 1, out_len - 1, p);
     out[n] = '\0';
     int status = pclose(p);
+    ps_san_assert_no_report(out);
     assert_true(WIFEXITED(status));
     return WEXITSTATUS(status);
 }
@@ -66,4 +73,17 @@ const cJSON *ps_cli_obj(const cJSON *o, const char *key)
     if (v == NULL)
         fail_msg("JSON key \"%s\" missing", key);
     return v;
+}
+
+void ps_cli_assert_after_init_clean(const cJSON *summary)
+{
+    const cJSON *after = ps_cli_obj(summary, "after_init");
+    assert_true(cJSON_IsTrue(ps_cli_obj(after, "allocations_counted")));
+    const double mallocs = ps_cli_num(after, "mallocs"), frees = ps_cli_num(after, "frees");
+    const double locks = ps_cli_num(after, "locks");
+    if (mallocs != 0 || frees != 0 || locks != 0)
+        fail_msg("after init on the loop thread: %.0f mallocs, %.0f frees, %.0f locks, want 0",
+                 mallocs, frees, locks);
+    ps_san_assert_zero((uint64_t)ps_cli_num(after, "page_faults"), PS_SAN_PAGE_FAULTS,
+                       "the runtime's loop thread after init, page faults");
 }

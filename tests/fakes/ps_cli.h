@@ -11,11 +11,14 @@
 
 #include <cjson/cJSON.h>
 
-/** @return $PUSHSTEP_BIN, or build/pushstep */
+/** @return $PUSHSTEP_BIN, or build/pushstep; in a build with ASan (the
+ *  end-to-end tests' sanitized build) the sanitized runtime instead:
+ *  $PUSHSTEP_SAN_BIN, or build/san/pushstep */
 const char *ps_cli_bin(void);
 
 /** Run `bin args` with stdout and stderr captured into out (NUL-terminated,
- *  cut at out_len - 1). @return its exit status (asserts it exited) */
+ *  cut at out_len - 1). @return its exit status (asserts it exited, and
+ *  that the output holds no sanitizer report) */
 int ps_cli_run(const char *args, char *out, size_t out_len);
 
 /** An empty file under /tmp (its path into path). */
@@ -28,5 +31,10 @@ cJSON *ps_cli_read_json(const char *path);
  *  (asserts it is there). */
 double ps_cli_num(const cJSON *o, const char *key);
 const cJSON *ps_cli_obj(const cJSON *o, const char *key);
+
+/** A summary's after_init (the loop thread after init): allocations and
+ *  locks counted, no malloc, free or lock; no page fault (reported, not
+ *  asserted, in the sanitized build: tests/fakes/ps_san.h). */
+void ps_cli_assert_after_init_clean(const cJSON *summary);
 
 #endif /* PS_CLI_H */
