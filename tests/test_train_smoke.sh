@@ -26,6 +26,11 @@ name="eval.py runs the benchmark's pushes in the training environment"
 check bash -c "/usr/bin/python3 policy/train/eval.py --weights $out/p.safetensors --dv 0.15 \
     --durations 0.1 --directions 2 --out $out/e.json >$out/eval.out 2>&1 \
     && grep -q '\"controller\": \"mlp\"' $out/e.json"
+name="the shipped policy (policy/weights/ps1_stage1.safetensors) stands in lockstep, contract checked"
+check bash -c "${PUSHSTEP_BIN:-build/pushstep} --lockstep --quiet --duration 6 --scenario scenarios/stand.yaml \
+    --policy mlp --weights policy/weights/ps1_stage1.safetensors --summary $out/shipped.json \
+    >$out/run.out 2>&1 && grep -Eq '\"fall_detected\":[[:space:]]*false' $out/shipped.json \
+    && grep -Eq '\"policy_runs\":[[:space:]]*[1-9]' $out/shipped.json"
 [ $fail -gt 0 ] && { cat "$out/train.out" "$out/run.out" 2>/dev/null | tail -20; }
 echo "[  PASSED  ] $pass test(s)."
 [ $fail -gt 0 ] && echo "[  FAILED  ] $fail test(s), listed below:"
