@@ -12,8 +12,11 @@ for bin in "$@"; do
     name=$(basename "$bin")
     case "$bin" in */tests/san/*) name="san/$name" ;; esac # the sanitized e2e build
     echo "=== $name"
+    t0=$(date +%s.%N)
     out=$("$bin" 2>&1); rc=$?
     printf '%s\n' "$out"
+    # each binary's wall time, so the suite's 15-minute budget can be read off a log
+    awk -v n="$name" -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN { printf "--- %s: %.1f s\n", n, b - a }'
     # grep on a here-string: `printf | grep -q` dies of SIGPIPE under pipefail
     # when grep stops reading early in a long output.
     if [ "$rc" -eq 77 ] && grep -q '^\[  SKIPPED \]' <<<"$out"; then
