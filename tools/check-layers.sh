@@ -31,81 +31,96 @@ PROTOCOL_HEADERS="drivers/ps_mit.h drivers/ps_robstride.h drivers/ps_moteus.h"
 
 is_in() { local x=$1; shift; for y in "$@"; do [ "$x" = "$y" ] && return 0; done; return 1; }
 
+# The layer of file $1, into LAYER (a global: no subshell per call; the
+# checks below run for every include of every file).
 layer_of() {
     local f=$1
-    if is_in "$f" $BASE; then echo base; return; fi
+    if is_in "$f" $BASE; then LAYER=base; return; fi
     case $f in
-    drivers/*) echo drivers ;;
-    policy/*) echo policy ;;
-    sim/*) echo sim ;;
-    rt/*) echo app ;;
-    *) echo other ;;
+    drivers/*) LAYER=drivers ;;
+    policy/*) LAYER=policy ;;
+    sim/*) LAYER=sim ;;
+    rt/*) LAYER=app ;;
+    *) LAYER=other ;;
     esac
 }
 
-# Direct project includes of a file, as paths relative to ROOT.
-direct_includes() {
-    local f=$1 dir inc
-    dir=$(dirname "$f")
-    sed -n 's/^[[:space:]]*#[[:space:]]*include[[:space:]]*"\([^"]*\)".*/\1/p' "$ROOT/$f" |
-        while read -r inc; do
-            realpath -m --relative-to="$ROOT" "$ROOT/$dir/$inc"
-        done
+# Direct project includes of every file under the four folders, as paths
+# relative to ROOT, read once: DIRECT[file] (newline-separated).
+declare -A DIRECT=()
+read_direct_includes() {
+    local f dir incs
+    while read -r f; do
+        dir=$(dirname "$f")
+        incs=$(sed -n 's/^[[:space:]]*#[[:space:]]*include[[:space:]]*"\([^"]*\)".*/\1/p' "$ROOT/$f")
+        if [ -n "$incs" ]; then
+            # shellcheck disable=SC2086 # one argument per include
+            DIRECT[$f]=$(cd "$ROOT/$dir" && realpath -m --relative-to="$ROOT" $incs)
+        else
+            DIRECT[$f]=""
+        fi
+    done < <(cd "$ROOT" && find rt drivers policy sim -name '*.[ch]' -o -name '*.cpp' | sort)
 }
 
-# Transitive closure (files only under the four layer folders).
+# Transitive closure (files only under the four layer folders) into CLOSURE.
 closure() {
     local -A seen=()
     local stack=("$1") f inc
     while [ ${#stack[@]} -gt 0 ]; do
         f=${stack[-1]}
         unset 'stack[-1]'
-        for inc in $(direct_includes "$f"); do
+        for inc in ${DIRECT[$f]:-}; do
             [ -n "${seen[$inc]:-}" ] && continue
             seen[$inc]=1
             [ -f "$ROOT/$inc" ] && stack+=("$inc")
         done
     done
-    printf '%s\n' "${!seen[@]}"
+    CLOSURE=("${!seen[@]}")
 }
 
-# Why file f may not include inc, or nothing when it may.
+# Why file f may not include inc, into WHY (empty when it may).
 violation() {
     local f=$1 inc=$2 lf li
-    lf=$(layer_of "$f")
-    li=$(layer_of "$inc")
+    WHY=""
+    layer_of "$f"
+    lf=$LAYER
+    layer_of "$inc"
+    li=$LAYER
     case $lf in
-    base) [ "$li" = base ] || echo "base includes $li" ;;
-    drivers) is_in "$li" base drivers || echo "drivers/ includes $li" ;;
+    base) [ "$li" = base ] || WHY="base includes $li" ;;
+    drivers) is_in "$li" base drivers || WHY="drivers/ includes $li" ;;
     policy)
         if [ "$li" = drivers ]; then
-            is_in "$inc" $POLICY_DRIVERS || echo "policy/ includes a protocol or port header"
+            is_in "$inc" $POLICY_DRIVERS || WHY="policy/ includes a protocol or port header"
         else
-            is_in "$li" base policy || echo "policy/ includes $li"
+            is_in "$li" base policy || WHY="policy/ includes $li"
         fi
         ;;
-    sim) is_in "$li" base drivers sim || echo "sim/ includes $li" ;;
+    sim) is_in "$li" base drivers sim || WHY="sim/ includes $li" ;;
     app)
         if [ "$li" = sim ]; then
-            is_in "$f" $COMPOSITION_ROOT || echo "application code outside the composition root includes sim/"
+            is_in "$f" $COMPOSITION_ROOT ||
+                WHY="application code outside the composition root includes sim/"
         elif is_in "$inc" $PROTOCOL_HEADERS; then
-            echo "application code names an actuator protocol (use drivers/ps_actuator.h)"
+            WHY="application code names an actuator protocol (use drivers/ps_actuator.h)"
         else
-            is_in "$li" base drivers policy app || echo "rt/ includes $li"
+            is_in "$li" base drivers policy app || WHY="rt/ includes $li"
         fi
         ;;
     esac
 }
 
 check_tree() {
-    local n_files=0 n_bad=0 f inc why
+    local n_files=0 n_bad=0 f inc
     FAILED=()
+    read_direct_includes
     while read -r f; do
         n_files=$((n_files + 1))
         local bad=""
-        for inc in $(closure "$f"); do
-            why=$(violation "$f" "$inc")
-            [ -n "$why" ] && bad+="    $f -> $inc: $why"$'\n'
+        closure "$f"
+        for inc in "${CLOSURE[@]}"; do
+            violation "$f" "$inc"
+            [ -n "$WHY" ] && bad+="    $f -> $inc: $WHY"$'\n'
         done
         if [ -n "$bad" ]; then
             n_bad=$((n_bad + 1))
