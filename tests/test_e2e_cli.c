@@ -876,17 +876,8 @@ static int run_signalled(const sig_case_t *c, int sig, const char *summary, doub
     snprintf(dur, sizeof(dur), "%d", SIG_DURATION_S);
     char *argv[] = {(char *)bin(), "--duration",    dur, "--scenario", (char *)c->scenario,
                     "--summary",   (char *)summary, NULL};
-    int fds[2];
-    assert_int_equal(pipe(fds), 0);
-    posix_spawn_file_actions_t fa;
-    assert_int_equal(posix_spawn_file_actions_init(&fa), 0);
-    assert_int_equal(posix_spawn_file_actions_adddup2(&fa, fds[1], 1), 0);
-    assert_int_equal(posix_spawn_file_actions_adddup2(&fa, fds[1], 2), 0);
-    assert_int_equal(posix_spawn_file_actions_addclose(&fa, fds[0]), 0);
     pid_t pid;
-    assert_int_equal(posix_spawn(&pid, bin(), &fa, NULL, argv, environ), 0);
-    posix_spawn_file_actions_destroy(&fa);
-    close(fds[1]);
+    const int rd = ps_cli_spawn_piped(argv, &pid);
     size_t n = 0;
     out[0] = '\0';
     const double t0 = mono_s();
@@ -916,9 +907,9 @@ static int run_signalled(const sig_case_t *c, int sig, const char *summary, doub
             *out_exit_s = mono_s();
             *out_sent_s = *out_exit_s - t0;
         }
-        struct pollfd pfd = {.fd = fds[0], .events = POLLIN};
+        struct pollfd pfd = {.fd = rd, .events = POLLIN};
         if (poll(&pfd, 1, 5) > 0) {
-            ssize_t k = read(fds[0], out + n, sizeof(out) - 1 - n);
+            ssize_t k = read(rd, out + n, sizeof(out) - 1 - n);
             if (k <= 0)
                 is_eof = true;
             else
@@ -926,7 +917,7 @@ static int run_signalled(const sig_case_t *c, int sig, const char *summary, doub
             out[n] = '\0';
         }
     }
-    close(fds[0]);
+    close(rd);
     int status = 0;
     assert_int_equal(waitpid(pid, &status, 0), pid);
     if (t_sig < 1e17)

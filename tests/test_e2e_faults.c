@@ -1474,17 +1474,8 @@ static void test_fault_config_reload_refused_while_active(void **state)
     ps_cli_temp_file(sum, sizeof(sum));
     char *argv[] = {(char *)ps_cli_bin(),   "--lockstep", "--duration", "8", "--scenario",
                     "scenarios/stand.yaml", "--summary",  sum,          NULL};
-    int fds[2];
-    assert_int_equal(pipe(fds), 0);
-    posix_spawn_file_actions_t fa;
-    assert_int_equal(posix_spawn_file_actions_init(&fa), 0);
-    assert_int_equal(posix_spawn_file_actions_adddup2(&fa, fds[1], 1), 0);
-    assert_int_equal(posix_spawn_file_actions_adddup2(&fa, fds[1], 2), 0);
-    assert_int_equal(posix_spawn_file_actions_addclose(&fa, fds[0]), 0);
     pid_t pid;
-    assert_int_equal(posix_spawn(&pid, argv[0], &fa, NULL, argv, environ), 0);
-    posix_spawn_file_actions_destroy(&fa);
-    close(fds[1]);
+    const int rd = ps_cli_spawn_piped(argv, &pid);
     static char out[64 * 1024];
     size_t n = 0;
     int n_sent = 0;
@@ -1494,15 +1485,15 @@ static void test_fault_config_reload_refused_while_active(void **state)
             assert_int_equal(kill(pid, SIGHUP), 0);
             n_sent++;
         }
-        struct pollfd pfd = {.fd = fds[0], .events = POLLIN};
+        struct pollfd pfd = {.fd = rd, .events = POLLIN};
         if (poll(&pfd, 1, 20) > 0) {
-            const ssize_t got = read(fds[0], out + n, sizeof(out) - 1 - n);
+            const ssize_t got = read(rd, out + n, sizeof(out) - 1 - n);
             is_eof = got <= 0;
             n += got > 0 ? (size_t)got : 0;
             out[n] = '\0';
         }
     }
-    close(fds[0]);
+    close(rd);
     int status = 0;
     assert_int_equal(waitpid(pid, &status, 0), pid);
     ps_san_assert_no_report(out);

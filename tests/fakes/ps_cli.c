@@ -1,12 +1,15 @@
 #include "ps_cli.h"
 
 #include <setjmp.h>
+#include <spawn.h>
 #include <stdarg.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <sys/wait.h>
 #include <unistd.h>
+
+extern char **environ;
 
 #include <cmocka.h>
 
@@ -22,6 +25,21 @@ const char *ps_cli_bin(void)
     }
     const char *b = getenv("PUSHSTEP_BIN");
     return b ? b : "build/pushstep";
+}
+
+int ps_cli_spawn_piped(char *const argv[], pid_t *out_pid)
+{
+    int fds[2];
+    assert_int_equal(pipe(fds), 0);
+    posix_spawn_file_actions_t fa;
+    assert_int_equal(posix_spawn_file_actions_init(&fa), 0);
+    assert_int_equal(posix_spawn_file_actions_adddup2(&fa, fds[1], 1), 0);
+    assert_int_equal(posix_spawn_file_actions_adddup2(&fa, fds[1], 2), 0);
+    assert_int_equal(posix_spawn_file_actions_addclose(&fa, fds[0]), 0);
+    assert_int_equal(posix_spawn(out_pid, argv[0], &fa, NULL, argv, environ), 0);
+    posix_spawn_file_actions_destroy(&fa);
+    close(fds[1]);
+    return fds[0];
 }
 
 int ps_cli_run(const char *args, char *out, size_t out_len)

@@ -8,6 +8,7 @@
 #define PS_CLI_H
 
 #include <stddef.h>
+#include <sys/types.h>
 
 #include <cjson/cJSON.h>
 
@@ -20,6 +21,10 @@ const char *ps_cli_bin(void);
  *  cut at out_len - 1). @return its exit status (asserts it exited, and
  *  that the output holds no sanitizer report) */
 int ps_cli_run(const char *args, char *out, size_t out_len);
+
+/** Start argv (argv[0] the binary) in the background, its stdout and
+ *  stderr into a pipe. @return the pipe's read end (asserts the spawn) */
+int ps_cli_spawn_piped(char *const argv[], pid_t *out_pid);
 
 /** An empty file under /tmp (its path into path). */
 void ps_cli_temp_file(char *path, size_t len);
