@@ -474,11 +474,28 @@ static void write_scenario(const char *extra_events)
 }
 
 /* ps1 with other drive temperature thresholds (control.derate_band_c,
- * hot_margin_c, derate_min): written once, removed at the end. */
+ * hot_margin_c, derate_min): written once, removed at the end. The robot
+ * file's relative paths (model, policy weights: ": ../") are made absolute,
+ * since the copy lives in /tmp. */
 #define THERMAL_BAND_C   30.0f
 #define THERMAL_MARGIN_C 10.0f
 #define THERMAL_MIN      0.3f
 static char thermal_robot[64];
+
+/* text[from, to) with every ": ../" as ": ROOT/". */
+static void write_rooted(FILE *out, const char *from, const char *to, const char *root)
+{
+    const char *rel = ": ../";
+    for (const char *p = from; p < to;) {
+        const char *hit = strstr(p, rel);
+        if (hit == NULL || hit >= to) {
+            fprintf(out, "%.*s", (int)(to - p), p);
+            return;
+        }
+        fprintf(out, "%.*s: %s/", (int)(hit - p), p, root);
+        p = hit + strlen(rel);
+    }
+}
 
 static const char *thermal_robot_path(void)
 {
@@ -492,8 +509,7 @@ static const char *thermal_robot_path(void)
     text[n] = '\0';
     const char *thermal = "derate_band_c: 15, hot_margin_c: 5, derate_min: 0.5}";
     const char *hold = strstr(text, thermal);
-    const char *model = strstr(text, "model: ../sim/models/ps1.xml");
-    assert_true(hold != NULL && model != NULL && model < hold);
+    assert_non_null(hold);
     char cwd[512];
     assert_non_null(getcwd(cwd, sizeof(cwd)));
     snprintf(thermal_robot, sizeof(thermal_robot), "/tmp/ps_faults_robot_XXXXXX.yaml");
@@ -501,12 +517,11 @@ static const char *thermal_robot_path(void)
     assert_true(fd >= 0);
     FILE *out = fdopen(fd, "w");
     assert_non_null(out);
-    fprintf(out, "%.*smodel: %s/sim/models/ps1.xml%.*s", (int)(model - text), text, cwd,
-            (int)(hold - (model + strlen("model: ../sim/models/ps1.xml"))),
-            model + strlen("model: ../sim/models/ps1.xml"));
-    fprintf(out, "derate_band_c: %g, hot_margin_c: %g, derate_min: %g}%s",
-            (double)THERMAL_BAND_C, (double)THERMAL_MARGIN_C, (double)THERMAL_MIN,
-            hold + strlen(thermal));
+    write_rooted(out, text, hold, cwd);
+    fprintf(out, "derate_band_c: %g, hot_margin_c: %g, derate_min: %g}",
+            (double)THERMAL_BAND_C, (double)THERMAL_MARGIN_C, (double)THERMAL_MIN);
+    const char *rest = hold + strlen(thermal);
+    write_rooted(out, rest, rest + strlen(rest), cwd);
     assert_int_equal(fclose(out), 0);
     return thermal_robot;
 }
