@@ -518,8 +518,8 @@ static const char *thermal_robot_path(void)
     FILE *out = fdopen(fd, "w");
     assert_non_null(out);
     write_rooted(out, text, hold, cwd);
-    fprintf(out, "derate_band_c: %g, hot_margin_c: %g, derate_min: %g}",
-            (double)THERMAL_BAND_C, (double)THERMAL_MARGIN_C, (double)THERMAL_MIN);
+    fprintf(out, "derate_band_c: %g, hot_margin_c: %g, derate_min: %g}", (double)THERMAL_BAND_C,
+            (double)THERMAL_MARGIN_C, (double)THERMAL_MIN);
     const char *rest = hold + strlen(thermal);
     write_rooted(out, rest, rest + strlen(rest), cwd);
     assert_int_equal(fclose(out), 0);
