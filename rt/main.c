@@ -141,7 +141,9 @@ static const char USAGE[] =
     "  --summary FILE.json   write the end summary as JSON: ticks, overruns, latency\n"
     "                        percentiles per stage, state transitions, mallocs,\n"
     "                        page faults and locks after init, bus loads, fall\n"
-    "                        detected, how far the simulated plant fell behind\n"
+    "                        detected, how far the simulated plant fell behind,\n"
+    "                        the policy slot's controller (mlp: how often its\n"
+    "                        fallback took over, and why)\n"
     "  --require-rt          fail instead of warning when mlockall, SCHED_FIFO or CPU\n"
     "                        affinity are not permitted, or (not in profile) when the\n"
     "                        simulated plant falls behind real time\n"
@@ -998,6 +1000,23 @@ static bool fell_while_active(double first_fall_t_s)
     return since >= 0 && first_fall_t_s >= since;
 }
 
+static ps_summary_policy_t summary_policy(const ps_app_t *app)
+{
+    ps_summary_policy_t p = {.name = app->policy_name[0] ? app->policy_name : NULL};
+    if (strcmp(app->policy_name, "mlp") != 0)
+        return p;
+    const ps_mlp_policy_t *m = &app->mlp;
+    p.weights_path = app->weights_path;
+    p.has_mlp = true;
+    p.n_steps = m->n_steps;
+    p.n_fallback_steps = m->n_fallback_steps;
+    p.n_obs_faults = m->n_obs_faults;
+    p.n_nan = m->n_nan;
+    p.n_range = m->n_range;
+    p.n_late = m->n_late;
+    return p;
+}
+
 static void finish_summary(ps_summary_t *sum)
 {
     sum->board_path = g.app.board_path;
@@ -1007,6 +1026,7 @@ static void finish_summary(ps_summary_t *sum)
     /* loop time from the schedule, so deadlines skipped by overruns count */
     sum->loop_s = ps_ns_to_s(g.app.loop.pacer.next_ns - g.start_ns);
     sum->loop = &g.app.loop;
+    sum->policy = summary_policy(&g.app);
     sum->logger = &g.logger;
     sum->guard = g.guard;
     sum->is_guard_exact = ps_guard_counts_allocs() && ps_guard_counts_locks(); /* not under TSan */

@@ -498,6 +498,9 @@ static int wire_policy(ps_app_t *app, const ps_app_opts_t *opts, ps_loop_cfg_t *
                            "policy.weights");
         return -PS_ERR_CONFIG;
     }
+    char canon[PATH_MAX]; /* messages and the summary name the file plainly */
+    if (realpath(app->weights_path, canon) != NULL)
+        snprintf(app->weights_path, sizeof(app->weights_path), "%s", canon);
     rc = ps_weights_load(&app->weights, app->weights_path, err, len);
     if (rc < 0)
         return rc == -ENOMEM ? rc : -PS_ERR_CONFIG;

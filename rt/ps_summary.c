@@ -104,6 +104,23 @@ static cJSON *buses_json(const ps_summary_t *s)
     return a;
 }
 
+static cJSON *policy_json(const ps_summary_policy_t *p)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "controller", p->name);
+    if (!p->has_mlp)
+        return o;
+    cJSON_AddStringToObject(o, "weights", p->weights_path ? p->weights_path : "");
+    cJSON_AddNumberToObject(o, "steps", (double)p->n_steps);
+    cJSON_AddNumberToObject(o, "fallback_steps", (double)p->n_fallback_steps);
+    cJSON *t = cJSON_AddObjectToObject(o, "fallback_takeovers");
+    cJSON_AddNumberToObject(t, "observation", (double)p->n_obs_faults);
+    cJSON_AddNumberToObject(t, "nan", (double)p->n_nan);
+    cJSON_AddNumberToObject(t, "out_of_range", (double)p->n_range);
+    cJSON_AddNumberToObject(t, "late", (double)p->n_late);
+    return o;
+}
+
 static cJSON *counters_json(const ps_loop_counters_t *c)
 {
     cJSON *o = cJSON_CreateObject();
@@ -257,6 +274,8 @@ static cJSON *summary_json(const ps_summary_t *s)
     }
     cJSON_AddItemToObject(root, "buses", buses_json(s));
     cJSON_AddItemToObject(root, "counters", counters_json(&loop->counters));
+    if (s->policy.name != NULL)
+        cJSON_AddItemToObject(root, "policy", policy_json(&s->policy));
     cJSON_AddBoolToObject(root, "fall_detected", loop->counters.has_fallen);
     if (s->recorder != NULL)
         cJSON_AddItemToObject(root, "recorder",
@@ -354,6 +373,24 @@ static void print_recorder(const ps_recorder_stats_t *r, FILE *out)
     }
 }
 
+/* " controller mlp (FILE): fallback in charge N of M steps, took over N times
+ * (observation N, NaN N, out of range N, late N)" */
+static void print_policy(const ps_summary_policy_t *p, FILE *out)
+{
+    if (p->name == NULL)
+        return;
+    if (!p->has_mlp) {
+        fprintf(out, " controller %s\n", p->name);
+        return;
+    }
+    fprintf(out,
+            " controller %s (%s): fallback in charge %llu of %llu steps; it took over after "
+            "%llu bad observations, %llu NaN actions, %llu actions out of range, %llu late "
+            "steps\n",
+            p->name, p->weights_path ? p->weights_path : "?", p->n_fallback_steps, p->n_steps,
+            p->n_obs_faults, p->n_nan, p->n_range, p->n_late);
+}
+
 void ps_summary_print(const ps_summary_t *s, FILE *out)
 {
     const ps_loop_t *loop = s->loop;
@@ -402,6 +439,7 @@ void ps_summary_print(const ps_summary_t *s, FILE *out)
             (unsigned long long)c->n_rx_unknown, (unsigned long long)c->n_rx_capped,
             (unsigned long long)c->n_imu_rejected, (unsigned long long)c->n_imu_repeated,
             (unsigned long long)c->n_imu_frozen, (unsigned long long)c->n_reply_implausible);
+    print_policy(&s->policy, out);
     fprintf(out, " fall detected: %s\n", loop->counters.has_fallen ? "yes" : "no");
     if (s->has_truth)
         fprintf(out,

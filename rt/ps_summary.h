@@ -34,12 +34,25 @@ typedef struct {
     const double *part_impulse_ns;
 } ps_summary_crowd_t;
 
+/** The controller in the policy slot; for the trained policy, how often its
+ *  fallback (the capture-point controller) took over and why. */
+typedef struct {
+    const char *name;         /**< "stand", "capture", "mlp"; NULL: not reported */
+    const char *weights_path; /**< "mlp": its policy file; NULL otherwise */
+    bool has_mlp;             /**< the counts below are valid */
+    unsigned long long n_steps;          /**< policy steps while the slot ran */
+    unsigned long long n_fallback_steps; /**< of them, steps the fallback had the slot */
+    /** takeovers, by the fault that caused them (one takeover may have several) */
+    unsigned long long n_obs_faults, n_nan, n_range, n_late;
+} ps_summary_policy_t;
+
 typedef struct {
     const char *board_path, *robot_path, *scenario_path;
     bool is_lockstep;
     double loop_s; /**< loop time covered */
     double wall_s; /**< wall time the loop ran */
     const ps_loop_t *loop;
+    ps_summary_policy_t policy;
     const ps_logger_t *logger;
     ps_guard_counts_t guard; /**< counted on the loop thread after init */
     bool is_guard_exact;     /**< false under TSan (allocations and locks not counted) */
