@@ -379,7 +379,7 @@ $(BUILD)/crowd_bench: $(call OBJ,bench/crowd_bench.c) $(LIB_OBJS)
 
 # The shipped policy, reproduced (docs/policy.md): seeded, on the CPUs. The
 # command and seed are written into the policy file's contract.
-TRAIN_ARGS ?= --seed 1 --envs 16 --threads 2 --steps 64 --bc-iters 100 --ppo-iters 300 \
+TRAIN_ARGS ?= --seed 1 --envs 16 --threads 2 --steps 64 --bc-iters 100 --ppo-iters 600 \
               --push-dv-max 0.6
 train: deps-train $(BUILD)/pushstep $(BUILD)/libpsenv.so
 	/usr/bin/python3 policy/train/train.py $(TRAIN_ARGS) --out policy/weights/ps1_stage1.safetensors \
