@@ -182,7 +182,7 @@ def main():
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--steps", type=int, default=64, help="steps per environment per iteration")
     ap.add_argument("--bc-iters", type=int, default=100)
-    ap.add_argument("--ppo-iters", type=int, default=300)
+    ap.add_argument("--ppo-iters", type=int, default=600)
     ap.add_argument("--hidden", default="128,128")
     ap.add_argument("--lr", type=float, default=3e-4)
     ap.add_argument("--dart-std", type=float, default=0.0,
