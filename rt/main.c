@@ -1002,19 +1002,10 @@ static bool fell_while_active(double first_fall_t_s)
 
 static ps_summary_policy_t summary_policy(const ps_app_t *app)
 {
-    ps_summary_policy_t p = {.name = app->policy_name[0] ? app->policy_name : NULL};
-    if (strcmp(app->policy_name, "mlp") != 0)
-        return p;
-    const ps_mlp_policy_t *m = &app->mlp;
-    p.weights_path = app->weights_path;
-    p.has_mlp = true;
-    p.n_steps = m->n_steps;
-    p.n_fallback_steps = m->n_fallback_steps;
-    p.n_obs_faults = m->n_obs_faults;
-    p.n_nan = m->n_nan;
-    p.n_range = m->n_range;
-    p.n_late = m->n_late;
-    return p;
+    const bool is_mlp = strcmp(app->policy_name, "mlp") == 0;
+    return (ps_summary_policy_t){.name = app->policy_name[0] ? app->policy_name : NULL,
+                                 .weights_path = is_mlp ? app->weights_path : NULL,
+                                 .mlp = is_mlp ? &app->mlp : NULL};
 }
 
 static void finish_summary(ps_summary_t *sum)

@@ -108,16 +108,17 @@ static cJSON *policy_json(const ps_summary_policy_t *p)
 {
     cJSON *o = cJSON_CreateObject();
     cJSON_AddStringToObject(o, "controller", p->name);
-    if (!p->has_mlp)
+    const ps_mlp_policy_t *m = p->mlp;
+    if (m == NULL)
         return o;
     cJSON_AddStringToObject(o, "weights", p->weights_path ? p->weights_path : "");
-    cJSON_AddNumberToObject(o, "steps", (double)p->n_steps);
-    cJSON_AddNumberToObject(o, "fallback_steps", (double)p->n_fallback_steps);
+    cJSON_AddNumberToObject(o, "steps", (double)m->n_steps);
+    cJSON_AddNumberToObject(o, "fallback_steps", (double)m->n_fallback_steps);
     cJSON *t = cJSON_AddObjectToObject(o, "fallback_takeovers");
-    cJSON_AddNumberToObject(t, "observation", (double)p->n_obs_faults);
-    cJSON_AddNumberToObject(t, "nan", (double)p->n_nan);
-    cJSON_AddNumberToObject(t, "out_of_range", (double)p->n_range);
-    cJSON_AddNumberToObject(t, "late", (double)p->n_late);
+    cJSON_AddNumberToObject(t, "observation", (double)m->n_obs_faults);
+    cJSON_AddNumberToObject(t, "nan", (double)m->n_nan);
+    cJSON_AddNumberToObject(t, "out_of_range", (double)m->n_range);
+    cJSON_AddNumberToObject(t, "late", (double)m->n_late);
     return o;
 }
 
@@ -346,8 +347,9 @@ static void print_rec_file(const char *what, const ps_rec_file_stats_t *f, FILE 
             (unsigned long long)f->n_records, (unsigned long long)f->n_messages,
             (double)f->n_bytes / 1000.0);
     if (f->n_lost_ring > 0 || f->n_lost_io > 0 || f->err != 0)
-        fprintf(out, "; LOST %llu records (%llu overwritten before the writer read them, %llu "
-                     "not written%s%s)",
+        fprintf(out,
+                "; LOST %llu records (%llu overwritten before the writer read them, %llu "
+                "not written%s%s)",
                 (unsigned long long)(f->n_lost_ring + f->n_lost_io),
                 (unsigned long long)f->n_lost_ring, (unsigned long long)f->n_lost_io,
                 f->err ? ": " : "", f->err ? strerror(-f->err) : "");
@@ -356,7 +358,7 @@ static void print_rec_file(const char *what, const ps_rec_file_stats_t *f, FILE 
 
 static void print_recorder(const ps_recorder_stats_t *r, FILE *out)
 {
-    fprintf(out, " recorder: %llu records into a ring of %u, %u triggers", 
+    fprintf(out, " recorder: %llu records into a ring of %u, %u triggers",
             (unsigned long long)r->n_pushed, r->n_slots, r->n_triggers);
     for (unsigned i = 0; i < PS_REC_TRIG_COUNT; i++)
         if (r->n_triggers_by[i] > 0)
@@ -379,7 +381,8 @@ static void print_policy(const ps_summary_policy_t *p, FILE *out)
 {
     if (p->name == NULL)
         return;
-    if (!p->has_mlp) {
+    const ps_mlp_policy_t *m = p->mlp;
+    if (m == NULL) {
         fprintf(out, " controller %s\n", p->name);
         return;
     }
@@ -387,8 +390,10 @@ static void print_policy(const ps_summary_policy_t *p, FILE *out)
             " controller %s (%s): fallback in charge %llu of %llu steps; it took over after "
             "%llu bad observations, %llu NaN actions, %llu actions out of range, %llu late "
             "steps\n",
-            p->name, p->weights_path ? p->weights_path : "?", p->n_fallback_steps, p->n_steps,
-            p->n_obs_faults, p->n_nan, p->n_range, p->n_late);
+            p->name, p->weights_path ? p->weights_path : "?",
+            (unsigned long long)m->n_fallback_steps, (unsigned long long)m->n_steps,
+            (unsigned long long)m->n_obs_faults, (unsigned long long)m->n_nan,
+            (unsigned long long)m->n_range, (unsigned long long)m->n_late);
 }
 
 void ps_summary_print(const ps_summary_t *s, FILE *out)

@@ -12,6 +12,7 @@
 #include <stdbool.h>
 #include <stdio.h>
 
+#include "../policy/ps_mlp_policy.h"
 #include "ps_guard.h"
 #include "ps_logger.h"
 #include "ps_loop.h"
@@ -25,7 +26,7 @@ typedef struct {
     unsigned long long n_steps_taken; /**< agents' reflex steps */
     double local_density_m2;          /**< around the robot at the end */
     double local_density_max_m2;
-    double robot_force_max_n;         /**< largest total crowd force on the robot */
+    double robot_force_max_n; /**< largest total crowd force on the robot */
     double transmitted_impulse_ns;
     double penetration_max_m;
     unsigned n_parts;
@@ -34,16 +35,12 @@ typedef struct {
     const double *part_impulse_ns;
 } ps_summary_crowd_t;
 
-/** The controller in the policy slot; for the trained policy, how often its
- *  fallback (the capture-point controller) took over and why. */
+/** The controller in the policy slot; for the trained policy, its counters:
+ *  how often its fallback (the capture-point controller) took over and why. */
 typedef struct {
-    const char *name;         /**< "stand", "capture", "mlp"; NULL: not reported */
-    const char *weights_path; /**< "mlp": its policy file; NULL otherwise */
-    bool has_mlp;             /**< the counts below are valid */
-    unsigned long long n_steps;          /**< policy steps while the slot ran */
-    unsigned long long n_fallback_steps; /**< of them, steps the fallback had the slot */
-    /** takeovers, by the fault that caused them (one takeover may have several) */
-    unsigned long long n_obs_faults, n_nan, n_range, n_late;
+    const char *name;           /**< "stand", "capture", "mlp"; NULL: not reported */
+    const char *weights_path;   /**< "mlp": its policy file; NULL otherwise */
+    const ps_mlp_policy_t *mlp; /**< "mlp": the policy (its counters); NULL otherwise */
 } ps_summary_policy_t;
 
 typedef struct {
@@ -79,9 +76,9 @@ typedef struct {
     bool has_crowd;                     /**< crowd below is valid */
     ps_summary_crowd_t crowd;
     const ps_recorder_stats_t *recorder; /**< flight recorder's account; NULL: not recording */
-    double truth_heading_dev_deg;       /**< largest heading change of the base */
-    double truth_foot_slide_m;          /**< feet's travel while carrying weight */
-    double truth_kinetic_max_j;         /**< largest kinetic energy */
+    double truth_heading_dev_deg;        /**< largest heading change of the base */
+    double truth_foot_slide_m;           /**< feet's travel while carrying weight */
+    double truth_kinetic_max_j;          /**< largest kinetic energy */
 } ps_summary_t;
 
 /** @return 0 | -EIO (err says why)  @rt NON-RT */
