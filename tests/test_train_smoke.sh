@@ -22,9 +22,47 @@ name="same seed, same first iterations (deterministic environment and trainer)"
 check bash -c "/usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 \
     --bc-iters 3 --ppo-iters 2 --out $out/q.safetensors --log-dir $out/b >/dev/null 2>&1 \
     && cmp -s <(cut -d, -f1-8 $out/log.csv) <(cut -d, -f1-8 $out/b/log.csv)"
+name="make train's first stage reproduces the shipped policy's learning log (first 2 iterations)"
+# a make variable's value, continuation lines joined
+make_var() { sed -n "/^$1 ?=/,/[^\\\\]\$/p" Makefile | sed "s/^$1 ?=//; s/\\\\\$//" | tr '\n' ' '; }
+args=$(make_var TRAIN_ARGS)
+check bash -c "/usr/bin/python3 policy/train/train.py $args --threads 2 \
+    --stop-after 2 --out $out/r.safetensors --log-dir $out/r >/dev/null 2>&1 \
+    && cmp -s <(cut -d, -f1-9 $out/r/log.csv) <(head -3 bench/results/train_log.csv | cut -d, -f1-9)"
+name="held episodes (--harness-p 1) end later by the time held, free ones at episode_s"
+check /usr/bin/python3 -c "
+import sys; sys.path.insert(0, 'policy/train'); import numpy as np, psenv
+def ends(p):
+    e = psenv.Env(4, 2, seed=3, episode_s=1.0, push_dv_max=0.06, dr=False, harness_p=p)
+    e.reset(); t = [None] * 4
+    for _ in range(200):
+        _, _, done, _, info = e.step(np.zeros((4, e.n_act), np.float32))
+        for i in range(4):
+            if done[i] and t[i] is None:
+                assert info[i, 0] == 0, 'fell'
+                t[i] = float(info[i, 2])
+    e.close(); return t
+free, held = ends(0.0), ends(1.0)
+assert all(abs(x - 1.0) < 0.03 for x in free), free
+assert all(1.2 <= x <= 3.03 for x in held) and len(set(held)) > 1, held
+"
+name="fine-tuning (--init) keeps the file's policy while only the critic learns, then moves it"
+same_policy() { /usr/bin/python3 -c "
+import sys, json, numpy as np; sys.path.insert(0, 'policy/train'); import psfile
+a, ma = psfile.read_safetensors('$1'); b, mb = psfile.read_safetensors('$2')
+o = lambda m: json.loads(m[psfile.CONTRACT_KEY])['observation']
+sys.exit(0 if all(np.array_equal(a[k], b[k]) for k in a) and o(ma)['mean'] == o(mb)['mean']
+         and np.allclose(o(ma)['std'], o(mb)['std'], rtol=1e-12) else 1)"; }
+export -f same_policy
+check bash -c "/usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 --bc-iters 0 \
+    --ppo-iters 2 --critic-warmup 2 --init $out/p.safetensors --harness-p 0.5 --focus-p 0.5 \
+    --out $out/f.safetensors --log-dir $out/f >/dev/null 2>&1 && same_policy $out/p.safetensors $out/f.safetensors \
+    && /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 --bc-iters 0 --ppo-iters 2 \
+    --critic-warmup 0 --ppo-lr 1e-3 --init $out/p.safetensors --out $out/g.safetensors --log-dir $out/g \
+    >/dev/null 2>&1 && ! same_policy $out/p.safetensors $out/g.safetensors"
 name="eval.py runs the benchmark's pushes in the training environment"
 check bash -c "/usr/bin/python3 policy/train/eval.py --weights $out/p.safetensors --dv 0.15 \
-    --durations 0.1 --directions 2 --out $out/e.json >$out/eval.out 2>&1 \
+    --durations 0.1 --directions 2 --harness --out $out/e.json >$out/eval.out 2>&1 \
     && grep -q '\"controller\": \"mlp\"' $out/e.json"
 name="the shipped policy (policy/weights/ps1_stage1.safetensors) stands in lockstep, contract checked"
 check bash -c "${PUSHSTEP_BIN:-build/pushstep} --lockstep --quiet --duration 6 --scenario scenarios/stand.yaml \

@@ -5,9 +5,11 @@ expert, so that the runtime's grid (bench/results/push.json, made by
 `pushstep --lockstep`) and the environment the policy was trained in can be
 compared cell by cell.
 
-One trial: released at once (the environment has no harness), a torso push
-of delta-v dv (impulse / mass) over the push's duration at a random time in
-[1, 2] s, success = no fall before the push's start + 5 s. The directions of a
+One trial: released at once (or, with --harness, held by the sim harness
+while the controller acts and let go at a random time in [0.2, 2] s, as the
+runtime's trials are), a torso push of delta-v dv (impulse / mass) over the
+push's duration at a random time in [1, 2] s after the release, success = no
+fall before the push's start + 5 s. The directions of a
 cell's trials are the 16 of the grid, one environment each.
 
   policy/train/eval.py --weights policy/weights/ps1_stage1.safetensors \\
@@ -57,15 +59,18 @@ def run_cell(env, ctl, dv, dur, dirs, rng, policy_hz):
     _, _, _, expert, _ = env.step(np.zeros((env.n, env.n_act), np.float32))
     obs = env.obs.copy()
     ok = [None] * n
-    t_end = t_push + 5.0
-    for _ in range(int((float(t_end.max()) + 0.5) * policy_hz)):
+    # the push's start moves on by the time held (info[2] is episode time)
+    push_start = np.full(n, np.inf)
+    for _ in range(int((float(t_push.max()) + 2.0 + 5.5) * policy_hz)):
         obs, _, _, expert, info = env.step(ctl(obs, expert))
         for i in range(n):
+            if info[i, 7] > 0 and not np.isfinite(push_start[i]):
+                push_start[i] = info[i, 2]
             if ok[i] is not None:
                 continue
             if info[i, 0] > 0:  # fell
                 ok[i] = False
-            elif info[i, 2] >= t_end[i] or info[i, 1] > 0:
+            elif info[i, 7] > 0 and info[i, 2] >= push_start[i] + 5.0 or info[i, 1] > 0:
                 ok[i] = True
         if all(x is not None for x in ok):
             break
@@ -97,13 +102,15 @@ def main():
     ap.add_argument("--runtime", help="bench/results/push.json to compare with")
     ap.add_argument("--out", help="JSON results")
     ap.add_argument("--lib", help="the environment library (default build/libpsenv.so)")
+    ap.add_argument("--harness", action="store_true",
+                    help="start each trial held by the harness, as the runtime does")
     a = ap.parse_args()
     dvs = [float(x) for x in a.dv.split(",")]
     durs = [float(x) for x in a.durations.split(",")]
     dirs = [2 * math.pi * k / a.directions for k in range(a.directions)]
     rng = np.random.default_rng(a.seed)
     env = psenv.Env(a.directions, a.threads, seed=a.seed, episode_s=8.0, dr=False,
-                     lib=a.lib)
+                     lib=a.lib, harness_p=1.0 if a.harness else 0.0)
     doc = psfile.read_safetensors(a.weights)[1] if a.weights else {}
     policy_hz = json.loads(doc[psfile.CONTRACT_KEY])["policy_hz"] if doc else 50
     ctls = [("capture", expert_ctl)] + ([("mlp", Mlp(a.weights))] if a.weights else [])

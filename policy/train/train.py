@@ -13,6 +13,13 @@ the runtime, batched over --threads cores). Two phases, seeded:
   2. PPO on Push-and-Step's reward (balance + quality, tools/psenv/ps_env.h)
      from the cloned policy, with a behaviour-cloning term that decays.
 
+With --init FILE a run fine-tunes a policy file instead (no cloning; its
+observation normalisation is kept as it is; the critic, which the file does
+not hold, first learns alone for --critic-warmup iterations); with
+--harness-p, --push-dv-min and --focus-p its episodes can start held by the
+harness as the runtime's do, and its pushes can be harder or come more often
+from one side (docs/policy.md).
+
 Observations are normalised by running mean and standard deviation, which
 go into the policy file's contract, so the runtime's observation builder
 normalises exactly as here. One torch thread (a measured probe found two
@@ -86,6 +93,27 @@ class Policy(torch.nn.Module):
 
     def linears(self):
         return [m for m in self.pi if isinstance(m, torch.nn.Linear)]
+
+
+def load_init(path, net, norm, hidden):
+    """The actor's layers and the observation normalisation of a policy file."""
+    t, meta = psfile.read_safetensors(path)
+    c = json.loads(meta[psfile.CONTRACT_KEY])
+    lin = net.linears()
+    if len(lin) != len(hidden) + 1:
+        raise SystemExit("--init: --hidden does not match")
+    with torch.no_grad():
+        for k, m in enumerate(lin):
+            w, b = t["base.%d.weight" % k], t["base.%d.bias" % k]
+            if tuple(w.shape) != tuple(m.weight.shape):
+                raise SystemExit("--init %s: layer %d is %s, this network's %s"
+                                 % (path, k, w.shape, tuple(m.weight.shape)))
+            m.weight.copy_(torch.from_numpy(w.copy()))
+            m.bias.copy_(torch.from_numpy(b.copy()))
+    o = c["observation"]
+    norm.n = 1 << 30  # only for std(): the statistics stay as the file has them
+    norm.mean = np.asarray(o["mean"], np.float64)
+    norm.m2 = np.asarray(o["std"], np.float64) ** 2 * (norm.n - 1)
 
 
 def save(path, net, norm, doc, hidden, trained_by):
@@ -201,6 +229,23 @@ def main():
     ap.add_argument("--out", default=os.path.join(HERE, "..", "weights", "ps1_stage1.safetensors"))
     ap.add_argument("--log-dir", default=os.path.join(psenv.ROOT, "build", "train"))
     ap.add_argument("--no-dr", action="store_true", help="no domain randomisation")
+    ap.add_argument("--stop-after", type=int, default=0,
+                    help="stop after this many iterations (tests: the schedule stays "
+                         "that of --bc-iters and --ppo-iters)")
+    ap.add_argument("--init", help="fine-tune this policy file (with --bc-iters 0)")
+    ap.add_argument("--critic-warmup", type=int, default=20,
+                    help="with --init: PPO iterations in which only the critic learns")
+    ap.add_argument("--bc-weight", type=float, default=0.5,
+                    help="PPO's behaviour-cloning term's weight at its start (decays to 0 "
+                         "over half of the PPO iterations)")
+    ap.add_argument("--push-dv-min", type=float, default=0.05, help="smallest push (m/s)")
+    ap.add_argument("--harness-p", type=float, default=0.0,
+                    help="fraction of episodes that start held by the harness, released "
+                         "at a random time in [0.2, 2] s as in the runtime")
+    ap.add_argument("--focus-p", type=float, default=0.0,
+                    help="fraction of pushes from --focus-dir-deg +-45 deg")
+    ap.add_argument("--focus-dir-deg", type=float, default=180.0,
+                    help="direction of the focused pushes' force (0 = +x, forward)")
     a = ap.parse_args()
 
     torch.set_num_threads(1)
@@ -209,8 +254,11 @@ def main():
     rng = np.random.default_rng(a.seed)
     hidden = [int(x) for x in a.hidden.split(",")]
     doc = ct.robot()
+    if a.init and a.bc_iters:
+        raise SystemExit("--init fine-tunes: give --bc-iters 0")
     env = psenv.Env(a.envs, a.threads, seed=a.seed, push_dv_max=a.push_dv_start,
-                    dr=not a.no_dr)
+                    dr=not a.no_dr, push_dv_min=a.push_dv_min, harness_p=a.harness_p,
+                    focus_p=a.focus_p, focus_dir_rad=float(np.radians(a.focus_dir_deg)))
     n_obs_contract = psfile.obs_size(ct.OBS_FIELDS, len(doc["joints"]), len(ct.LEGS))
     if env.n_obs != n_obs_contract or env.n_act != len(ct.LEGS):
         raise SystemExit("environment (%d obs, %d actions) and contract.py (%d, %d) disagree"
@@ -225,6 +273,8 @@ def main():
     opt_pi = torch.optim.Adam(actor_params, lr=a.ppo_lr)
     opt_v = torch.optim.Adam(net.v.parameters(), lr=a.lr)
     norm = RunningNorm(env.n_obs)
+    if a.init:
+        load_init(a.init, net, norm, hidden)
     os.makedirs(a.log_dir, exist_ok=True)
     log_path = os.path.join(a.log_dir, "log.csv")
     logf = open(log_path, "w", newline="")
@@ -236,8 +286,12 @@ def main():
                   "--push-dv-max %g --dart-std %g --ppo-std %g --ppo-lr %g --target-kl %g%s" % (
                       a.seed, a.envs, a.threads, a.bc_iters, a.ppo_iters, a.steps, a.hidden,
                       a.push_dv_start, a.push_dv_max, a.dart_std, a.ppo_std, a.ppo_lr,
-                      a.target_kl,
-                                          " --no-dr" if a.no_dr else ""))
+                      a.target_kl, " --no-dr" if a.no_dr else ""))
+    if a.init:
+        trained_by += (" --init %s --critic-warmup %d --bc-weight %g --push-dv-min %g "
+                       "--harness-p %g --focus-p %g --focus-dir-deg %g" % (
+                           os.path.basename(a.init), a.critic_warmup, a.bc_weight,
+                           a.push_dv_min, a.harness_p, a.focus_p, a.focus_dir_deg))
     obs = env.reset()
     expert = np.zeros((env.n, env.n_act), np.float32)
     _, _, _, expert, _ = env.step(expert)  # the expert's first labels
@@ -246,7 +300,8 @@ def main():
     n_env_steps = 0
     ds_o, ds_a = [], []
     total = a.bc_iters + a.ppo_iters
-    bar = tqdm(range(total), desc="train", unit="it", dynamic_ncols=True)
+    n_run = min(total, a.stop_after) if a.stop_after > 0 else total
+    bar = tqdm(range(n_run), desc="train", unit="it", dynamic_ncols=True)
     for it in bar:
         is_bc = it < a.bc_iters
         # the clone learns from pushes the expert survives; PPO goes further
@@ -258,7 +313,7 @@ def main():
                 net.log_std.fill_(float(np.log(a.ppo_std)))
         beta = max(0.0, 1.0 - it / max(1, a.bc_iters * 0.75)) if is_bc else 0.0
         buf, obs, expert, last_v = rollout(env, net, norm, obs, a.steps, beta, expert, rng,
-                                           explore=not is_bc,
+                                           update_norm=not a.init, explore=not is_bc,
                                            dart_std=a.dart_std if is_bc else 0.0)
         n_env_steps += a.steps * env.n
         st = stats(buf)
@@ -295,7 +350,9 @@ def main():
             ADV = torch.from_numpy(adv.reshape(-1).astype(np.float32))
             ADV = (ADV - ADV.mean()) / (ADV.std() + 1e-8)
             R = torch.from_numpy(ret.reshape(-1).astype(np.float32))
-            w_bc = 0.5 * max(0.0, 1.0 - (it - a.bc_iters) / max(1, 0.5 * a.ppo_iters))
+            w_bc = a.bc_weight * max(0.0, 1.0 - (it - a.bc_iters) / max(1, 0.5 * a.ppo_iters))
+            # a fine-tuning run's critic starts untrained: it learns alone first
+            train_actor = not a.init or it >= a.critic_warmup
             loss_v = 0.0
             for _ in range(5):
                 perm = torch.randperm(O.shape[0])
@@ -309,10 +366,11 @@ def main():
                                     ratio.clamp(0.8, 1.2) * ADV[idx]).mean()
                     bc = ((net.pi(O[idx]) - E[idx]) ** 2).mean()
                     loss = pg + w_bc * bc
-                    opt_pi.zero_grad()
-                    loss.backward()
-                    torch.nn.utils.clip_grad_norm_(actor_params, 1.0)
-                    opt_pi.step()
+                    if train_actor:
+                        opt_pi.zero_grad()
+                        loss.backward()
+                        torch.nn.utils.clip_grad_norm_(actor_params, 1.0)
+                        opt_pi.step()
                     vl = ((net.v(O[idx]).squeeze(-1) - R[idx]) ** 2).mean()
                     opt_v.zero_grad()
                     vl.backward()

@@ -67,6 +67,8 @@ typedef struct {
     uint64_t tick;
     push_t push[2];
     int n_push;
+    double release_s; /* the harness lets go at this episode time; 0: free from the start */
+    bool is_held;
     push_t fixed; /* ps_env_set_push: this push every episode instead */
     bool has_fixed;
     double z_rest, yaw0, prev_com[3], prev_ankle[2][3];
@@ -160,15 +162,19 @@ static void plan_pushes(const ps_env_t *e, env1_t *v)
     if (v->has_fixed) {
         v->n_push = 1;
         v->push[0] = v->fixed;
+        v->push[0].t_s += v->release_s;
         return;
     }
     v->n_push = uni(&v->rng, 0.0, 1.0) < 0.5 ? 2 : 1;
     for (int i = 0; i < v->n_push; i++) {
         push_t *p = &v->push[i];
-        p->t_s = i == 0 ? uni(&v->rng, 0.8, 2.0) : uni(&v->rng, 3.2, 4.2);
+        p->t_s = v->release_s + (i == 0 ? uni(&v->rng, 0.8, 2.0) : uni(&v->rng, 3.2, 4.2));
         p->dur_s = uni(&v->rng, 0.0, 1.0) < 0.5 ? 0.1 : 0.3;
-        p->dv_m_s = uni(&v->rng, 0.05, e->cfg.push_dv_max_m_s);
-        const double dir = uni(&v->rng, 0.0, 6.283185307179586);
+        p->dv_m_s = uni(&v->rng, e->cfg.push_dv_min_m_s, e->cfg.push_dv_max_m_s);
+        double dir = uni(&v->rng, 0.0, 6.283185307179586);
+        /* a draw only when asked for, so that focus_p 0 keeps the stream */
+        if (e->cfg.focus_p > 0.0f && uni(&v->rng, 0.0, 1.0) < e->cfg.focus_p)
+            dir = e->cfg.focus_dir_rad + (dir - 3.141592653589793) * 0.25;
         const double f = p->dv_m_s * mass / p->dur_s;
         p->force_n[0] = f * cos(dir);
         p->force_n[1] = f * sin(dir);
@@ -250,6 +256,10 @@ static int physics_step(const ps_env_t *e, env1_t *v, int64_t now_ns, double dt)
     v->n_effort++;
     ps_plant_set_torques(v->plant, tau);
     const double t_s = (double)now_ns * 1e-9;
+    if (v->is_held && t_s >= v->release_s) {
+        ps_plant_set_harness(v->plant, false);
+        v->is_held = false;
+    }
     double f[3] = {0, 0, 0};
     for (int i = 0; i < v->n_push; i++) {
         const push_t *p = &v->push[i];
@@ -408,7 +418,11 @@ static int reset1(const ps_env_t *e, env1_t *v, float *obs, float *expert)
 {
     const ps_robot_cfg_t *r = &e->robot;
     randomise(e, v); /* first: mj_setConst (mass changes) moves the model to qpos0 */
-    ps_plant_reset(v->plant, e->stance, false);
+    v->release_s = 0.0;
+    if (e->cfg.harness_p > 0.0f && uni(&v->rng, 0.0, 1.0) < e->cfg.harness_p)
+        v->release_s = uni(&v->rng, 0.2, 2.0);
+    v->is_held = v->release_s > 0.0;
+    ps_plant_reset(v->plant, e->stance, v->is_held);
     plan_pushes(e, v);
     memset(v->pend, 0, sizeof(v->pend));
     v->t_ns = 0;
@@ -473,7 +487,7 @@ static int step1(const ps_env_t *e, env1_t *v, const float *a, float *obs, float
         r = -1.0;
     }
     const double t_s = (double)v->t_ns * 1e-9;
-    const bool is_end = fell || t_s >= e->cfg.episode_s;
+    const bool is_end = fell || t_s >= e->cfg.episode_s + v->release_s;
     *rew = (float)r;
     *done = is_end ? 1u : 0u;
     if (info != NULL) {
@@ -632,7 +646,10 @@ int ps_env_create(const char *robot_path, const ps_env_cfg_t *cfg, ps_env_t **ou
                   size_t err_len)
 {
     if (robot_path == NULL || cfg == NULL || out == NULL || cfg->n_envs == 0 ||
-        cfg->n_threads == 0 || cfg->n_threads > MAX_THREADS)
+        cfg->n_threads == 0 || cfg->n_threads > MAX_THREADS || !(cfg->push_dv_min_m_s >= 0.0) ||
+        !(cfg->push_dv_min_m_s <= cfg->push_dv_max_m_s) || !(cfg->harness_p >= 0.0f) ||
+        !(cfg->harness_p <= 1.0f) || !(cfg->focus_p >= 0.0f) || !(cfg->focus_p <= 1.0f) ||
+        !isfinite(cfg->focus_dir_rad))
         return -EINVAL;
     ps_env_t *e = calloc(1, sizeof(*e));
     if (e == NULL)

@@ -18,7 +18,14 @@
  *
  * Episodes (episode_s): the robot starts in its stance, free; one or two
  * pushes on the torso at random times, directions, delta-v in
- * [0.05, push_dv_max] m/s and durations 0.1 or 0.3 s. Domain randomisation
+ * [push_dv_min, push_dv_max] m/s and durations 0.1 or 0.3 s. With
+ * probability harness_p an episode starts as the runtime's do: the sim
+ * harness holds the pelvis while the policy already acts, and lets go at a
+ * random time in [0.2, 2] s (the runtime releases at 2 s, the policy having
+ * acted from 0.2 s; a policy that drifts while held falls at release); the
+ * pushes and the episode's end move on by the time held. With probability
+ * focus_p a push's direction is drawn from focus_dir_rad +- 45 deg instead
+ * of the whole circle (more of the pushes a policy handles worst). Domain randomisation
  * (is_dr) per episode: torso and pelvis mass x [0.9, 1.1] and the torso's
  * CoM moved up to 2 cm, friction x [0.6, 1.4], motor strength (peak and
  * torque_max) x [0.85, 1.15], command latency 0..2 ms, IMU noise x [0.5, 2]
@@ -53,6 +60,12 @@ typedef struct {
     float push_dv_max_m_s;
     int is_dr;     /**< domain randomisation */
     int is_expert; /**< compute the capture-point controller's actions */
+    /* Added for fine-tuning; zero (with push_dv_min_m_s 0.05) gives the
+     * episodes of the first stage, random draws included, bit for bit. */
+    double push_dv_min_m_s; /**< smallest random push delta-v (double: 0.05 as before) */
+    float harness_p;        /**< probability that an episode starts harnessed */
+    float focus_p;          /**< probability that a push comes from focus_dir_rad +-45 deg */
+    float focus_dir_rad;    /**< world frame, direction of the force, 0 = +x */
 } ps_env_cfg_t;
 
 #define PS_ENV_INFO 8 /**< floats of info per environment and step: */
