@@ -59,7 +59,7 @@ typedef struct {
     uint32_t act_joint[PS_MAX_JOINTS]; /**< index into joint_name */
     float act_scale[PS_MAX_JOINTS], act_clip;
     uint32_t n_extra;
-    char trained_by[256];
+    char trained_by[1024]; /**< how the file was made; longer text is cut */
 } ps_weights_contract_t;
 
 typedef struct {

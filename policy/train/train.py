@@ -238,6 +238,10 @@ def main():
     ap.add_argument("--bc-weight", type=float, default=0.5,
                     help="PPO's behaviour-cloning term's weight at its start (decays to 0 "
                          "over half of the PPO iterations)")
+    ap.add_argument("--gamma", type=float, default=0.99, help="discount per policy step")
+    ap.add_argument("--gae-lambda", type=float, default=0.95)
+    ap.add_argument("--fixed-std", action="store_true",
+                    help="PPO's action standard deviation stays at --ppo-std")
     ap.add_argument("--push-dv-min", type=float, default=0.05, help="smallest push (m/s)")
     ap.add_argument("--harness-p", type=float, default=0.0,
                     help="fraction of episodes that start held by the harness, released "
@@ -269,7 +273,7 @@ def main():
     # stands needs its joint targets right to a few hundredths of a radian),
     # the critic at the cloning rate, each clipped on its own so the value
     # loss's large gradients do not set the actor's scale
-    actor_params = list(net.pi.parameters()) + [net.log_std]
+    actor_params = list(net.pi.parameters()) + ([] if a.fixed_std else [net.log_std])
     opt_pi = torch.optim.Adam(actor_params, lr=a.ppo_lr)
     opt_v = torch.optim.Adam(net.v.parameters(), lr=a.lr)
     norm = RunningNorm(env.n_obs)
@@ -289,9 +293,14 @@ def main():
                       a.target_kl, " --no-dr" if a.no_dr else ""))
     if a.init:
         trained_by += (" --init %s --critic-warmup %d --bc-weight %g --push-dv-min %g "
-                       "--harness-p %g --focus-p %g --focus-dir-deg %g" % (
+                       "--harness-p %g --focus-p %g --focus-dir-deg %g --gamma %g "
+                       "--gae-lambda %g%s" % (
                            os.path.basename(a.init), a.critic_warmup, a.bc_weight,
-                           a.push_dv_min, a.harness_p, a.focus_p, a.focus_dir_deg))
+                           a.push_dv_min, a.harness_p, a.focus_p, a.focus_dir_deg, a.gamma,
+                           a.gae_lambda, " --fixed-std" if a.fixed_std else ""))
+        # and how the file it started from was made
+        init_c = json.loads(psfile.read_safetensors(a.init)[1][psfile.CONTRACT_KEY])
+        trained_by += "; %s was: %s" % (os.path.basename(a.init), init_c.get("trained_by", "?"))
     obs = env.reset()
     expert = np.zeros((env.n, env.n_act), np.float32)
     _, _, _, expert, _ = env.step(expert)  # the expert's first labels
@@ -336,7 +345,7 @@ def main():
                     opt.step()
                     loss_v = float(loss)
             # the critic learns the expert's returns meanwhile
-            adv, ret = gae(buf, last_v, 0.99, 0.95)
+            adv, ret = gae(buf, last_v, a.gamma, a.gae_lambda)
             R = torch.from_numpy(ret.reshape(-1).astype(np.float32))
             for _ in range(4):
                 vl = ((net.v(O).squeeze(-1) - R) ** 2).mean()
@@ -344,7 +353,7 @@ def main():
                 vl.backward()
                 opt.step()
         else:
-            adv, ret = gae(buf, last_v, 0.99, 0.95)
+            adv, ret = gae(buf, last_v, a.gamma, a.gae_lambda)
             A = torch.from_numpy(buf["act"].reshape(-1, env.n_act).astype(np.float32))
             LP = torch.from_numpy(buf["logp"].reshape(-1).astype(np.float32))
             ADV = torch.from_numpy(adv.reshape(-1).astype(np.float32))
