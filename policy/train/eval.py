@@ -70,7 +70,7 @@ def run_cell(env, ctl, dv, dur, dirs, rng, policy_hz):
                 continue
             if info[i, 0] > 0:  # fell
                 ok[i] = False
-            elif info[i, 7] > 0 and info[i, 2] >= push_start[i] + 5.0 or info[i, 1] > 0:
+            elif info[i, 2] >= push_start[i] + 5.0 or info[i, 1] > 0:  # inf until the push
                 ok[i] = True
         if all(x is not None for x in ok):
             break

@@ -96,7 +96,8 @@ class Policy(torch.nn.Module):
 
 
 def load_init(path, net, norm, hidden):
-    """The actor's layers and the observation normalisation of a policy file."""
+    """The actor's layers and the observation normalisation of a policy file;
+    returns its contract."""
     t, meta = psfile.read_safetensors(path)
     c = json.loads(meta[psfile.CONTRACT_KEY])
     lin = net.linears()
@@ -114,6 +115,7 @@ def load_init(path, net, norm, hidden):
     norm.n = 1 << 30  # only for std(): the statistics stay as the file has them
     norm.mean = np.asarray(o["mean"], np.float64)
     norm.m2 = np.asarray(o["std"], np.float64) ** 2 * (norm.n - 1)
+    return c
 
 
 def save(path, net, norm, doc, hidden, trained_by):
@@ -277,8 +279,7 @@ def main():
     opt_pi = torch.optim.Adam(actor_params, lr=a.ppo_lr)
     opt_v = torch.optim.Adam(net.v.parameters(), lr=a.lr)
     norm = RunningNorm(env.n_obs)
-    if a.init:
-        load_init(a.init, net, norm, hidden)
+    init_c = load_init(a.init, net, norm, hidden) if a.init else None
     os.makedirs(a.log_dir, exist_ok=True)
     log_path = os.path.join(a.log_dir, "log.csv")
     logf = open(log_path, "w", newline="")
@@ -299,7 +300,6 @@ def main():
                            a.push_dv_min, a.harness_p, a.focus_p, a.focus_dir_deg, a.gamma,
                            a.gae_lambda, " --fixed-std" if a.fixed_std else ""))
         # and how the file it started from was made
-        init_c = json.loads(psfile.read_safetensors(a.init)[1][psfile.CONTRACT_KEY])
         trained_by += "; %s was: %s" % (os.path.basename(a.init), init_c.get("trained_by", "?"))
     obs = env.reset()
     expert = np.zeros((env.n, env.n_act), np.float32)
