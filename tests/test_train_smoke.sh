@@ -2,7 +2,7 @@
 # Smoke test of the training pipeline (make test): a few iterations of
 # policy/train/train.py on the C environment (build/libpsenv.so), then the
 # runtime loads the policy file it wrote and runs it in lockstep. Prints
-# cmocka's summary lines for tools/run-tests.sh. About 30 s.
+# cmocka's summary lines for tools/run-tests.sh. About 50 s.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 out=$(mktemp -d)
@@ -60,6 +60,20 @@ check bash -c "/usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --ste
     && /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 --bc-iters 0 --ppo-iters 2 \
     --critic-warmup 0 --ppo-lr 1e-3 --init $out/p.safetensors --out $out/g.safetensors --log-dir $out/g \
     >/dev/null 2>&1 && ! same_policy $out/p.safetensors $out/g.safetensors"
+name="GAE: a time-limit cut bootstraps from the state's value, a fall does not (--bootstrap-timeouts)"
+# one environment, 2 steps, reward 1, values 10 and 20, both episodes end at
+# step 0: a fall (info[0] = 1) gives delta = 1 - 10; a cut gives
+# 1 + 0.5 * 10 - 10 with gamma 0.5; without the option a cut is a fall
+check /usr/bin/python3 -c "
+import sys; sys.path.insert(0, 'policy/train'); import numpy as np, train
+def adv0(fell, boot):
+    info = np.zeros((2, 1, 8), np.float32); info[0, 0, 0] = fell; info[0, 0, 1] = 1
+    buf = {'rew': np.ones((2, 1), np.float32), 'done': np.array([[1], [0]]),
+           'val': np.array([[10], [20]], np.float32), 'info': info}
+    return float(train.gae(buf, np.array([0], np.float32), 0.5, 0.9, boot)[0][0, 0])
+assert adv0(1, True) == -9.0 and adv0(0, False) == -9.0, (adv0(1, True), adv0(0, False))
+assert adv0(0, True) == -4.0, adv0(0, True)
+"
 name="eval.py runs the benchmark's pushes in the training environment"
 check bash -c "/usr/bin/python3 policy/train/eval.py --weights $out/p.safetensors --dv 0.15 \
     --durations 0.1 --directions 2 --harness --out $out/e.json >$out/eval.out 2>&1 \

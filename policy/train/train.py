@@ -184,13 +184,22 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
     return {k: np.asarray(v) for k, v in buf.items()}, obs, expert, last_v
 
 
-def gae(buf, last_v, gamma, lam):
+def gae(buf, last_v, gamma, lam, bootstrap_timeouts=False):
+    """Advantages and returns. An episode that ends without a fall is cut by
+    the time limit, not ended by the robot: with bootstrap_timeouts its last
+    step bootstraps from that state's own value (the environment resets
+    before the next observation is seen), instead of counting the lost
+    future like a fall's."""
     rew, done, val = buf["rew"], buf["done"].astype(np.float32), buf["val"]
+    timeout = np.zeros_like(done)
+    if bootstrap_timeouts:
+        timeout = done * (1.0 - buf["info"][..., 0].astype(np.float32))
     adv = np.zeros_like(rew)
     g = np.zeros(rew.shape[1], np.float32)
     for t in reversed(range(rew.shape[0])):
         nv = last_v if t == rew.shape[0] - 1 else val[t + 1]
-        delta = rew[t] + gamma * nv * (1 - done[t]) - val[t]
+        nv = (1 - done[t]) * nv + timeout[t] * val[t]
+        delta = rew[t] + gamma * nv - val[t]
         g = delta + gamma * lam * (1 - done[t]) * g
         adv[t] = g
     return adv, adv + val
@@ -244,6 +253,9 @@ def main():
     ap.add_argument("--gae-lambda", type=float, default=0.95)
     ap.add_argument("--fixed-std", action="store_true",
                     help="PPO's action standard deviation stays at --ppo-std")
+    ap.add_argument("--bootstrap-timeouts", action="store_true",
+                    help="an episode cut by the time limit bootstraps from its last "
+                         "state's value instead of ending like a fall")
     ap.add_argument("--push-dv-min", type=float, default=0.05, help="smallest push (m/s)")
     ap.add_argument("--harness-p", type=float, default=0.0,
                     help="fraction of episodes that start held by the harness, released "
@@ -299,6 +311,8 @@ def main():
                            os.path.basename(a.init), a.critic_warmup, a.bc_weight,
                            a.push_dv_min, a.harness_p, a.focus_p, a.focus_dir_deg, a.gamma,
                            a.gae_lambda, " --fixed-std" if a.fixed_std else ""))
+    if a.bootstrap_timeouts:
+        trained_by += " --bootstrap-timeouts"
         # and how the file it started from was made
         trained_by += "; %s was: %s" % (os.path.basename(a.init), init_c.get("trained_by", "?"))
     obs = env.reset()
@@ -345,7 +359,7 @@ def main():
                     opt.step()
                     loss_v = float(loss)
             # the critic learns the expert's returns meanwhile
-            adv, ret = gae(buf, last_v, a.gamma, a.gae_lambda)
+            adv, ret = gae(buf, last_v, a.gamma, a.gae_lambda, a.bootstrap_timeouts)
             R = torch.from_numpy(ret.reshape(-1).astype(np.float32))
             for _ in range(4):
                 vl = ((net.v(O).squeeze(-1) - R) ** 2).mean()
@@ -353,7 +367,7 @@ def main():
                 vl.backward()
                 opt.step()
         else:
-            adv, ret = gae(buf, last_v, a.gamma, a.gae_lambda)
+            adv, ret = gae(buf, last_v, a.gamma, a.gae_lambda, a.bootstrap_timeouts)
             A = torch.from_numpy(buf["act"].reshape(-1, env.n_act).astype(np.float32))
             LP = torch.from_numpy(buf["logp"].reshape(-1).astype(np.float32))
             ADV = torch.from_numpy(adv.reshape(-1).astype(np.float32))
