@@ -337,7 +337,7 @@ test: deps-test
 	    PUSHSTEP_SAN_BIN=$(ASAN_PUSHSTEP) bash tools/run-tests.sh \
 	    tools/check-layers.sh $(TEST_BINS) $(SAN_E2E_BINS) $(TSAN_BINS) tests/test_tsan_threads.sh \
 	    tests/test_asan_cli.sh \
-	    tests/test_soak_short.sh policy/train/test_tools.py \
+	    tests/test_soak_short.sh policy/train/test_tools.py tests/test_push_bench.py \
 	    tests/test_train_smoke.sh tests/test_fuzz.sh tools/test-install.sh tools/test-aarch64.sh \
 	    tools/qemu/test-hw.sh
 

@@ -11,9 +11,11 @@ over a duration: force = delta_v * mass / duration.
 
 Subcommands (so that GNU parallel, a Slurm array or parallel --sshlogin can
 run the trials; nothing here schedules them):
-  jobs  [grid options]          print one trial spec per line
+  jobs  [grid options]          print one trial spec per line (--first-trial K
+                                leaves out trials 0..K-1: a grid grown later)
   trial SPEC --out DIR          run one trial, write DIR/<id>.json
-  merge DIR --out FILE.json     merge the per-trial results into one table
+  merge SRC... --out FILE.json  merge per-trial results (directories of trial
+                                files, or earlier merged FILE.json) into one table
   table FILE.json               print the readable summary (markdown)
 
 A trial spec is "controller,direction_deg,dv_m_s,duration_s,trial_idx".
@@ -47,13 +49,15 @@ def parse_spec(text):
     return (c, float(d), float(v), float(t), int(k))
 
 
-def grid(controllers, n_dir, dvs, durations, trials):
-    for c in controllers:
-        for i in range(n_dir):
-            d = 360.0 * i / n_dir
-            for v in dvs:
-                for t in durations:
-                    for k in range(trials):
+def grid(controllers, n_dir, dvs, durations, trials, first_trial=0):
+    """Trial-major: every cell's trial k before any cell's trial k + 1, so a
+    grid cut short still has the same number of trials in every cell."""
+    for k in range(first_trial, trials):
+        for c in controllers:
+            for i in range(n_dir):
+                d = 360.0 * i / n_dir
+                for v in dvs:
+                    for t in durations:
                         yield (c, d, v, t, k)
 
 
@@ -105,8 +109,41 @@ def run_trial(spec, out_dir, binary):
     return 0
 
 
-def merge(in_dir, out):
-    rows = [json.load(open(p)) for p in sorted(glob.glob(os.path.join(in_dir, "*.json")))]
+def load_json(path):
+    try:
+        with open(path) as fh:
+            return json.load(fh)
+    except ValueError as e:
+        raise ValueError("%s: not JSON (%s)" % (path, e))
+
+
+def read_trials(sources):
+    """Trial records from directories of trial files and from merged files,
+    one per trial id. A trial is reproducible, so the same id twice must
+    carry the same result; a difference means two builds or two policy files
+    were mixed, and is refused."""
+    by_id = {}
+    for src in sources:
+        if os.path.isdir(src):
+            files = sorted(glob.glob(os.path.join(src, "*.json")))
+            rows = [load_json(p) for p in files]
+        else:
+            doc = load_json(src)
+            if not isinstance(doc, dict) or not isinstance(doc.get("trials"), list):
+                raise ValueError("%s: not a merged push file (no list \"trials\")" % src)
+            rows = doc["trials"]
+        for r in rows:
+            if not isinstance(r, dict) or "id" not in r:
+                raise ValueError("%s: a trial record without an id" % src)
+            old = by_id.setdefault(r["id"], r)
+            if old != r:
+                raise ValueError("trial %s differs between sources (%s): results of "
+                                 "different builds or policy files" % (r["id"], src))
+    return [by_id[k] for k in sorted(by_id)]
+
+
+def merge(sources, out):
+    rows = read_trials(sources)
     cells = {}
     for r in rows:
         key = (r["controller"], r["direction_deg"], r["dv_m_s"], r["duration_s"])
@@ -227,12 +264,13 @@ def main():
     j.add_argument("--dv", default="0.15,0.30,0.45,0.60,0.80")
     j.add_argument("--durations", default="0.1,0.3")
     j.add_argument("--trials", type=int, default=20)
+    j.add_argument("--first-trial", type=int, default=0)
     t = sub.add_parser("trial")
     t.add_argument("spec")
     t.add_argument("--out", required=True)
     t.add_argument("--bin", default=os.path.join(ROOT, "build", "pushstep"))
     m = sub.add_parser("merge")
-    m.add_argument("dir")
+    m.add_argument("sources", nargs="+", help="directories of trial files, merged .json files")
     m.add_argument("--out", required=True)
     tb = sub.add_parser("table")
     tb.add_argument("file")
@@ -243,13 +281,18 @@ def main():
     if a.cmd == "jobs":
         for spec in grid(a.controllers.split(","), a.directions,
                          [float(x) for x in a.dv.split(",")],
-                         [float(x) for x in a.durations.split(",")], a.trials):
+                         [float(x) for x in a.durations.split(",")], a.trials,
+                         a.first_trial):
             print("%s,%g,%g,%g,%d" % spec)
         return 0
     if a.cmd == "trial":
         return run_trial(parse_spec(a.spec), a.out, a.bin)
     if a.cmd == "merge":
-        doc = merge(a.dir, a.out)
+        try:
+            doc = merge(a.sources, a.out)
+        except (OSError, ValueError) as e:
+            sys.stderr.write("push.py merge: %s\n" % e)
+            return 2
         sys.stdout.write(table_md(doc))
         return 0
     if a.cmd == "table":

@@ -1,0 +1,147 @@
+#!/usr/bin/python3
+"""Tests of the push-recovery benchmark's bookkeeping (bench/push.py), on
+hand-made trial records, no simulation: the job list (size, trial-major
+order, --first-trial to grow a grid later), delta-v50's interpolation, and
+merging trial files and earlier merged files into one table (a trial seen
+twice must agree; bad input is refused naming the file). Prints cmocka's
+summary lines for tools/run-tests.sh.
+"""
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import unittest
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+PUSH = os.path.join(HERE, "..", "bench", "push.py")
+sys.path.insert(0, os.path.join(HERE, "..", "bench"))
+import push  # noqa: E402
+
+
+def cli(*args):
+    p = subprocess.run([sys.executable, PUSH] + list(args), stdout=subprocess.PIPE,
+                       stderr=subprocess.PIPE, text=True)
+    return p.returncode, p.stdout, p.stderr
+
+
+def record(ctl, d, v, t, k, fell):
+    spec = (ctl, float(d), float(v), float(t), k)
+    return {"id": push.spec_id(spec), "controller": ctl, "direction_deg": float(d),
+            "dv_m_s": float(v), "duration_s": float(t), "trial": k, "fell": fell,
+            "force_n": v * push.MASS_KG / t}
+
+
+def write_trials(directory, rows):
+    os.makedirs(directory, exist_ok=True)
+    for r in rows:
+        with open(os.path.join(directory, r["id"] + ".json"), "w") as fh:
+            json.dump(r, fh)
+
+
+def cell(v, rate, n=4):
+    return {"controller": "c", "duration_s": 0.1, "direction_deg": 0.0, "dv_m_s": v,
+            "n": n, "n_success": int(rate * n), "success_rate": rate}
+
+
+class Jobs(unittest.TestCase):
+    def test_size_and_trial_major_order(self):
+        rc, out, _ = cli("jobs", "--controllers", "stand,mlp", "--directions", "4",
+                         "--trials", "3")
+        self.assertEqual(rc, 0)
+        specs = [push.parse_spec(line) for line in out.splitlines()]
+        self.assertEqual(len(specs), 2 * 4 * 5 * 2 * 3)
+        self.assertEqual(len(set(specs)), len(specs))
+        ks = [s[4] for s in specs]
+        self.assertEqual(ks, sorted(ks), "a cell's trial k+1 before another's trial k")
+        self.assertEqual({s[1] for s in specs}, {0.0, 90.0, 180.0, 270.0})
+
+    def test_first_trial_grows_a_grid(self):
+        whole = cli("jobs", "--directions", "2", "--trials", "5")[1].splitlines()
+        head = cli("jobs", "--directions", "2", "--trials", "2")[1].splitlines()
+        tail = cli("jobs", "--directions", "2", "--trials", "5", "--first-trial", "2")[1]
+        self.assertEqual(head + tail.splitlines(), whole)
+        self.assertTrue(all(push.parse_spec(s)[4] >= 2 for s in tail.splitlines()))
+
+
+class Dv50(unittest.TestCase):
+    def dv50(self, cells):
+        return push.dv50(cells)["c"]["0.1"]["0"]
+
+    def test_interpolates_between_the_points_around_50_percent(self):
+        cells = [cell(0.15, 1.0), cell(0.30, 0.75), cell(0.45, 0.25), cell(0.60, 0.0)]
+        self.assertAlmostEqual(self.dv50(cells), 0.375)
+
+    def test_order_of_cells_does_not_matter(self):
+        cells = [cell(0.60, 0.0), cell(0.30, 1.0), cell(0.45, 0.0), cell(0.15, 1.0)]
+        self.assertAlmostEqual(self.dv50(cells), 0.375)
+
+    def test_never_below_half_gives_the_largest_push(self):
+        self.assertEqual(self.dv50([cell(0.15, 1.0), cell(0.80, 0.5)]), 0.80)
+
+    def test_failing_the_smallest_push_gives_zero(self):
+        self.assertEqual(self.dv50([cell(0.15, 0.25), cell(0.30, 0.0)]), 0.0)
+
+
+class Merge(unittest.TestCase):
+    def setUp(self):
+        self.tmp = tempfile.TemporaryDirectory()
+        self.d = self.tmp.name
+
+    def tearDown(self):
+        self.tmp.cleanup()
+
+    def path(self, name):
+        return os.path.join(self.d, name)
+
+    def test_trial_files_and_a_merged_file_combine(self):
+        first = [record("mlp", 0, 0.3, 0.1, k, k == 1) for k in range(2)]
+        later = [record("mlp", 0, 0.3, 0.1, k, k != 2) for k in range(2, 4)]
+        write_trials(self.path("a"), first)
+        write_trials(self.path("b"), later + first[:1])  # one trial run twice: same result
+        rc, _, err = cli("merge", self.path("a"), "--out", self.path("a.json"))
+        self.assertEqual(rc, 0, err)
+        rc, table, err = cli("merge", self.path("a.json"), self.path("b"),
+                             "--out", self.path("all.json"))
+        self.assertEqual(rc, 0, err)
+        doc = json.load(open(self.path("all.json")))
+        self.assertEqual(len(doc["trials"]), 4)
+        (c,) = doc["cells"]
+        self.assertEqual((c["n"], c["n_success"]), (4, 2))  # k 0 and 2 stood
+        self.assertIn("| mlp | 2/4 |", table)
+
+    def test_a_trial_with_two_results_is_refused(self):
+        write_trials(self.path("a"), [record("mlp", 0, 0.3, 0.1, 0, False)])
+        write_trials(self.path("b"), [record("mlp", 0, 0.3, 0.1, 0, True)])
+        rc, _, err = cli("merge", self.path("a"), self.path("b"), "--out", self.path("o.json"))
+        self.assertEqual(rc, 2)
+        self.assertIn("mlp_d000_v0.30_t0.1_k00", err)
+        self.assertIn("differs", err)
+        self.assertFalse(os.path.exists(self.path("o.json")))
+
+    def test_bad_sources_are_named(self):
+        with open(self.path("bad.json"), "w") as fh:
+            fh.write("{not json")
+        with open(self.path("other.json"), "w") as fh:
+            json.dump({"cells": []}, fh)
+        for src, words in (("bad.json", "not JSON"), ("other.json", "not a merged push file"),
+                           ("missing.json", "missing.json")):
+            rc, _, err = cli("merge", self.path(src), "--out", self.path("o.json"))
+            self.assertEqual(rc, 2, src)
+            self.assertTrue(err.startswith("push.py merge: "), err)
+            self.assertIn(words, err)
+            self.assertIn(src, err)
+
+
+def main():
+    res = unittest.TextTestRunner(stream=sys.stdout, verbosity=2).run(
+        unittest.defaultTestLoader.loadTestsFromModule(sys.modules[__name__]))
+    bad = len(res.failures) + len(res.errors)
+    print("[  PASSED  ] %d test(s)." % (res.testsRun - bad))
+    if bad:
+        print("[  FAILED  ] %d test(s), listed below:" % bad)
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
