@@ -104,6 +104,12 @@ def run_trial(spec, out_dir, binary):
     for key in ("heading_dev_deg", "foot_slide_m", "kinetic_energy_j"):
         if key in truth:
             res[key] = truth[key]
+    pol = s.get("policy", {})
+    if "fallback_steps" in pol:  # the trained policy: how long its fallback was in charge
+        res["policy_steps"] = pol["steps"]
+        res["fallback_steps"] = pol["fallback_steps"]
+        res["fallback_takeovers"] = pol["fallback_takeovers"]
+        res["first_takeover_t_s"] = pol.get("first_takeover_t_s")
     with open(os.path.join(out_dir, spec_id(spec) + ".json"), "w") as fh:
         json.dump(res, fh)
     return 0
@@ -120,8 +126,10 @@ def load_json(path):
 def read_trials(sources):
     """Trial records from directories of trial files and from merged files,
     one per trial id. A trial is reproducible, so the same id twice must
-    carry the same result; a difference means two builds or two policy files
-    were mixed, and is refused."""
+    carry the same result in every field both records have (a record of an
+    older push.py may lack the newer fields; the fuller record is kept); a
+    difference means two builds or two policy files were mixed, and is
+    refused."""
     by_id = {}
     for src in sources:
         if os.path.isdir(src):
@@ -136,9 +144,11 @@ def read_trials(sources):
             if not isinstance(r, dict) or "id" not in r:
                 raise ValueError("%s: a trial record without an id" % src)
             old = by_id.setdefault(r["id"], r)
-            if old != r:
+            if any(old[k] != r[k] for k in old.keys() & r.keys()):
                 raise ValueError("trial %s differs between sources (%s): results of "
                                  "different builds or policy files" % (r["id"], src))
+            if len(r) > len(old):
+                by_id[r["id"]] = r
     return [by_id[k] for k in sorted(by_id)]
 
 
@@ -223,6 +233,54 @@ def table_md(doc):
                 d50 = doc["dv50"].get(ctl, {}).get("%.1f" % dur, {}).get("%g" % d)
                 lines.append("| %s | %g | %s | %s |" % (ctl, d, " | ".join(row),
                                                          "%.2f" % d50 if d50 is not None else "-"))
+    return "\n".join(lines) + "\n" + per_controller_md(doc)
+
+
+def mean_of(rows, key, scale=1.0):
+    vals = [r[key] * scale for r in rows if r.get(key) is not None]
+    return "%.1f" % (sum(vals) / len(vals)) if vals else "-"
+
+
+def fallback_of(rows):
+    """The trained policy's fallback over these trials: in how many it took
+    over, why, in how many of those it first took over before the robot fell
+    (or in a trial without a fall), and its share of the policy steps (trials
+    recorded by an older push.py carry none of this and are left out)."""
+    rows = [r for r in rows if "fallback_steps" in r]
+    if not rows:
+        return "-"
+    took = [r for r in rows if r["fallback_steps"] > 0]
+    early = [r for r in took if r.get("first_takeover_t_s") is not None and
+             (not r["fell"] or r["first_takeover_t_s"] < r["first_fall_t_s"])]
+    why = {}
+    for r in rows:
+        for k, n in r["fallback_takeovers"].items():
+            why[k] = why.get(k, 0) + n
+    steps = sum(r["policy_steps"] for r in rows)
+    share = 100.0 * sum(r["fallback_steps"] for r in rows) / steps if steps else 0.0
+    reasons = ", ".join("%s %d" % (k, n) for k, n in sorted(why.items()) if n)
+    return "in %d of %d trials (%s), %d of them before a fall or without one, " \
+        "%.1f %% of steps" % (len(took), len(rows), reasons or "never", len(early), share)
+
+
+def per_controller_md(doc):
+    """The issue's per-trial measures, averaged over each controller's trials."""
+    lines = ["\n### Per trial, averaged over each controller's trials\n",
+             "| controller | push | trials | no fall | heading change (deg) | feet sliding (cm) "
+             "| peak kinetic energy (J) | fallback took over |", "|---" * 8 + "|"]
+    ctls = sorted({r["controller"] for r in doc["trials"]})
+    durs = sorted({r["duration_s"] for r in doc["trials"]})
+    for ctl in ctls:
+        for dur in durs + [None]:
+            rows = [r for r in doc["trials"] if r["controller"] == ctl and
+                    (dur is None or r["duration_s"] == dur)]
+            if not rows:
+                continue
+            lines.append("| %s | %s | %d | %d | %s | %s | %s | %s |" % (
+                ctl, "all" if dur is None else "%.1f s" % dur, len(rows),
+                sum(not r["fell"] for r in rows), mean_of(rows, "heading_dev_deg"),
+                mean_of(rows, "foot_slide_m", 100.0), mean_of(rows, "kinetic_energy_j"),
+                fallback_of(rows)))
     return "\n".join(lines) + "\n"
 
 

@@ -54,6 +54,7 @@ int ps_mlp_policy_init(ps_mlp_policy_t *p, ps_weights_t *w, uint32_t n_joints,
     p->fallback = fallback;
     p->clock = clock;
     p->late_ns = late_ns;
+    p->first_fallback_t_ns = -1;
     p->fallback_hold_s = FALLBACK_HOLD_S;
     p->dt_s = dt_s;
     return 0;
@@ -127,6 +128,8 @@ static int mlp_step(void *ctx, const ps_meas_t *meas, const ps_estimate_t *est, 
         p->n_nan += (faults & PS_MLP_FAULT_NAN) != 0;
         p->n_range += (faults & PS_MLP_FAULT_RANGE) != 0;
         p->n_late += (faults & PS_MLP_FAULT_LATE) != 0;
+        if (p->first_fallback_t_ns < 0)
+            p->first_fallback_t_ns = meas->imu.t_ns;
         p->is_fallback = true;
         p->fallback_left_s = p->fallback_hold_s;
     }

@@ -52,6 +52,10 @@ typedef struct {
     float fallback_left_s;
     uint32_t last_faults;
     uint64_t n_steps, n_fallback_steps, n_obs_faults, n_nan, n_range, n_late;
+    /** The loop time of the first takeover (the IMU reading's t_ns then, ns;
+     *  0 when no reading had come yet); -1: never. Tells whether the fallback
+     *  acted before or after something else, such as a fall. */
+    int64_t first_fallback_t_ns;
 } ps_mlp_policy_t;
 
 /** @pre w loaded and ps_weights_check_robot passed for this robot; the

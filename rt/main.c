@@ -1005,7 +1005,8 @@ static ps_summary_policy_t summary_policy(const ps_app_t *app)
     const bool is_mlp = strcmp(app->policy_name, "mlp") == 0;
     return (ps_summary_policy_t){.name = app->policy_name[0] ? app->policy_name : NULL,
                                  .weights_path = is_mlp ? app->weights_path : NULL,
-                                 .mlp = is_mlp ? &app->mlp : NULL};
+                                 .mlp = is_mlp ? &app->mlp : NULL,
+                                 .start_ns = g.start_ns};
 }
 
 static void finish_summary(ps_summary_t *sum)

@@ -104,6 +104,14 @@ static cJSON *buses_json(const ps_summary_t *s)
     return a;
 }
 
+/* Run time of the fallback's first takeover; one before the first IMU reading
+ * (time 0) counts as the run's start. @pre it took over */
+static double first_takeover_s(const ps_summary_policy_t *p)
+{
+    const int64_t t_ns = p->mlp->first_fallback_t_ns;
+    return t_ns > p->start_ns ? ps_ns_to_s(t_ns - p->start_ns) : 0.0;
+}
+
 static cJSON *policy_json(const ps_summary_policy_t *p)
 {
     cJSON *o = cJSON_CreateObject();
@@ -119,6 +127,10 @@ static cJSON *policy_json(const ps_summary_policy_t *p)
     cJSON_AddNumberToObject(t, "nan", (double)m->n_nan);
     cJSON_AddNumberToObject(t, "out_of_range", (double)m->n_range);
     cJSON_AddNumberToObject(t, "late", (double)m->n_late);
+    if (m->first_fallback_t_ns >= 0)
+        cJSON_AddNumberToObject(o, "first_takeover_t_s", first_takeover_s(p));
+    else
+        cJSON_AddNullToObject(o, "first_takeover_t_s");
     return o;
 }
 
@@ -375,8 +387,8 @@ static void print_recorder(const ps_recorder_stats_t *r, FILE *out)
     }
 }
 
-/* " controller mlp (FILE): fallback in charge N of M steps, took over N times
- * (observation N, NaN N, out of range N, late N)" */
+/* " controller mlp (FILE): fallback in charge N of M steps; it took over after
+ * N bad observations, ..., N late steps[, first at T s]" */
 static void print_policy(const ps_summary_policy_t *p, FILE *out)
 {
     if (p->name == NULL)
@@ -389,11 +401,14 @@ static void print_policy(const ps_summary_policy_t *p, FILE *out)
     fprintf(out,
             " controller %s (%s): fallback in charge %llu of %llu steps; it took over after "
             "%llu bad observations, %llu NaN actions, %llu actions out of range, %llu late "
-            "steps\n",
+            "steps",
             p->name, p->weights_path ? p->weights_path : "?",
             (unsigned long long)m->n_fallback_steps, (unsigned long long)m->n_steps,
             (unsigned long long)m->n_obs_faults, (unsigned long long)m->n_nan,
             (unsigned long long)m->n_range, (unsigned long long)m->n_late);
+    if (m->first_fallback_t_ns >= 0)
+        fprintf(out, ", first at %.3f s", first_takeover_s(p));
+    fprintf(out, "\n");
 }
 
 void ps_summary_print(const ps_summary_t *s, FILE *out)

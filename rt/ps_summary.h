@@ -41,6 +41,7 @@ typedef struct {
     const char *name;           /**< "stand", "capture", "mlp"; NULL: not reported */
     const char *weights_path;   /**< "mlp": its policy file; NULL otherwise */
     const ps_mlp_policy_t *mlp; /**< "mlp": the policy (its counters); NULL otherwise */
+    int64_t start_ns;           /**< the run's start on the loop clock (takeover times) */
 } ps_summary_policy_t;
 
 typedef struct {

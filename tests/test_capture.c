@@ -214,6 +214,7 @@ static void test_ps_mlp_policy_zero_net_targets_stance(void **st)
     for (int k = 0; k < 3; k++)
         assert_int_equal(f.p.ops->step(f.p.ctx, &m, &e, &t), 0);
     assert_int_equal(f.mlp.n_fallback_steps, 0);
+    assert_true(f.mlp.first_fallback_t_ns == -1);
     for (uint32_t i = 0; i < t.n_joints; i++)
         assert_float_equal(t.q_rad[i], g_robot.servo[i].stance_rad, 1e-6);
     ps_weights_free(&f.w);
@@ -235,17 +236,21 @@ static void test_ps_mlp_policy_late_or_wild_falls_back(void **st)
     f.clock.now_extra_script_ns = slow;
     f.clock.n_now_extra_script = 2;
     f.clock.n_now_calls = 0;
+    m.imu.t_ns = 1234567890;
     assert_int_equal(f.p.ops->step(f.p.ctx, &m, &e, &t), 0);
     assert_int_equal(f.mlp.n_late, 1);
     assert_true(f.mlp.is_fallback);
+    assert_true(f.mlp.first_fallback_t_ns == 1234567890); /* the takeover's loop time */
     int k = 0;
     for (; k < 60 && f.mlp.is_fallback; k++) /* 1 s of fallback at 50 Hz */
         assert_int_equal(f.p.ops->step(f.p.ctx, &m, &e, &t), 0);
     assert_false(f.mlp.is_fallback);
     assert_in_range(k, 50, 51);
     e.is_contact[0] = e.is_contact[1] = false; /* no base of support: no observation */
+    m.imu.t_ns = 2234567890;
     assert_int_equal(f.p.ops->step(f.p.ctx, &m, &e, &t), 0);
     assert_int_equal(f.mlp.n_obs_faults, 1);
+    assert_true(f.mlp.first_fallback_t_ns == 1234567890); /* the first one's, kept */
     ps_weights_free(&f.w);
 
     mlp_setup(&f, "tests/data/policy/ps1_wild.safetensors");

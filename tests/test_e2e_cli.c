@@ -344,6 +344,10 @@ static void test_cli_summary_reports_the_policy_and_its_fallback(void **state)
     const cJSON *why = obj(pol, "fallback_takeovers");
     assert_true(num(why, "out_of_range") >= 2); /* again after every 1 s hold */
     assert_true(num(why, "nan") == 0 && num(why, "late") == 0 && num(why, "observation") == 0);
+    /* the first policy step already took over, before any reading: the start */
+    assert_true(num(pol, "first_takeover_t_s") == 0.0);
+    if (strstr(out, ", first at ") == NULL)
+        fail_msg("no first takeover time in the policy line:\n%s", out);
     assert_true(cJSON_IsFalse(obj(obj(j, "sim_truth"), "fell_while_active")));
     cJSON_Delete(j);
 
@@ -352,6 +356,7 @@ static void test_cli_summary_reports_the_policy_and_its_fallback(void **state)
     pol = obj(j, "policy");
     assert_true(num(pol, "steps") >= 140);
     assert_true(num(pol, "fallback_steps") == 0);
+    assert_true(cJSON_IsNull(obj(pol, "first_takeover_t_s")));
     cJSON_Delete(j);
 
     snprintf(args, sizeof(args), "%s --duration 1 --policy stand", stand);

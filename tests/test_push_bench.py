@@ -3,7 +3,8 @@
 hand-made trial records, no simulation: the job list (size, trial-major
 order, --first-trial to grow a grid later), delta-v50's interpolation, and
 merging trial files and earlier merged files into one table (a trial seen
-twice must agree; bad input is refused naming the file). Prints cmocka's
+twice must agree; bad input is refused naming the file), and the table's
+per-controller means (heading, sliding, kinetic energy, the fallback). Prints cmocka's
 summary lines for tools/run-tests.sh.
 """
 import json
@@ -109,6 +110,40 @@ class Merge(unittest.TestCase):
         (c,) = doc["cells"]
         self.assertEqual((c["n"], c["n_success"]), (4, 2))  # k 0 and 2 stood
         self.assertIn("| mlp | 2/4 |", table)
+
+    def test_an_older_record_without_the_newer_fields_merges(self):
+        old = record("mlp", 0, 0.3, 0.1, 0, False)
+        new = dict(old, fallback_steps=3, policy_steps=400,
+                   fallback_takeovers={"out_of_range": 1, "late": 0})
+        write_trials(self.path("a"), [old])
+        write_trials(self.path("b"), [new])
+        for order in (("a", "b"), ("b", "a")):
+            rc, table, err = cli("merge", *[self.path(x) for x in order],
+                                 "--out", self.path("o.json"))
+            self.assertEqual(rc, 0, err)
+            self.assertEqual(json.load(open(self.path("o.json")))["trials"], [new])
+
+    def test_per_controller_means_and_fallback(self):
+        rows = [dict(record("mlp", 0, 0.3, 0.1, 0, False), heading_dev_deg=10.0,
+                     foot_slide_m=0.10, kinetic_energy_j=40.0, policy_steps=400,
+                     fallback_steps=0, fallback_takeovers={"late": 0, "out_of_range": 0}),
+                dict(record("mlp", 0, 0.3, 0.3, 1, True), heading_dev_deg=20.0,
+                     foot_slide_m=0.30, kinetic_energy_j=60.0, policy_steps=400,
+                     fallback_steps=100, fallback_takeovers={"late": 1, "out_of_range": 2},
+                     first_fall_t_s=4.5, first_takeover_t_s=4.0),
+                dict(record("mlp", 90, 0.3, 0.3, 1, True), policy_steps=400,
+                     fallback_steps=50, fallback_takeovers={"observation": 1},
+                     first_fall_t_s=4.5, first_takeover_t_s=4.6),
+                dict(record("stand", 0, 0.3, 0.1, 0, True), heading_dev_deg=5.0)]
+        write_trials(self.path("a"), rows)
+        rc, table, err = cli("merge", self.path("a"), "--out", self.path("o.json"))
+        self.assertEqual(rc, 0, err)
+        self.assertIn("| mlp | all | 3 | 1 | 15.0 | 20.0 | 50.0 | in 2 of 3 trials "
+                      "(late 1, observation 1, out_of_range 2), 1 of them before a fall or "
+                      "without one, 12.5 % of steps |", table)
+        self.assertIn("| mlp | 0.1 s | 1 | 1 | 10.0 | 10.0 | 40.0 | in 0 of 1 trials "
+                      "(never), 0 of them before a fall or without one, 0.0 % of steps |", table)
+        self.assertIn("| stand | all | 1 | 0 | 5.0 | - | - | - |", table)
 
     def test_a_trial_with_two_results_is_refused(self):
         write_trials(self.path("a"), [record("mlp", 0, 0.3, 0.1, 0, False)])
