@@ -1142,6 +1142,62 @@ static void state_lines(char *buf, size_t len)
     }
 }
 
+/* Records scenarios/stand.yaml into log_path and replays it into
+ * again_path, leaving the two runs' transition lines in recorded and replayed
+ * and out holding the replay's output. False when either run was disturbed
+ * (is_disturbed): a policy late or a tick overrun on this machine's CPU time
+ * is not in the log, so the two runs may differ for that alone (seen once in
+ * CI, a sanitized build under load: RAMP -> DAMPING (POLICY_LATE) recorded,
+ * not replayed). */
+static bool record_and_replay(const char *log_path, const char *again_path, char *recorded,
+                              char *replayed, size_t len, unsigned long *n_fed_lines,
+                              unsigned long *n_cmd_lines)
+{
+    char args[256], summary_path[32];
+    make_temp_file(summary_path, sizeof(summary_path));
+    snprintf(args, sizeof(args),
+             "--scenario scenarios/stand.yaml --lockstep --duration 3 --quiet --candump %s",
+             log_path);
+    cJSON *j = lockstep_run(args, summary_path);
+    if (j == NULL)
+        return false;
+    cJSON_Delete(j);
+    state_lines(recorded, len);
+    const char *ramp = strstr(out, "s state STANDBY -> RAMP");
+    assert_non_null(ramp);
+    while (ramp > out && ramp[-1] != '\n')
+        ramp--;
+    double start_s = -1;
+    assert_int_equal(sscanf(ramp, "t=%lf", &start_s), 1);
+    assert_true(start_s > 0.0 && start_s < 1.0);
+    /* replies and IMU frames (ps1: MIT replies on 0x100 + id, the IMU on
+     * 0x080/0x081) against the commands and requests (0x001..0x009) */
+    *n_fed_lines = *n_cmd_lines = 0;
+    FILE *f = fopen(log_path, "r");
+    assert_non_null(f);
+    char line[PS_CANDUMP_LINE_MAX + 8];
+    while (fgets(line, sizeof(line), f) != NULL) {
+        ps_can_frame_t fr;
+        char ifname[PS_CANDUMP_IFNAME_MAX], err[PS_ERR_MSG_LEN];
+        assert_int_equal(ps_candump_parse(line, &fr, ifname, sizeof(ifname), err, sizeof(err)), 0);
+        if (fr.id >= 0x080)
+            (*n_fed_lines)++;
+        else
+            (*n_cmd_lines)++;
+    }
+    fclose(f);
+    assert_true(*n_fed_lines > 10000 && *n_cmd_lines > 10000);
+    snprintf(args, sizeof(args),
+             "--replay %s --board sim --start-after %.3f --duration 3 --quiet --candump %s",
+             log_path, start_s, again_path);
+    j = lockstep_run(args, summary_path);
+    if (j == NULL)
+        return false;
+    cJSON_Delete(j);
+    state_lines(replayed, len);
+    return true;
+}
+
 /* A lockstep run's own candump log fed back into the loop (board sim, no
  * plant): START at the time the recorded run took it, and the same
  * --duration, since the recorded run stopped at 3 s and the log shows the
@@ -1157,52 +1213,22 @@ static void state_lines(char *buf, size_t len)
  * starts mid-run (the first ticks see no replies yet and the loop starts in
  * STANDBY whatever the robot was doing), a live candump (sent frames stamped
  * on the wire, up to a tick after the deadline: paired within a tick), or a
- * policy late on this machine's CPU time (HOLD where the recording had none). */
+ * policy late on this machine's CPU time (not in the log: a disturbed pair of
+ * runs is made again, up to LOCKSTEP_AGAIN_MAX times). */
 static void test_cli_replay_of_a_lockstep_log_same_transitions_and_commands(void **state)
 {
     (void)state;
     char log_path[32], again_path[32], args[256];
     make_temp_file(log_path, sizeof(log_path));
     make_temp_file(again_path, sizeof(again_path));
-    snprintf(args, sizeof(args),
-             "--scenario scenarios/stand.yaml --lockstep --duration 3 --quiet --candump %s",
-             log_path);
-    int rc = run(args);
-    if (rc != 0)
-        fail_msg("record: exit %d:\n%s", rc, out);
     static char recorded[8192], replayed[8192];
-    state_lines(recorded, sizeof(recorded));
-    const char *ramp = strstr(out, "s state STANDBY -> RAMP");
-    assert_non_null(ramp);
-    while (ramp > out && ramp[-1] != '\n')
-        ramp--;
-    double start_s = -1;
-    assert_int_equal(sscanf(ramp, "t=%lf", &start_s), 1);
-    assert_true(start_s > 0.0 && start_s < 1.0);
-    /* replies and IMU frames (ps1: MIT replies on 0x100 + id, the IMU on
-     * 0x080/0x081) against the commands and requests (0x001..0x009) */
     unsigned long n_fed_lines = 0, n_cmd_lines = 0;
-    FILE *f = fopen(log_path, "r");
-    assert_non_null(f);
-    char line[PS_CANDUMP_LINE_MAX + 8];
-    while (fgets(line, sizeof(line), f) != NULL) {
-        ps_can_frame_t fr;
-        char ifname[PS_CANDUMP_IFNAME_MAX], err[PS_ERR_MSG_LEN];
-        assert_int_equal(ps_candump_parse(line, &fr, ifname, sizeof(ifname), err, sizeof(err)), 0);
-        if (fr.id >= 0x080)
-            n_fed_lines++;
-        else
-            n_cmd_lines++;
-    }
-    fclose(f);
-    assert_true(n_fed_lines > 10000 && n_cmd_lines > 10000);
-    snprintf(args, sizeof(args),
-             "--replay %s --board sim --start-after %.3f --duration 3 --quiet --candump %s",
-             log_path, start_s, again_path);
-    rc = run(args);
-    if (rc != 0)
-        fail_msg("replay: exit %d:\n%s", rc, out);
-    state_lines(replayed, sizeof(replayed));
+    int n_again = 0;
+    while (!record_and_replay(log_path, again_path, recorded, replayed, sizeof(recorded),
+                              &n_fed_lines, &n_cmd_lines))
+        if (++n_again > LOCKSTEP_AGAIN_MAX)
+            fail_msg("every pair of runs disturbed by overruns or late policy steps (a loaded "
+                     "host)");
     if (strstr(recorded, "STANDBY -> RAMP") == NULL || strstr(recorded, "RAMP -> ACTIVE") == NULL ||
         strcmp(recorded, replayed) != 0)
         fail_msg("transitions differ:\nrecorded:\n%sreplayed:\n%s", recorded, replayed);
@@ -1241,7 +1267,7 @@ static void test_cli_replay_of_a_lockstep_log_same_transitions_and_commands(void
     unlink(again_path);
     /* an interface the board does not have: refused before the run, with the
      * log's file and line */
-    f = fopen(log_path, "w");
+    FILE *f = fopen(log_path, "w");
     assert_non_null(f);
     fputs("(0000000001.000000) can0 001#FFFFFFFFFFFFFFFC\n"
           "(0000000001.000635) vcan5 101#0180008008001919\n",

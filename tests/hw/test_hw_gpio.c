@@ -326,8 +326,12 @@ static void test_estop_burst_beyond_fifo_level_right(void **state)
                   (unsigned long long)g_a.n_level_fixes);
 }
 
-/* A glitch shorter than the debounce is not reported; each try measures its
- * pulse and a try that came out too long under qemu is repeated. */
+/* A glitch shorter than the debounce is not reported. Each try measures its
+ * pulse, and a try that came out too long under a loaded qemu is repeated;
+ * so is one whose two edges the kernel merged into one interrupt (one event,
+ * the level read fixing the rest), which by design errs toward pressed
+ * (drivers/ps_gpio_gpiod.h) and is checked to. CI once failed the first
+ * version of this test, which counted such a try. */
 static void test_estop_glitch_shorter_than_debounce_ignored(void **state)
 {
     (void)state;
@@ -335,8 +339,9 @@ static void test_estop_glitch_shorter_than_debounce_ignored(void **state)
     c.estop_debounce_us = DEBOUNCE_US;
     open_ok(&g_a, &c);
     assert_false(read_pressed(&g_a));
-    int n_ok = 0;
-    for (int k = 0; k < 6 && n_ok < 3; k++) {
+    int n_ok = 0, k = 0;
+    for (; k < 12 && n_ok < 3; k++) {
+        const uint64_t n_fixes = g_a.n_level_fixes;
         const int64_t t0 = mono_ns();
         mock_set(0, 1);
         sleep_us(1000);
@@ -344,14 +349,25 @@ static void test_estop_glitch_shorter_than_debounce_ignored(void **state)
         const int64_t pulse_ns = mono_ns() - t0;
         sleep_us(2 * DEBOUNCE_US); /* the release holds: nothing pending */
         const bool is_pressed = read_pressed(&g_a);
+        if (g_a.n_level_fixes != n_fixes) {
+            print_message("glitch try %d: pulse %.2f ms, edges merged by the kernel (a level "
+                          "fix): reported pressed, not counted\n",
+                          k, (double)pulse_ns / 1e6);
+            assert_true(is_pressed);
+            assert_false(read_pressed(&g_a));
+            continue;
+        }
         if (pulse_ns >= (int64_t)DEBOUNCE_US * 1000 / 2) {
             print_message("glitch try %d: pulse %.2f ms, too long under qemu: not counted\n", k,
                           (double)pulse_ns / 1e6);
             continue;
         }
-        assert_false(is_pressed);
+        if (is_pressed)
+            fail_msg("glitch try %d: a pulse of %.3f ms (debounce %.1f ms) reported as a press", k,
+                     (double)pulse_ns / 1e6, DEBOUNCE_US / 1e3);
         n_ok++;
     }
+    print_message("glitch: %d of %d tries counted, none reported\n", n_ok, k);
     assert_int_equal(n_ok, 3);
 }
 
