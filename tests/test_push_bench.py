@@ -3,9 +3,11 @@
 hand-made trial records, no simulation: the job list (size, trial-major
 order, --first-trial to grow a grid later), delta-v50's interpolation, and
 merging trial files and earlier merged files into one table (a trial seen
-twice must agree; bad input is refused naming the file), and the table's
-per-controller means (heading, sliding, kinetic energy, the fallback). Prints cmocka's
-summary lines for tools/run-tests.sh.
+twice must agree, unless one was disturbed by the load; bad input is refused
+naming the file), the table's per-controller means (heading, sliding, kinetic
+energy, the fallback), and a trial run again while the load disturbs it (a
+stand-in for build/pushstep). Prints cmocka's summary lines for
+tools/run-tests.sh.
 """
 import json
 import os
@@ -154,6 +156,22 @@ class Merge(unittest.TestCase):
         self.assertIn("differs", err)
         self.assertFalse(os.path.exists(self.path("o.json")))
 
+    def test_a_disturbed_record_gives_way_to_an_undisturbed_one(self):
+        calm = record("mlp", 0, 0.3, 0.1, 0, False)
+        disturbed = dict(record("mlp", 0, 0.3, 0.1, 0, True), disturbed=True)
+        write_trials(self.path("a"), [calm])
+        write_trials(self.path("b"), [disturbed])
+        for order in (("a", "b"), ("b", "a")):
+            rc, table, err = cli("merge", *[self.path(x) for x in order],
+                                 "--out", self.path("o.json"))
+            self.assertEqual(rc, 0, err)
+            self.assertEqual(json.load(open(self.path("o.json")))["trials"], [calm])
+            self.assertNotIn("disturbed", table)
+        rc, table, err = cli("merge", self.path("b"), "--out", self.path("o.json"))
+        self.assertEqual(rc, 0, err)
+        self.assertIn("1 trial(s) disturbed by the machine's load in every run", table)
+        self.assertIn("mlp_d000_v0.30_t0.1_k00", table)
+
     def test_bad_sources_are_named(self):
         with open(self.path("bad.json"), "w") as fh:
             fh.write("{not json")
@@ -166,6 +184,63 @@ class Merge(unittest.TestCase):
             self.assertTrue(err.startswith("push.py merge: "), err)
             self.assertIn(words, err)
             self.assertIn(src, err)
+
+
+# A stand-in for build/pushstep: writes a --summary whose overruns come from
+# the counter file's next line (one line per run), and counts its runs.
+FAKE_PUSHSTEP = """#!/bin/sh
+summary=""
+while [ $# -gt 0 ]; do [ "$1" = --summary ] && summary=$2; shift; done
+n=$(wc -l < "$FAKE_RUNS")
+echo run >> "$FAKE_RUNS"
+overruns=$(sed -n "$((n + 1))p" "$FAKE_OVERRUNS")
+printf '{"overruns": %s, "counters": {"policy_late": 0}, "sim_truth": {"fell_while_active": %s}}' \\
+    "$overruns" "$( [ "$overruns" -gt 0 ] && echo true || echo false)" > "$summary"
+"""
+
+
+class Trial(unittest.TestCase):
+    def setUp(self):
+        self.tmp = tempfile.TemporaryDirectory()
+        self.d = self.tmp.name
+        self.bin = os.path.join(self.d, "pushstep")
+        with open(self.bin, "w") as fh:
+            fh.write(FAKE_PUSHSTEP)
+        os.chmod(self.bin, 0o755)
+        os.environ["FAKE_RUNS"] = os.path.join(self.d, "runs")
+        os.environ["FAKE_OVERRUNS"] = os.path.join(self.d, "overruns")
+        open(os.environ["FAKE_RUNS"], "w").close()
+
+    def tearDown(self):
+        self.tmp.cleanup()
+
+    def trial(self, overruns):
+        with open(os.environ["FAKE_OVERRUNS"], "w") as fh:
+            fh.write("".join("%d\n" % n for n in overruns))
+        open(os.environ["FAKE_RUNS"], "w").close()
+        rc, _, err = cli("trial", "stand,0,0.3,0.1,0", "--out", self.d, "--bin", self.bin)
+        self.assertEqual(rc, 0, err)
+        with open(os.environ["FAKE_RUNS"]) as fh:
+            n_runs = len(fh.readlines())
+        with open(os.path.join(self.d, "stand_d000_v0.30_t0.1_k00.json")) as fh:
+            return json.load(fh), n_runs, err
+
+    def test_an_undisturbed_run_is_run_once(self):
+        res, n_runs, err = self.trial([0, 0, 0])
+        self.assertEqual((n_runs, res["fell"], "disturbed" in res), (1, False, False))
+        self.assertEqual(err, "")
+
+    def test_a_disturbed_run_is_run_again(self):
+        res, n_runs, err = self.trial([2, 0, 0])
+        self.assertEqual((n_runs, res["fell"], "disturbed" in res), (2, False, False))
+        self.assertIn("run 1 disturbed by this machine's load (overruns 2, policy late 0): again",
+                      err)
+
+    def test_disturbed_every_time_is_kept_and_marked(self):
+        res, n_runs, err = self.trial([1, 1, 1, 0])
+        self.assertEqual((n_runs, res["fell"], res.get("disturbed")), (push.RUNS_MAX, True, True))
+        self.assertIn("run 3 disturbed", err)
+        self.assertIn("kept, marked disturbed", err)
 
 
 def main():
