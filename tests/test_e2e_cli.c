@@ -1081,17 +1081,20 @@ static void check_signal_in_every_state(int sig, const char *sig_name)
                 fail_full("%s in %s: loop ran %.2f s, signal %.2f s after spawn, exit %.2f s "
                           "after it:\n%s",
                           sig_name, c->state, loop_s, sent_s, exit_s, out);
-            const double overruns = num(j, "overruns");
+            /* a late policy step (HOLD) as well as overruns: an ASan build's
+             * step once took 513 us against the 500 us deadline under load */
+            const bool is_host_disturbed = is_disturbed(j);
             char why[160] = "";
             const bool is_path_ok = !is_startup_estop && took_expected_path(c, j, why, sizeof(why));
             cJSON_Delete(j);
             unlink(path);
-            const bool is_again = !is_path_ok && (is_startup_estop || overruns > 0);
+            const bool is_again = !is_path_ok && (is_startup_estop || is_host_disturbed);
             print_message("      %s in %s, try %d: exit %d after %.2f s%s%s\n", sig_name, c->state,
                           r + 1, rc, exit_s, is_again ? ", again: " : "",
                           !is_again          ? ""
                           : is_startup_estop ? "start-up fault"
-                                             : "host disturbed the run (overruns)");
+                                             : "host disturbed the run (overruns or a late "
+                                               "policy step)");
             if (!is_path_ok && !is_again)
                 fail_full("%s in %s: %s in:\n%s", sig_name, c->state, why, out);
             if (is_again && ++n_again > SIG_AGAIN_MAX)
