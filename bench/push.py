@@ -119,7 +119,8 @@ def run_trial(spec, out_dir, binary):
         s = run_once(spec, binary, text)
         if s is None:
             return 1
-        if not is_disturbed(s):
+        disturbed = is_disturbed(s)
+        if not disturbed:
             break
         sys.stderr.write("trial %s: run %d disturbed by this machine's load (overruns %d, "
                          "policy late %d)%s\n" % (
@@ -143,7 +144,7 @@ def run_trial(spec, out_dir, binary):
         res["fallback_steps"] = pol["fallback_steps"]
         res["fallback_takeovers"] = pol["fallback_takeovers"]
         res["first_takeover_t_s"] = pol.get("first_takeover_t_s")
-    if is_disturbed(s):
+    if disturbed:
         res["disturbed"] = True
     with open(os.path.join(out_dir, spec_id(spec) + ".json"), "w") as fh:
         json.dump(res, fh)

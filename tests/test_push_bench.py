@@ -97,6 +97,16 @@ class Merge(unittest.TestCase):
     def path(self, name):
         return os.path.join(self.d, name)
 
+    def merged_both_ways(self, a, b):
+        """Merges directories a and b in both orders: each order's trials and table."""
+        out = []
+        for order in ((a, b), (b, a)):
+            rc, table, err = cli("merge", *[self.path(x) for x in order],
+                                 "--out", self.path("o.json"))
+            self.assertEqual(rc, 0, err)
+            out.append((json.load(open(self.path("o.json")))["trials"], table))
+        return out
+
     def test_trial_files_and_a_merged_file_combine(self):
         first = [record("mlp", 0, 0.3, 0.1, k, k == 1) for k in range(2)]
         later = [record("mlp", 0, 0.3, 0.1, k, k != 2) for k in range(2, 4)]
@@ -119,11 +129,8 @@ class Merge(unittest.TestCase):
                    fallback_takeovers={"out_of_range": 1, "late": 0})
         write_trials(self.path("a"), [old])
         write_trials(self.path("b"), [new])
-        for order in (("a", "b"), ("b", "a")):
-            rc, table, err = cli("merge", *[self.path(x) for x in order],
-                                 "--out", self.path("o.json"))
-            self.assertEqual(rc, 0, err)
-            self.assertEqual(json.load(open(self.path("o.json")))["trials"], [new])
+        for trials, _ in self.merged_both_ways("a", "b"):
+            self.assertEqual(trials, [new])
 
     def test_per_controller_means_and_fallback(self):
         rows = [dict(record("mlp", 0, 0.3, 0.1, 0, False), heading_dev_deg=10.0,
@@ -161,11 +168,8 @@ class Merge(unittest.TestCase):
         disturbed = dict(record("mlp", 0, 0.3, 0.1, 0, True), disturbed=True)
         write_trials(self.path("a"), [calm])
         write_trials(self.path("b"), [disturbed])
-        for order in (("a", "b"), ("b", "a")):
-            rc, table, err = cli("merge", *[self.path(x) for x in order],
-                                 "--out", self.path("o.json"))
-            self.assertEqual(rc, 0, err)
-            self.assertEqual(json.load(open(self.path("o.json")))["trials"], [calm])
+        for trials, table in self.merged_both_ways("a", "b"):
+            self.assertEqual(trials, [calm])
             self.assertNotIn("disturbed", table)
         rc, table, err = cli("merge", self.path("b"), "--out", self.path("o.json"))
         self.assertEqual(rc, 0, err)

@@ -330,8 +330,8 @@ static void test_estop_burst_beyond_fifo_level_right(void **state)
  * pulse, and a try that came out too long under a loaded qemu is repeated;
  * so is one whose two edges the kernel merged into one interrupt (one event,
  * the level read fixing the rest), which by design errs toward pressed
- * (drivers/ps_gpio_gpiod.h) and is checked to. CI once failed the first
- * version of this test, which counted such a try. */
+ * (drivers/ps_gpio_gpiod.h) and is checked to. The first version of this
+ * test, which counted such a try, failed in CI and, under load, here. */
 static void test_estop_glitch_shorter_than_debounce_ignored(void **state)
 {
     (void)state;
