@@ -79,13 +79,11 @@ RUNS_MAX = 3  # runs of a trial while this machine's load disturbs them
 
 
 def is_disturbed(summary):
-    """Lockstep judges a late policy step and an overrunning tick on the loop
-    thread's CPU time (rt/ps_loop.h), and on a loaded machine (a VM without
-    steal accounting) time taken from the thread counts as its own: a late
-    step hands the slot to the fallback and changes what the robot does, so
-    such a run depends on the load, not only on its spec."""
-    return (summary.get("overruns", 0) > 0 or
-            summary.get("counters", {}).get("policy_late", 0) > 0)
+    """The runtime says whether a lockstep run was a function of its spec
+    alone: it judges a late policy step and an overrunning tick on the loop
+    thread's CPU time (rt/ps_loop.h), which a loaded machine inflates, and a
+    late step hands the slot to the fallback."""
+    return summary.get("deterministic") is not True
 
 
 def run_once(spec, binary, text):

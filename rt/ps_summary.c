@@ -247,6 +247,16 @@ static cJSON *recorder_json(const ps_recorder_stats_t *r, bool has_cont)
     return o;
 }
 
+/* Lockstep runs on simulated time, but judges an overrunning tick and a late
+ * policy step on the loop thread's CPU time (rt/ps_loop.h): either changes what
+ * the robot does (a hold, the fallback taking over), and on a loaded machine (a
+ * VM without steal accounting) time taken from the thread counts as its own.
+ * A lockstep run with neither is a function of its inputs alone. */
+static bool is_deterministic(const ps_summary_t *s)
+{
+    return s->is_lockstep && s->loop->pacer.n_overruns == 0 && s->loop->counters.n_policy_late == 0;
+}
+
 static cJSON *summary_json(const ps_summary_t *s)
 {
     const ps_loop_t *loop = s->loop;
@@ -255,6 +265,7 @@ static cJSON *summary_json(const ps_summary_t *s)
     cJSON_AddStringToObject(root, "robot", s->robot_path);
     cJSON_AddStringToObject(root, "scenario", s->scenario_path ? s->scenario_path : "");
     cJSON_AddStringToObject(root, "mode", s->is_lockstep ? "lockstep" : "realtime");
+    cJSON_AddBoolToObject(root, "deterministic", is_deterministic(s));
     cJSON_AddNumberToObject(root, "loop_s", s->loop_s);
     cJSON_AddNumberToObject(root, "wall_s", s->wall_s);
     cJSON_AddNumberToObject(root, "ticks", (double)loop->counters.n_ticks);
@@ -421,6 +432,12 @@ void ps_summary_print(const ps_summary_t *s, FILE *out)
             s->loop_s, s->wall_s, s->wall_s > 0 ? s->loop_s / s->wall_s : 0.0,
             (unsigned long long)loop->counters.n_ticks, (unsigned long long)loop->pacer.n_overruns,
             (unsigned long long)loop->pacer.n_missed, ps_sm_state_name(loop->state));
+    if (s->is_lockstep && !is_deterministic(s))
+        fprintf(out,
+                "  not deterministic: %llu overruns and %llu late policy steps on this "
+                "machine's CPU time (a loaded host?); a rerun may differ\n",
+                (unsigned long long)loop->pacer.n_overruns,
+                (unsigned long long)loop->counters.n_policy_late);
     fprintf(out, " latency per stage:\n");
     for (int st = 0; st < PS_STAGE_COUNT; st++)
         print_stage(out, ps_loop_stage_name((ps_stage_t)st), &loop->perf[st]);

@@ -191,15 +191,17 @@ class Merge(unittest.TestCase):
 
 
 # A stand-in for build/pushstep: writes a --summary whose overruns come from
-# the counter file's next line (one line per run), and counts its runs.
+# the counter file's next line (one line per run), not deterministic when
+# there are any, as the runtime's, and counts its runs.
 FAKE_PUSHSTEP = """#!/bin/sh
 summary=""
 while [ $# -gt 0 ]; do [ "$1" = --summary ] && summary=$2; shift; done
 n=$(wc -l < "$FAKE_RUNS")
 echo run >> "$FAKE_RUNS"
 overruns=$(sed -n "$((n + 1))p" "$FAKE_OVERRUNS")
-printf '{"overruns": %s, "counters": {"policy_late": 0}, "sim_truth": {"fell_while_active": %s}}' \\
-    "$overruns" "$( [ "$overruns" -gt 0 ] && echo true || echo false)" > "$summary"
+det=$( [ "$overruns" -gt 0 ] && echo false || echo true)
+printf '{"overruns": %s, "deterministic": %s, "counters": {"policy_late": 0}, "sim_truth": {"fell_while_active": %s}}' \\
+    "$overruns" "$det" "$( [ "$overruns" -gt 0 ] && echo true || echo false)" > "$summary"
 """
 
 
