@@ -74,6 +74,34 @@ def adv0(fell, boot):
 assert adv0(1, True) == -9.0 and adv0(0, False) == -9.0, (adv0(1, True), adv0(0, False))
 assert adv0(0, True) == -4.0, adv0(0, True)
 "
+name="--stair-p: each direction's delta-v steps down after a fall, up after a push withstood"
+# a stand-in environment records the pushes set; info rows as psenv's:
+# [0] fell, [1] ended, [7] pushes so far
+check /usr/bin/python3 -c "
+import sys; sys.path.insert(0, 'policy/train'); import numpy as np, train
+class Env:
+    n = 2
+    def __init__(self): self.set = []
+    def set_push(self, i, t_s, dur_s, dv, direction): self.set.append((i, t_s, dur_s, dv, direction))
+def ended(i, fell, pushes):
+    info = np.zeros((2, 8), np.float32); info[i, :2] = (fell, 1); info[i, 7] = pushes
+    return info
+env = Env(); st = train.Staircase(env, 1.0, 0.1, 0.5, np.random.default_rng(1))
+for i, t_s, dur_s, dv, d in env.set:
+    assert 0.8 <= t_s <= 2.0 and dur_s in (0.1, 0.3) and abs(dv - 0.5) <= 0.05, env.set
+k, j = st.queued[0]; w = 2 * np.pi / 16
+assert abs(env.set[0][4] - k * w) <= w / 2 and env.set[0][2] == (0.1, 0.3)[j], (env.set[0], k, j)
+first = list(st.queued); st.started()
+assert st.running == first and len(env.set) == 4
+a = st.running[0]; st.observe(ended(0, 1, 1))          # fell after the push: down
+assert abs(st.dv[a] - 0.4) < 1e-9 and st.n[a] == 1 and st.fell[a] == 1, st.dv[a]
+b = st.running[1]; before = st.dv[b]; st.observe(ended(1, 0, 1))  # withstood: up
+assert abs(st.dv[b] - before - 0.1) < 1e-9 and st.n[b] == (1 if b != a else 2)
+c = st.running[0]; before = st.dv[c]; st.observe(ended(0, 1, 0))  # fell before its push: kept
+assert st.dv[c] == before and st.n.sum() == 2 and len(env.set) == 7
+random = train.Staircase(Env(), 0.0, 0.1, 0.5, np.random.default_rng(1))
+assert random.queued == [None, None] and all(s[2] == 0.0 for s in random.env.set)
+"
 name="eval.py runs the benchmark's pushes in the training environment"
 check bash -c "/usr/bin/python3 policy/train/eval.py --weights $out/p.safetensors --dv 0.15 \
     --durations 0.1 --directions 2 --harness --out $out/e.json >$out/eval.out 2>&1 \

@@ -141,7 +141,7 @@ def plot(log_csv, png):
 
 
 def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=True,
-            explore=True, dart_std=0.0):
+            explore=True, dart_std=0.0, stair=None):
     """n_steps of every environment. beta_expert: probability that an
     environment follows the expert this step (DAgger)."""
     n = env.n
@@ -169,6 +169,8 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
             # its previous action and integrates PPO's exploration noise
             a = a + dart_std * rng.standard_normal(a.shape).astype(np.float32)
         obs2, rew, done, expert2, info = env.step(a)
+        if stair is not None:
+            stair.observe(info)
         buf["obs"].append(o)
         buf["raw"].append(obs)
         buf["act"].append(a)
@@ -203,6 +205,71 @@ def gae(buf, last_v, gamma, lam, bootstrap_timeouts=False):
         g = delta + gamma * lam * (1 - done[t]) * g
         adv[t] = g
     return adv, adv + val
+
+
+class Staircase:
+    """Per-direction push sampling (--stair-p): each of N_DIR directions and
+    both durations keeps its own delta-v, one step up after a push the robot
+    withstood, one step down after a fall, so it settles where half of them
+    fall (that direction's dv50 in training) and the pushes a direction
+    handles worst come at its own edge instead of the whole circle's.
+
+    An episode's push is set for the environment's episode after next (the C
+    environment has begun the next one when it reports an end), so each
+    environment holds the push of its running episode and of the one queued."""
+    N_DIR = 16
+    DURS = (0.1, 0.3)
+
+    def __init__(self, env, p, step, dv0, rng):
+        self.env, self.p, self.step, self.rng = env, p, step, rng
+        self.dv = np.full((self.N_DIR, len(self.DURS)), dv0)
+        self.n = np.zeros((self.N_DIR, len(self.DURS)), np.int64)
+        self.fell = np.zeros_like(self.n)
+        self.running = [None] * env.n
+        self.queued = [self._queue(i) for i in range(env.n)]
+
+    def _queue(self, i):
+        """Set environment i's next push: a staircase one with probability p
+        (direction bin k, duration j), else a random one (None)."""
+        if self.rng.random() >= self.p:
+            self.env.set_push(i, 0.0, 0.0, 0.0, 0.0)
+            return None
+        k, j = int(self.rng.integers(self.N_DIR)), int(self.rng.integers(len(self.DURS)))
+        width = 2.0 * np.pi / self.N_DIR
+        direction = k * width + self.rng.uniform(-0.5, 0.5) * width
+        dv = max(0.05, self.dv[k, j] + self.rng.uniform(-0.5, 0.5) * self.step)
+        self.env.set_push(i, float(self.rng.uniform(0.8, 2.0)), self.DURS[j], float(dv),
+                          float(direction))
+        return (k, j)
+
+    def started(self):
+        """After env.reset(): the queued pushes are running; queue the next."""
+        self.running = self.queued
+        self.queued = [self._queue(i) for i in range(self.env.n)]
+
+    def observe(self, info):
+        """One step's info of every environment (psenv.INFO_KEYS)."""
+        for i in np.flatnonzero(info[:, 1] > 0):
+            kj = self.running[i]
+            # a fall before the push (released from the harness badly) says
+            # nothing about the push
+            if kj is not None and info[i, 7] >= 1:
+                fell = info[i, 0] > 0
+                self.n[kj] += 1
+                self.fell[kj] += int(fell)
+                self.dv[kj] = float(np.clip(self.dv[kj] + (-self.step if fell else self.step),
+                                            0.05, 1.2))
+            self.running[i] = self.queued[i]
+            self.queued[i] = self._queue(i)
+
+    def write(self, path):
+        with open(path, "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["force_dir_deg", "dur_s", "dv_m_s", "pushes", "falls"])
+            for k in range(self.N_DIR):
+                for j, d in enumerate(self.DURS):
+                    w.writerow(["%.1f" % (360.0 * k / self.N_DIR), d, "%.3f" % self.dv[k, j],
+                                self.n[k, j], self.fell[k, j]])
 
 
 def stats(buf):
@@ -264,7 +331,16 @@ def main():
                     help="fraction of pushes from --focus-dir-deg +-45 deg")
     ap.add_argument("--focus-dir-deg", type=float, default=180.0,
                     help="direction of the focused pushes' force (0 = +x, forward)")
+    ap.add_argument("--stair-p", type=float, default=0.0,
+                    help="fraction of episodes whose one push comes from a per-direction "
+                         "staircase (16 directions x 0.1/0.3 s, delta-v up a step after a "
+                         "push withstood, down after a fall); log-dir/stair.csv has the levels")
+    ap.add_argument("--stair-step", type=float, default=0.02, help="staircase step (m/s)")
+    ap.add_argument("--stair-dv0", type=float, default=0.4,
+                    help="staircase starting delta-v (m/s)")
     a = ap.parse_args()
+    if not 0.0 <= a.stair_p <= 1.0 or not a.stair_step > 0.0 or not a.stair_dv0 > 0.0:
+        raise SystemExit("--stair-p is in [0, 1], --stair-step and --stair-dv0 > 0")
 
     torch.set_num_threads(1)
     torch.manual_seed(a.seed)
@@ -311,11 +387,17 @@ def main():
                            os.path.basename(a.init), a.critic_warmup, a.bc_weight,
                            a.push_dv_min, a.harness_p, a.focus_p, a.focus_dir_deg, a.gamma,
                            a.gae_lambda, " --fixed-std" if a.fixed_std else ""))
+    if a.stair_p > 0.0:
+        trained_by += " --stair-p %g --stair-step %g --stair-dv0 %g" % (
+            a.stair_p, a.stair_step, a.stair_dv0)
     if a.bootstrap_timeouts:
         trained_by += " --bootstrap-timeouts"
         # and how the file it started from was made
         trained_by += "; %s was: %s" % (os.path.basename(a.init), init_c.get("trained_by", "?"))
+    stair = Staircase(env, a.stair_p, a.stair_step, a.stair_dv0, rng) if a.stair_p > 0 else None
     obs = env.reset()
+    if stair:
+        stair.started()
     expert = np.zeros((env.n, env.n_act), np.float32)
     _, _, _, expert, _ = env.step(expert)  # the expert's first labels
     obs = env.obs.copy()
@@ -337,7 +419,7 @@ def main():
         beta = max(0.0, 1.0 - it / max(1, a.bc_iters * 0.75)) if is_bc else 0.0
         buf, obs, expert, last_v = rollout(env, net, norm, obs, a.steps, beta, expert, rng,
                                            update_norm=not a.init, explore=not is_bc,
-                                           dart_std=a.dart_std if is_bc else 0.0)
+                                           dart_std=a.dart_std if is_bc else 0.0, stair=stair)
         n_env_steps += a.steps * env.n
         st = stats(buf)
         O = torch.from_numpy(buf["obs"].reshape(-1, env.n_obs))
@@ -413,8 +495,12 @@ def main():
                         falls="%.2f" % st["falls_per_ep"])
         if (it + 1) % 20 == 0 or it + 1 == total:
             save(a.out, net, norm, doc, hidden, trained_by)
+            if stair:
+                stair.write(os.path.join(a.log_dir, "stair.csv"))
     logf.close()
     env.close()
+    if stair:
+        stair.write(os.path.join(a.log_dir, "stair.csv"))
     save(a.out, net, norm, doc, hidden, trained_by)
     png = os.path.join(a.log_dir, "curves.png")
     print("wrote %s (%d env steps, %.0f s); log %s%s" % (
