@@ -82,8 +82,14 @@ def parse(model):
         if isinstance(nxt, list):  # x * sigmoid(x)
             sig = [c for c in nxt if c.op_type == "Sigmoid"][0]
             mul = [c for c in nxt if c.op_type == "Mul"][0]
-            if sig.output[0] not in mul.input or not layers or layers[-1][2] is not None:
+            # exactly y = x * s, s = Sigmoid(x), both new tensors: a Sigmoid that
+            # writes over its own input leaves s computed by nothing
+            if (list(sig.input) != [cur] or len(sig.output) != 1 or len(mul.output) != 1 or
+                    sorted(mul.input) != sorted([cur, sig.output[0]]) or
+                    sig.output[0] in seen or mul.output[0] in seen or
+                    sig.output[0] == mul.output[0] or not layers or layers[-1][2] is not None):
                 raise Unsupported("%s: not x * Sigmoid(x) after a dense layer" % _where(mul))
+            seen.update([sig.output[0], mul.output[0]])
             layers[-1][2] = "silu"
             used.update([id(sig), id(mul)])
             cur = mul.output[0]
