@@ -395,6 +395,13 @@ def main():
         # and how the file it started from was made
         trained_by += "; %s was: %s" % (os.path.basename(a.init), init_c.get("trained_by", "?"))
     stair = Staircase(env, a.stair_p, a.stair_step, a.stair_dv0, rng) if a.stair_p > 0 else None
+    stair_csv = os.path.join(a.log_dir, "stair.csv")
+
+    def checkpoint():
+        save(a.out, net, norm, doc, hidden, trained_by)
+        if stair:
+            stair.write(stair_csv)
+
     obs = env.reset()
     if stair:
         stair.started()
@@ -494,14 +501,10 @@ def main():
         bar.set_postfix(phase="bc" if is_bc else "ppo", rew="%.3f" % st["rew"],
                         falls="%.2f" % st["falls_per_ep"])
         if (it + 1) % 20 == 0 or it + 1 == total:
-            save(a.out, net, norm, doc, hidden, trained_by)
-            if stair:
-                stair.write(os.path.join(a.log_dir, "stair.csv"))
+            checkpoint()
     logf.close()
     env.close()
-    if stair:
-        stair.write(os.path.join(a.log_dir, "stair.csv"))
-    save(a.out, net, norm, doc, hidden, trained_by)
+    checkpoint()  # also when --stop-after cut the run short
     png = os.path.join(a.log_dir, "curves.png")
     print("wrote %s (%d env steps, %.0f s); log %s%s" % (
         a.out, n_env_steps, time.time() - t0, log_path,
