@@ -52,6 +52,7 @@
 #include "../rt/ps_perception.h"
 #include "../rt/ps_recorder.h"
 #include "fakes/ps_cli.h"
+#include "fakes/ps_clock_fake.h"
 #include "fakes/ps_san.h"
 
 #define START_NS PS_NS_PER_S
@@ -84,10 +85,10 @@ int clock_gettime(clockid_t id, struct timespec *ts)
 
 typedef enum {
     IMU_PASS = 0,
-    IMU_DROP,      /* no IMU frames: silence */
-    IMU_FROZEN,    /* the same two frames (same seq) again and again */
-    IMU_NAN,       /* the sensor's gyro reads NaN (its encoder flags it) */
-    IMU_SATURATED, /* gyro beyond its range */
+    IMU_DROP,          /* no IMU frames: silence */
+    IMU_FROZEN,        /* the same two frames (same seq) again and again */
+    IMU_NAN,           /* the sensor's gyro reads NaN (its encoder flags it) */
+    IMU_SATURATED,     /* gyro beyond its range */
     IMU_FROZEN_VALUES, /* the same six values, the seq advancing */
 } imu_fault_t;
 
@@ -139,18 +140,19 @@ static int64_t now_ns(void)
     return ps_clock_now_ns(app.loop.cfg.clock);
 }
 
-static int64_t thread_cpu_ns(void)
-{
-    struct timespec ts;
-    (void)clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-    return (int64_t)ts.tv_sec * PS_NS_PER_S + ts.tv_nsec;
-}
+/* The loop's deadline clock here (rt/ps_loop.h deadline_clock; in lockstep
+ * the thread's CPU time, which judges a late policy step and an overrunning
+ * tick): the CPU time the fakes declare they burnt, nothing else. On a
+ * virtual machine without steal accounting the host's time away from the
+ * vCPU counts as the thread's, so a loaded CI host once made a step "late"
+ * while the robot ramped up and it went DAMPING before any fault was
+ * injected. The rows test the runtime's reaction to lateness, not the host;
+ * the real CPU-time clock runs end to end in tests/test_e2e_cli.c. */
+static ps_clock_fake_t declared_cpu;
 
 static void burn_cpu(int64_t ns)
 {
-    const int64_t until = thread_cpu_ns() + ns;
-    while (thread_cpu_ns() < until) {
-    }
+    ps_clock_fake_advance(&declared_cpu, ns);
 }
 
 /* ---- a CAN port wrapper: injection and an independent command check ------ */
@@ -551,6 +553,10 @@ static void start_system_robot(const char *robot, const char *extra_events, doub
     n_heartbeat_refused = 0;
     policy_inner = app.loop.cfg.policy;
     app.loop.cfg.policy = (ps_policy_t){.ops = &POLICY_OPS, .ctx = NULL};
+    ps_clock_fake_init(&declared_cpu, 0);
+    app.loop.cfg.deadline_clock = &declared_cpu.clock;
+    if (app.mlp.clock != NULL)
+        app.mlp.clock = &declared_cpu.clock; /* its own late check: the same clock */
 
     if (!has_rec_dir)
         has_rec_dir = mkdtemp(rec_dir) != NULL;
@@ -740,7 +746,12 @@ static void run_row(void **state)
     start_system_robot(r->is_thermal_robot ? thermal_robot_path() : NULL, r->events,
                        r->ring_s > 0 ? r->ring_s : 4.0);
     step_until(INJECT_S);
-    assert_int_equal(app.loop.state, PS_SM_ACTIVE);
+    if (app.loop.state != PS_SM_ACTIVE)
+        fail_msg("%s before the injection at %.2f s (conditions now 0x%x; %llu late policy "
+                 "steps, %llu overruns)",
+                 ps_sm_state_name(app.loop.state), INJECT_S, app.loop.last.cond,
+                 (unsigned long long)app.loop.counters.n_policy_late,
+                 (unsigned long long)app.loop.pacer.n_overruns);
     const uint64_t inj = app.loop.counters.n_ticks;
     if (r->arm != NULL)
         r->arm();
@@ -1070,8 +1081,7 @@ static void arm_imu_frozen_values(void)
 static void check_imu_frozen_values(void)
 {
     print_message("      %llu samples refused as frozen (imu.frozen_samples %u)\n",
-                  (unsigned long long)app.loop.counters.n_imu_frozen,
-                  app.robot.imu.frozen_samples);
+                  (unsigned long long)app.loop.counters.n_imu_frozen, app.robot.imu.frozen_samples);
     assert_true(app.loop.counters.n_imu_frozen > 0);
     assert_int_equal(app.loop.counters.n_imu_repeated, 0);
     assert_int_equal(app.loop.counters.n_imu_rejected, 0);
@@ -1098,8 +1108,8 @@ static void check_flipped_replies_unused(void)
     for (uint64_t i = head_at_arm_flip; i < head; i++) {
         assert_int_equal(ps_recorder_read(&rec, i, &rtick), 0);
         if (rtick.q_rad[L_KNEE] < l->pos_min_rad || rtick.q_rad[L_KNEE] > l->pos_max_rad)
-            fail_msg("tick %llu: l_knee measured at %.3f rad",
-                     (unsigned long long)rtick.tick, (double)rtick.q_rad[L_KNEE]);
+            fail_msg("tick %llu: l_knee measured at %.3f rad", (unsigned long long)rtick.tick,
+                     (double)rtick.q_rad[L_KNEE]);
     }
 }
 
