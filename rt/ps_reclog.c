@@ -515,6 +515,17 @@ static int select_cols(log_t *lg)
     return 0;
 }
 
+/* Integral values (ticks, times in ns, counters, flags) in full, as integers:
+ * %.9g would write a time of 4,493,000,000 ns as 4.493e+09. Up to 2^53 a
+ * double holds every integer exactly. */
+static void write_value(FILE *f, char sep, double v)
+{
+    if (v == trunc(v) && fabs(v) < 9007199254740992.0)
+        fprintf(f, "%c%.0f", sep, v);
+    else
+        fprintf(f, "%c%.9g", sep, v);
+}
+
 static void emit_row(log_t *lg)
 {
     const double t_s = (double)(lg->row_t - lg->t0) * 1e-9;
@@ -533,7 +544,7 @@ static void emit_row(log_t *lg)
             if (isnan(lg->row[i])) /* no value: empty in CSV, gnuplot's missing */
                 fputs(k == 0 ? "," : "\tNaN", f);
             else
-                fprintf(f, k == 0 ? ",%.9g" : "\t%.9g", lg->row[i]);
+                write_value(f, k == 0 ? ',' : '\t', lg->row[i]);
         fputc('\n', f);
     }
     lg->n_rows++;

@@ -318,9 +318,22 @@ static void check_log_command(const char *path, uint64_t n_ticks)
     assert_true(strncmp(line, "t_s,estimate.tick,estimate.t_ns,", 32) == 0);
     assert_non_null(strstr(line, ",estimate.capture_point_m[0],"));
     assert_non_null(strstr(line, ",joints.q_rad.l_knee,truth.push_force_n[0]\n"));
-    uint32_t n_push = 0;
+    uint32_t n_push = 0, n_rows = 0;
+    long long tick_before = -1, t_ns_before = -1;
     while (fgets(line, sizeof(line), f) != NULL) {
         const double t_s = atof(line);
+        /* the tick and its time in ns as integers, in full: one tick, 1 ms */
+        char *end = NULL;
+        const long long tick = strtoll(strchr(line, ',') + 1, &end, 10);
+        assert_true(*end == ',');
+        const long long t_ns = strtoll(end + 1, &end, 10);
+        assert_true(*end == ',');
+        if (n_rows++ > 0) {
+            assert_true(tick == tick_before + 1);
+            assert_true(t_ns == t_ns_before + 1000000);
+        }
+        tick_before = tick;
+        t_ns_before = t_ns;
         const char *last = strrchr(line, ',');
         if (atof(last + 1) > 299.0) {
             n_push++;
