@@ -123,10 +123,10 @@ int ps_render_create(const ps_render_cfg_t *cfg, const mjModel *m, ps_render_t *
         ps_err_format(err, err_len, "render: fps %g out of range (0, 200]", cfg->fps);
         return -EINVAL;
     }
-    if (cfg->width < 16 || cfg->height < 16 || cfg->width > m->vis.global.offwidth ||
-        cfg->height > m->vis.global.offheight || cfg->width % 2 || cfg->height % 2) {
+    if (cfg->width < 16 || cfg->height < 16 || cfg->width > PS_RENDER_MAX_WIDTH ||
+        cfg->height > PS_RENDER_MAX_HEIGHT || cfg->width % 2 || cfg->height % 2) {
         ps_err_format(err, err_len, "render: frame size %dx%d: even, 16x16 to %dx%d",
-                      cfg->width, cfg->height, m->vis.global.offwidth, m->vis.global.offheight);
+                      cfg->width, cfg->height, PS_RENDER_MAX_WIDTH, PS_RENDER_MAX_HEIGHT);
         return -EINVAL;
     }
     if (!(cfg->area_m[2] > cfg->area_m[0] && cfg->area_m[3] > cfg->area_m[1])) {
@@ -149,6 +149,13 @@ int ps_render_create(const ps_render_cfg_t *cfg, const mjModel *m, ps_render_t *
         rc = -ENOMEM;
         goto fail;
     }
+    /* MuJoCo sizes the offscreen buffer from the model (<visual><global
+     * offwidth/offheight>, 640 x 480 by default, which the robot's own
+     * MJCF keeps): the renderer's copy gets room for the frame. */
+    if (r->m->vis.global.offwidth < cfg->width)
+        r->m->vis.global.offwidth = cfg->width;
+    if (r->m->vis.global.offheight < cfg->height)
+        r->m->vis.global.offheight = cfg->height;
     if (cfg->dir != NULL) {
         (void)snprintf(r->dir, sizeof(r->dir), "%s", cfg->dir);
         rc = make_dir(r->dir);

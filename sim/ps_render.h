@@ -32,10 +32,13 @@ struct mjData_;
 
 typedef struct ps_render ps_render_t;
 
+#define PS_RENDER_MAX_WIDTH  1920 /**< largest frame */
+#define PS_RENDER_MAX_HEIGHT 1080
+
 typedef struct {
     const char *dir;         /**< output folder (made if missing); NULL: no files */
     double fps;              /**< frames per simulated second */
-    int width, height;       /**< frame size, even, at most 1280 x 720 */
+    int width, height;       /**< frame size, even, 16 x 16 to PS_RENDER_MAX_* */
     bool is_view;            /**< also show frames in a window */
     bool is_lockstep;        /**< wait for the renderer rather than drop frames */
     bool is_census;          /**< count what each frame shows (tests; renders twice) */

@@ -79,8 +79,10 @@ static ps_plant_t *press_plant(ps_crowd_cfg_t *c)
     return p;
 }
 
-/* Decode an RGB PNG: size and the number of distinct colours. */
-static int png_stats(const char *path, int *out_w, int *out_h, uint32_t *out_colours)
+/* Decode an RGB PNG: size, the number of distinct colours and of black
+ * pixels (every channel below 8; out_black may be NULL). */
+static int png_stats(const char *path, int *out_w, int *out_h, uint32_t *out_colours,
+                     uint32_t *out_black)
 {
     FILE *f = fopen(path, "rb");
     if (f == NULL)
@@ -99,12 +101,14 @@ static int png_stats(const char *path, int *out_w, int *out_h, uint32_t *out_col
     unsigned char *row = malloc(3u * (size_t)w);
     static unsigned char seen[1u << 21]; /* 15-bit colour buckets */
     memset(seen, 0, sizeof(seen));
-    uint32_t n = 0;
+    uint32_t n = 0, n_black = 0;
     for (int y = 0; y < h; y++) {
         png_read_row(png, row, NULL);
         for (int x = 0; x < w; x++) {
+            n_black += row[3 * x] < 8 && row[3 * x + 1] < 8 && row[3 * x + 2] < 8;
             const unsigned c = (unsigned)(row[3 * x] >> 1) << 14 |
-                               (unsigned)(row[3 * x + 1] >> 1) << 7 | (unsigned)(row[3 * x + 2] >> 1);
+                               (unsigned)(row[3 * x + 1] >> 1) << 7 |
+                               (unsigned)(row[3 * x + 2] >> 1);
             n += seen[c] ? 0u : 1u;
             seen[c] = 1;
         }
@@ -115,6 +119,8 @@ static int png_stats(const char *path, int *out_w, int *out_h, uint32_t *out_col
     *out_w = w;
     *out_h = h;
     *out_colours = n;
+    if (out_black != NULL)
+        *out_black = n_black;
     return 0;
 }
 
@@ -173,19 +179,19 @@ static void test_render_records_frames_density_and_mp4(void **state)
            res.agent_px, res.n_agents_seen);
     assert_int_equal(res.n_frames, 16);
     assert_int_equal(res.n_dropped, 0);
-    assert_true(res.robot_px > 1000);    /* the robot (1888 px when written), through the people */
+    assert_true(res.robot_px > 1000);     /* the robot (1888 px when written), through the people */
     assert_true(res.n_agents_seen >= 10); /* most of the people around it */
     char path[600];
     int w, h;
     uint32_t colours;
     (void)snprintf(path, sizeof(path), "%s/frame_00015.png", dir);
-    assert_int_equal(png_stats(path, &w, &h, &colours), 0);
+    assert_int_equal(png_stats(path, &w, &h, &colours, NULL), 0);
     printf("render: %s %dx%d, %u colours\n", path, w, h, colours);
     assert_int_equal(w, 640);
     assert_int_equal(h, 360);
     assert_true(colours > 500); /* shaded bodies, floor, text: not blank */
     (void)snprintf(path, sizeof(path), "%s/density.png", dir);
-    assert_int_equal(png_stats(path, &w, &h, &colours), 0);
+    assert_int_equal(png_stats(path, &w, &h, &colours, NULL), 0);
     printf("render: %s %dx%d, %u colours\n", path, w, h, colours);
     assert_true(res.is_density);
     assert_true(colours > 20);
@@ -201,6 +207,70 @@ static void test_render_records_frames_density_and_mp4(void **state)
         (void)snprintf(cmd, sizeof(cmd), "rm -rf '%s'", dir);
         assert_int_equal(system(cmd), 0);
     }
+}
+
+/* The robot alone (no crowd scene around it): its MJCF leaves MuJoCo's
+ * 640 x 480 offscreen buffer, yet the frames come at `pushstep --render`'s
+ * 960 x 540 (they used to be refused: "frame size 960x540: even, 16x16 to
+ * 640x480"). */
+static void test_render_robot_alone_at_the_cli_frame_size(void **state)
+{
+    (void)state;
+    char dir[] = "/tmp/ps_render_XXXXXX";
+    assert_non_null(mkdtemp(dir));
+    const ps_plant_cfg_t pc = {.model_path = "sim/models/ps1.xml",
+                               .n_joints = robot.n_joints,
+                               .joint_name = robot.joint_name,
+                               .stance_rad = stance};
+    ps_plant_t *p = NULL;
+    char err[PS_ERR_MSG_LEN] = "";
+    if (ps_plant_create(&pc, &p, err, sizeof(err)) != 0)
+        fail_msg("ps_plant_create: %s", err);
+    assert_true(ps_plant_model(p)->vis.global.offwidth < 960);
+    const ps_render_cfg_t rc = {.dir = dir,
+                                .fps = 20.0,
+                                .width = 960,
+                                .height = 540,
+                                .is_lockstep = true,
+                                .is_census = true,
+                                .robot_root = "pelvis",
+                                .area_m = {-3.0, -3.0, 3.0, 3.0}};
+    ps_render_t *r = NULL;
+    if (ps_render_create(&rc, ps_plant_model(p), &r, err, sizeof(err)) != 0)
+        fail_msg("ps_render_create: %s", err);
+    if (ps_render_start(r, err, sizeof(err)) != 0)
+        fail_msg("ps_render_start: %s", err);
+    const int every = (int)lround(1.0 / (rc.fps * ps_plant_timestep_s(p)));
+    for (int k = 1; k <= 2 * every; k++) {
+        assert_int_equal(ps_plant_step(p), 0);
+        if (k % every == 0)
+            ps_render_offer(r, ps_plant_data(p));
+    }
+    ps_render_result_t res;
+    if (ps_render_finish(r, &res, err, sizeof(err)) != 0)
+        fail_msg("ps_render_finish: %s", err);
+    printf("render: robot alone, %llu frames, robot %u px\n", (unsigned long long)res.n_frames,
+           res.robot_px);
+    assert_int_equal(res.n_frames, 2);
+    assert_true(res.robot_px > 1000);
+    char path[600];
+    int w, h;
+    uint32_t colours;
+    uint32_t black = 0;
+    (void)snprintf(path, sizeof(path), "%s/frame_00001.png", dir);
+    assert_int_equal(png_stats(path, &w, &h, &colours, &black), 0);
+    printf("render: %s %dx%d, %u colours, %u black pixels\n", path, w, h, colours, black);
+    assert_int_equal(w, 960);
+    assert_int_equal(h, 540);
+    assert_true(colours > 100); /* a plain floor and one robot (538 when written) */
+    /* drawn edge to edge: a 640 x 480 buffer leaves the rest black (a third
+     * of the frame); the floor and the robot have no black pixel */
+    assert_true(black < 960u * 540u / 100u);
+    ps_render_destroy(r);
+    ps_plant_destroy(p);
+    char cmd[700];
+    (void)snprintf(cmd, sizeof(cmd), "rm -rf '%s'", dir);
+    assert_int_equal(system(cmd), 0);
 }
 
 static void test_render_create_view_without_display_refused(void **state)
@@ -238,7 +308,10 @@ static void test_render_create_bad_size_rejected(void **state)
     (void)state;
     ps_crowd_cfg_t c;
     ps_plant_t *p = press_plant(&c);
-    ps_render_cfg_t rc = {.fps = 25.0, .width = 641, .height = 360, .robot_root = "pelvis",
+    ps_render_cfg_t rc = {.fps = 25.0,
+                          .width = 641,
+                          .height = 360,
+                          .robot_root = "pelvis",
                           .area_m = {-1.5, -1.5, 1.5, 1.5}};
     ps_render_t *r = NULL;
     char err[PS_ERR_MSG_LEN] = "";
@@ -267,6 +340,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_render_records_frames_density_and_mp4),
+        cmocka_unit_test(test_render_robot_alone_at_the_cli_frame_size),
         cmocka_unit_test(test_render_create_view_without_display_refused),
         cmocka_unit_test(test_render_create_bad_size_rejected),
     };
