@@ -140,6 +140,29 @@ static long mp4_frames(const char *path)
     return n;
 }
 
+/* Renders the plant for n_steps physics steps at rc's frame rate (lockstep:
+ * every frame drawn) and returns what the renderer says; *out_r stays
+ * open for the caller's checks (ps_render_destroy). */
+static ps_render_result_t render_steps(ps_plant_t *p, const ps_render_cfg_t *rc, int n_steps,
+                                       ps_render_t **out_r)
+{
+    char err[PS_ERR_MSG_LEN] = "";
+    if (ps_render_create(rc, ps_plant_model(p), out_r, err, sizeof(err)) != 0)
+        fail_msg("ps_render_create: %s", err);
+    if (ps_render_start(*out_r, err, sizeof(err)) != 0)
+        fail_msg("ps_render_start: %s", err);
+    const int every = (int)lround(1.0 / (rc->fps * ps_plant_timestep_s(p)));
+    for (int k = 1; k <= n_steps; k++) {
+        assert_int_equal(ps_plant_step(p), 0);
+        if (k % every == 0)
+            ps_render_offer(*out_r, ps_plant_data(p));
+    }
+    ps_render_result_t res;
+    if (ps_render_finish(*out_r, &res, err, sizeof(err)) != 0)
+        fail_msg("ps_render_finish: %s", err);
+    return res;
+}
+
 static void test_render_records_frames_density_and_mp4(void **state)
 {
     (void)state;
@@ -156,23 +179,7 @@ static void test_render_records_frames_density_and_mp4(void **state)
                                 .robot_root = "pelvis",
                                 .area_m = {-1.5, -1.5, 1.5, 1.5}};
     ps_render_t *r = NULL;
-    char err[PS_ERR_MSG_LEN] = "";
-    int rv = ps_render_create(&rc, ps_plant_model(p), &r, err, sizeof(err));
-    if (rv != 0)
-        fail_msg("ps_render_create: %s", err);
-    rv = ps_render_start(r, err, sizeof(err));
-    if (rv != 0)
-        fail_msg("ps_render_start: %s", err);
-    const int every = (int)lround(1.0 / (rc.fps * ps_plant_timestep_s(p)));
-    for (int k = 1; k <= 800; k++) { /* 0.8 s: 16 frames */
-        assert_int_equal(ps_plant_step(p), 0);
-        if (k % every == 0)
-            ps_render_offer(r, ps_plant_data(p));
-    }
-    ps_render_result_t res;
-    rv = ps_render_finish(r, &res, err, sizeof(err));
-    if (rv != 0)
-        fail_msg("ps_render_finish: %s", err);
+    const ps_render_result_t res = render_steps(p, &rc, 800, &r); /* 0.8 s: 16 frames */
     printf("render: %llu frames, %llu dropped; last frame: robot %u px, people %u px, %u of 20 "
            "people seen\n",
            (unsigned long long)res.n_frames, (unsigned long long)res.n_dropped, res.robot_px,
@@ -236,19 +243,8 @@ static void test_render_robot_alone_at_the_cli_frame_size(void **state)
                                 .robot_root = "pelvis",
                                 .area_m = {-3.0, -3.0, 3.0, 3.0}};
     ps_render_t *r = NULL;
-    if (ps_render_create(&rc, ps_plant_model(p), &r, err, sizeof(err)) != 0)
-        fail_msg("ps_render_create: %s", err);
-    if (ps_render_start(r, err, sizeof(err)) != 0)
-        fail_msg("ps_render_start: %s", err);
     const int every = (int)lround(1.0 / (rc.fps * ps_plant_timestep_s(p)));
-    for (int k = 1; k <= 2 * every; k++) {
-        assert_int_equal(ps_plant_step(p), 0);
-        if (k % every == 0)
-            ps_render_offer(r, ps_plant_data(p));
-    }
-    ps_render_result_t res;
-    if (ps_render_finish(r, &res, err, sizeof(err)) != 0)
-        fail_msg("ps_render_finish: %s", err);
+    const ps_render_result_t res = render_steps(p, &rc, 2 * every, &r);
     printf("render: robot alone, %llu frames, robot %u px\n", (unsigned long long)res.n_frames,
            res.robot_px);
     assert_int_equal(res.n_frames, 2);
