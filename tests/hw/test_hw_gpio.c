@@ -354,7 +354,18 @@ static void test_estop_glitch_shorter_than_debounce_ignored(void **state)
                           "fix): reported pressed, not counted\n",
                           k, (double)pulse_ns / 1e6);
             assert_true(is_pressed);
-            assert_false(read_pressed(&g_a));
+            /* released by the next read, or the one after: on gpio-sim an
+             * edge's stamp can fall after the fix that saw it, one read of
+             * the opposite level that the next corrects (the header's cost;
+             * seen once in a loaded fresh-check's qemu) */
+            bool is_still = read_pressed(&g_a);
+            if (is_still) {
+                print_message("glitch try %d: one more read pressed (an edge stamped after "
+                              "the fix)\n",
+                              k);
+                is_still = read_pressed(&g_a);
+            }
+            assert_false(is_still);
             continue;
         }
         if (pulse_ns >= (int64_t)DEBOUNCE_US * 1000 / 2) {
