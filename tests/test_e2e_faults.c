@@ -150,7 +150,7 @@ static int64_t now_ns(void)
  * the real CPU-time clock runs end to end in tests/test_e2e_cli.c. */
 static ps_clock_fake_t declared_cpu;
 
-static void burn_cpu(int64_t ns)
+static void declare_cpu_burnt(int64_t ns)
 {
     ps_clock_fake_advance(&declared_cpu, ns);
 }
@@ -314,7 +314,7 @@ static int port_recv(void *ctx, ps_can_frame_t *out, size_t max)
     fault_port_t *p = ctx;
     if (p->bus_idx == 0 && k.burn_ticks_left > 0) {
         k.burn_ticks_left--;
-        burn_cpu(k.burn_recv_ns);
+        declare_cpu_burnt(k.burn_recv_ns);
     }
     if (k.delay_rx_ns > 0 || p->n_pending > 0) {
         /* Everything due on the wire goes into the wrapper's queue; it comes
@@ -434,7 +434,7 @@ static int policy_step(void *ctx, const ps_meas_t *m, const ps_estimate_t *e, ps
     (void)ctx;
     if (k.policy_burn_runs_left > 0) {
         k.policy_burn_runs_left--;
-        burn_cpu(k.policy_burn_ns);
+        declare_cpu_burnt(k.policy_burn_ns);
     }
     const int rc = policy_inner.ops->step(policy_inner.ctx, m, e, out);
     const int j = 3; /* l_knee */
