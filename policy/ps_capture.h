@@ -20,7 +20,9 @@
  *          minimum-jerk path in x and y and a sine arch of lift_m in z over
  *          swing_s; the target is re-planned while the first half of the
  *          swing lasts. The stance leg holds the pelvis level at the
- *          standing height.
+ *          standing height; the swing leg is solved from the trunk's
+ *          estimated pose, so the sole keeps to its path over the ground
+ *          while the trunk leans.
  *   SETTLE both feet down again for settle_s (no new step), then STAND
  *          around the new base of support.
  *

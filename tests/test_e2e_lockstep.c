@@ -780,7 +780,7 @@ static void test_lockstep_capture_stands_where_stand_falls(void **state)
     assert_int_equal(t.n_cmd_out_of_limits, 0);
 }
 
-/* A hard push to the left (0.45 m/s): the capture-point controller steps
+/* A hard push to the left (0.60 m/s): the capture-point controller steps
  * out in the real loop: the left foot leaves the ground (the estimator sees
  * single support on the right) and lands to the left, the commands inside
  * their limits all along. */
