@@ -21,6 +21,7 @@ import argparse
 import json
 import os
 import sys
+import warnings
 
 import numpy as np
 import onnx
@@ -160,7 +161,11 @@ def parse(model):
 
 
 def convert(onnx_path, contract, out_path):
-    model = onnx.load(onnx_path)
+    # A corrupt file makes protobuf warn on stderr before it fails; the
+    # failure is reported as our one clear line (hypothesis found this).
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = onnx.load(onnx_path)
     layers = parse(model)
     c = dict(contract)
     c["activations"] = [a for _, _, a in layers]

@@ -382,6 +382,10 @@ class Malformed(unittest.TestCase):
         # writing over its own input was imported
         @example(hidden=[1], act_list=["identity", "silu", "identity"], matmul=False,
                  kind="self_loop", k=2, r=0, seed=0)
+        # and (2026-12-03, later): corrupt bytes on which protobuf warned on
+        # stderr before the importer's own message
+        @example(hidden=[], act_list=["identity", "identity", "identity"], matmul=False,
+                 kind="bytes", k=0, r=768, seed=0)
         @given(hidden=st.lists(st.integers(1, 12), min_size=0, max_size=2),
                act_list=st.lists(st.sampled_from(["identity", "relu", "tanh", "silu"]),
                                  min_size=3, max_size=3),
