@@ -140,11 +140,14 @@ static void test_ps_capture_still_stands_without_stepping(void **st)
     assert_int_equal(p.ops->step(p.ctx, NULL, &e, &t), -EINVAL);
 }
 
-/* Moves the pelvis left by 0.02 m a policy tick (1 m/s) until a step
- * starts (at most 20 ticks); the pelvis's y at the next tick. */
-static float move_left_until_swing(ps_capture_t *c, ps_policy_t *p, ps_meas_t *m, ps_estimate_t *e,
-                                   ps_targets_t *t)
+/* A fresh controller in *p; the pelvis moves left by 0.02 m a policy tick
+ * (1 m/s) until a step starts (at most 20 ticks); the pelvis's y at the
+ * next tick. */
+static float start_left_step(ps_capture_t *c, ps_policy_t *p, ps_meas_t *m, ps_estimate_t *e,
+                             ps_targets_t *t)
 {
+    init_capture(c);
+    ps_capture_as_policy(c, p);
     float y = 0.0f;
     for (int k = 0; k < 20 && c->phase == PS_CAPTURE_STAND; k++, y += 0.02f) {
         state(c, 0.0f, y, m, e);
@@ -161,13 +164,11 @@ static void test_ps_capture_sideways_motion_steps_outward(void **st)
 {
     (void)st;
     ps_capture_t c;
-    init_capture(&c);
     ps_policy_t p;
-    ps_capture_as_policy(&c, &p);
     ps_meas_t m;
     ps_estimate_t e;
     ps_targets_t t;
-    const float y = move_left_until_swing(&c, &p, &m, &e, &t);
+    const float y = start_left_step(&c, &p, &m, &e, &t);
     assert_int_equal(c.swing_side, 0);
     assert_int_equal(c.n_steps, 1);
     assert_true(c.com_vel_m_s[1] > 0.5f);
@@ -202,13 +203,11 @@ static void test_ps_capture_swing_sole_follows_its_path_under_a_leaning_trunk(vo
 {
     (void)st;
     ps_capture_t c;
-    init_capture(&c);
     ps_policy_t p;
-    ps_capture_as_policy(&c, &p);
     ps_meas_t m;
     ps_estimate_t e;
     ps_targets_t t;
-    const float y = move_left_until_swing(&c, &p, &m, &e, &t);
+    const float y = start_left_step(&c, &p, &m, &e, &t);
     const int sw = c.swing_side, stn = 1 - sw;
     state_pitched(&c, 0.0f, y, -0.1f, &m, &e);
     for (int k = 0; k < 3; k++) /* to about the middle of the swing */
