@@ -385,11 +385,11 @@ $(BUILD)/crowd_bench: $(call OBJ,bench/crowd_bench.c) $(LIB_OBJS)
 # pushes from the front (TRAIN_FT_ARGS). The commands and seeds are written
 # into the policy file's contract.
 TRAIN_ARGS ?= --seed 1 --envs 16 --threads 2 --steps 64 --bc-iters 100 --ppo-iters 600 \
-              --push-dv-max 0.6
+              --push-dv-max 0.6 --expert slow
 TRAIN_FT_ARGS ?= --seed 2 --envs 16 --threads 2 --steps 64 --bc-iters 0 --ppo-iters 320 \
               --critic-warmup 40 --bc-weight 0.2 --harness-p 0.5 --push-dv-min 0.05 \
               --push-dv-start 0.6 --push-dv-max 0.6 --ppo-lr 3e-5 --focus-p 0.3 \
-              --gamma 0.995 --gae-lambda 0.98 --fixed-std
+              --gamma 0.995 --gae-lambda 0.98 --fixed-std --expert slow
 train: deps-train $(BUILD)/pushstep $(BUILD)/libpsenv.so
 	/usr/bin/python3 policy/train/train.py $(TRAIN_ARGS) --out $(BUILD)/train/first.safetensors \
 	    --log-dir $(BUILD)/train/first

@@ -70,6 +70,7 @@ int ps_capture_init(ps_capture_t *c, uint32_t n_joints, const char (*joint_name)
         .lookahead_s = 0.0f,
         .max_load_frac = 0.95f,
         .reach_frac = 0.92f,
+        .swing_follows_trunk = true,
     };
     return 0;
 }
@@ -398,7 +399,7 @@ static int capture_step(void *ctx, const ps_meas_t *meas, const ps_estimate_t *e
         pelvis[2] = c->height_cmd_m;
         if (legs_ik(c, (const float(*)[3])feet, fyaw, pelvis, heading, &t) != 0)
             stance_targets(c, &t);
-        else if (c->phase == PS_CAPTURE_SWING)
+        else if (c->phase == PS_CAPTURE_SWING && c->p.swing_follows_trunk)
             (void)swing_leg_ik(c, est, c->swing_side, feet[c->swing_side], fyaw[c->swing_side], &t);
         /* Ankle strategy (ps_stand's signs) on the feet that carry weight. */
         const float cp = clampf(c->p.k_tilt * est->pitch_rad + c->p.k_vel * c->com_vel_m_s[0],

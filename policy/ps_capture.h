@@ -60,6 +60,9 @@ typedef struct {
     float lookahead_s;      /**< trigger on xi predicted this far ahead (LIPM about the CoP) */
     float max_load_frac;    /**< no sideways step with a foot the CoM is this far across to */
     float reach_frac;       /**< hip-ankle distance at most this share of thigh + shank */
+    /** true: the swing leg is solved from the trunk's estimated pose; false: for a
+     *  level trunk (the controller until 2026-12-03, kept for the training's expert) */
+    bool swing_follows_trunk;
 } ps_capture_params_t;
 
 typedef struct {

@@ -22,16 +22,21 @@ name="same seed, same first iterations (deterministic environment and trainer)"
 check bash -c "/usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 \
     --bc-iters 3 --ppo-iters 2 --out $out/q.safetensors --log-dir $out/b >/dev/null 2>&1 \
     && cmp -s <(cut -d, -f1-8 $out/log.csv) <(cut -d, -f1-8 $out/b/log.csv)"
-# bench/results/train_log_make_train.csv: make train's first stage from the
-# current capture-point expert (2026-12-03); the shipped file's own log,
-# train_log.csv, came from the earlier expert (docs/policy.md)
-name="make train's first stage reproduces its recorded learning log (first 2 iterations)"
+# make train clones the slow expert (--expert slow in TRAIN_ARGS): its first
+# stage's log is the shipped file's, bench/results/train_log.csv; with the
+# runtime's capture-point controller as the expert (--expert quick) it is
+# bench/results/train_log_make_train.csv (docs/policy.md)
+name="make train's first stage reproduces the shipped file's learning log (first 2 iterations)"
 # a make variable's value, continuation lines joined
 make_var() { sed -n "/^$1 ?=/,/[^\\\\]\$/p" Makefile | sed "s/^$1 ?=//; s/\\\\\$//" | tr '\n' ' '; }
 args=$(make_var TRAIN_ARGS)
 check bash -c "/usr/bin/python3 policy/train/train.py $args --threads 2 \
     --stop-after 2 --out $out/r.safetensors --log-dir $out/r >/dev/null 2>&1 \
-    && cmp -s <(cut -d, -f1-9 $out/r/log.csv) <(head -3 bench/results/train_log_make_train.csv | cut -d, -f1-9)"
+    && cmp -s <(cut -d, -f1-9 $out/r/log.csv) <(head -3 bench/results/train_log.csv | cut -d, -f1-9)"
+name="with the runtime's controller as the expert, the first stage's recorded log (2 iterations)"
+check bash -c "/usr/bin/python3 policy/train/train.py $args --expert quick --threads 2 \
+    --stop-after 2 --out $out/r2.safetensors --log-dir $out/r2 >/dev/null 2>&1 \
+    && cmp -s <(cut -d, -f1-9 $out/r2/log.csv) <(head -3 bench/results/train_log_make_train.csv | cut -d, -f1-9)"
 name="held episodes (--harness-p 1) end later by the time held, free ones at episode_s"
 check /usr/bin/python3 -c "
 import sys; sys.path.insert(0, 'policy/train'); import numpy as np, psenv

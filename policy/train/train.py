@@ -338,6 +338,13 @@ def main():
     ap.add_argument("--stair-step", type=float, default=0.02, help="staircase step (m/s)")
     ap.add_argument("--stair-dv0", type=float, default=0.4,
                     help="staircase starting delta-v (m/s)")
+    ap.add_argument("--expert", choices=("quick", "slow"), default="quick",
+                    help="the capture-point controller cloned and used for the cloning term: "
+                         "quick, the runtime's (0.15 s swings, the swing leg solved from the "
+                         "trunk's pose); slow, as it was until 2026-12-03 (0.3 s swings, 5 cm "
+                         "lift, 0.1 s trigger lookahead, 0.3 s settling, the swing leg solved "
+                         "for a level trunk), what make train clones: its clone measured better "
+                         "(docs/policy.md)")
     a = ap.parse_args()
     if not 0.0 <= a.stair_p <= 1.0 or not a.stair_step > 0.0 or not a.stair_dv0 > 0.0:
         raise SystemExit("--stair-p is in [0, 1], --stair-step and --stair-dv0 > 0")
@@ -352,7 +359,8 @@ def main():
         raise SystemExit("--init fine-tunes: give --bc-iters 0")
     env = psenv.Env(a.envs, a.threads, seed=a.seed, push_dv_max=a.push_dv_start,
                     dr=not a.no_dr, push_dv_min=a.push_dv_min, harness_p=a.harness_p,
-                    focus_p=a.focus_p, focus_dir_rad=float(np.radians(a.focus_dir_deg)))
+                    focus_p=a.focus_p, focus_dir_rad=float(np.radians(a.focus_dir_deg)),
+                    expert_slow=a.expert == "slow")
     n_obs_contract = psfile.obs_size(ct.OBS_FIELDS, len(doc["joints"]), len(ct.LEGS))
     if env.n_obs != n_obs_contract or env.n_act != len(ct.LEGS):
         raise SystemExit("environment (%d obs, %d actions) and contract.py (%d, %d) disagree"
@@ -392,7 +400,9 @@ def main():
             a.stair_p, a.stair_step, a.stair_dv0)
     if a.bootstrap_timeouts:
         trained_by += " --bootstrap-timeouts"
-        # and how the file it started from was made
+    if a.expert != "quick":
+        trained_by += " --expert %s" % a.expert
+    if a.init:  # and how the file it started from was made
         trained_by += "; %s was: %s" % (os.path.basename(a.init), init_c.get("trained_by", "?"))
     stair = Staircase(env, a.stair_p, a.stair_step, a.stair_dv0, rng) if a.stair_p > 0 else None
     stair_csv = os.path.join(a.log_dir, "stair.csv")

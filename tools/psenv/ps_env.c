@@ -593,6 +593,16 @@ int ps_env_step(ps_env_t *e, const float *act, float *obs, float *rew, uint8_t *
     return run_all(e);
 }
 
+/* The capture-point controller's tunables before its 2026-12-03 change. */
+static void slow_expert(ps_capture_params_t *p)
+{
+    p->swing_s = 0.3f;
+    p->settle_s = 0.3f;
+    p->lift_m = 0.05f;
+    p->lookahead_s = 0.1f;
+    p->swing_follows_trunk = false;
+}
+
 static int init1(ps_env_t *e, env1_t *v, uint32_t i, char *err, size_t len)
 {
     const ps_robot_cfg_t *r = &e->robot;
@@ -637,6 +647,8 @@ static int init1(ps_env_t *e, env1_t *v, uint32_t i, char *err, size_t len)
         snprintf(err, len, "observation or capture controller: %s", ps_strerror(rc));
         return rc;
     }
+    if (e->cfg.is_expert_slow)
+        slow_expert(&v->cap.p);
     ps_capture_as_policy(&v->cap, &v->cap_pol);
     e->n_obs = v->obs.n_obs;
     return 0;

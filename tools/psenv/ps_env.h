@@ -66,6 +66,11 @@ typedef struct {
     float harness_p;        /**< probability that an episode starts harnessed */
     float focus_p;          /**< probability that a push comes from focus_dir_rad +-45 deg */
     float focus_dir_rad;    /**< world frame, direction of the force, 0 = +x */
+    /* Added 2026-12-03; zero gives the runtime's capture-point controller. */
+    int is_expert_slow; /**< the expert steps as the controller did until 2026-12-03: 0.3 s
+                           swing, 5 cm lift, 0.1 s trigger lookahead, 0.3 s settling, the
+                           swing leg solved for a level trunk (what the shipped policy
+                           cloned; its clone measured better, docs/policy.md) */
 } ps_env_cfg_t;
 
 #define PS_ENV_INFO 8 /**< floats of info per environment and step: */
