@@ -168,8 +168,8 @@ help:
 	@echo "             random fault every 8 s, each recovered; checks states, limits,"
 	@echo "             recorder, memory: bench/results/soak.json, soak.md"
 	@echo "make train   train the balance policy on the C environment (CPU, 2 cores,"
-	@echo "             seeded): policy/weights/ps1_stage1.safetensors (overwrites the"
-	@echo "             shipped file, which it no longer reproduces), $(BUILD)/train/"
+	@echo "             seeded, about 17 min): policy/weights/ps1_stage1.safetensors (the"
+	@echo "             shipped file, reproduced bit for bit), $(BUILD)/train/"
 	@echo "make install PREFIX=/usr/local [DESTDIR=]: the binary, its data (boards, robots,"
 	@echo "             scenarios, models) in PREFIX/share/pushstep, the systemd unit"
 	@echo "             pushstep@.service and the udev rules (docs/deploy.md)"
@@ -379,8 +379,9 @@ $(BUILD)/crowd_bench: $(call OBJ,bench/crowd_bench.c) $(LIB_OBJS)
 	$(CC) $(CFLAGS) -o $@ $^ $(LDLIBS)
 
 # The balance policy's training (docs/policy.md): seeded, on the CPUs, in
-# two runs (since the capture-point controller's 2026-12-03 change it makes a
-# weaker file than the shipped one, which it overwrites; see docs/policy.md): cloning the capture-point controller and PPO (TRAIN_ARGS), then
+# two runs, which reproduce the shipped file bit for bit: cloning the
+# capture-point controller with its tunables before its 2026-12-03 change
+# (--expert slow: its clone measured better, docs/policy.md) and PPO (TRAIN_ARGS), then
 # PPO fine-tuning from that file with the runtime's harness phase and more
 # pushes from the front (TRAIN_FT_ARGS). The commands and seeds are written
 # into the policy file's contract.
