@@ -141,7 +141,9 @@ def main():
     if a.out:
         with open(a.out, "w") as f:
             json.dump({"what": "training environment (nominal) vs runtime, same push grid",
-                       "seed": a.seed, "cells": cells}, f, indent=1)
+                       "seed": a.seed, "expert": a.expert,
+                       "weights": os.path.basename(a.weights) if a.weights else None,
+                       "cells": cells}, f, indent=1)
     return 0
 
 
