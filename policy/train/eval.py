@@ -104,7 +104,7 @@ def main():
     ap.add_argument("--lib", help="the environment library (default build/libpsenv.so)")
     ap.add_argument("--harness", action="store_true",
                     help="start each trial held by the harness, as the runtime does")
-    ap.add_argument("--expert", choices=("quick", "slow"), default="quick",
+    ap.add_argument("--expert", choices=psenv.EXPERTS, default="quick",
                     help="the capture-point controller's tunables (train.py --expert)")
     a = ap.parse_args()
     dvs = [float(x) for x in a.dv.split(",")]
@@ -113,7 +113,7 @@ def main():
     rng = np.random.default_rng(a.seed)
     env = psenv.Env(a.directions, a.threads, seed=a.seed, episode_s=8.0, dr=False,
                      lib=a.lib, harness_p=1.0 if a.harness else 0.0,
-                     expert_slow=a.expert == "slow")
+                     expert=a.expert)
     doc = psfile.read_safetensors(a.weights)[1] if a.weights else {}
     policy_hz = json.loads(doc[psfile.CONTRACT_KEY])["policy_hz"] if doc else 50
     ctls = [("capture", expert_ctl)] + ([("mlp", Mlp(a.weights))] if a.weights else [])

@@ -7,6 +7,9 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 INFO = 8
+# The capture-point controller's tunables (train.py, eval.py --expert): quick,
+# the runtime's; slow, as before its 2026-12-03 change (tools/psenv/ps_env.h)
+EXPERTS = ("quick", "slow")
 INFO_KEYS = ("fell", "ended", "t_s", "push_dv", "r_balance", "r_quality", "com_z", "pushes")
 
 
@@ -26,7 +29,9 @@ def _f32(a):
 class Env:
     def __init__(self, n_envs, n_threads=2, seed=1, episode_s=6.0, push_dv_max=0.8, dr=True,
                  robot=None, lib=None, push_dv_min=0.05, harness_p=0.0, focus_p=0.0,
-                 focus_dir_rad=0.0, expert_slow=False):
+                 focus_dir_rad=0.0, expert="quick"):
+        if expert not in EXPERTS:
+            raise ValueError("expert %r: one of %s" % (expert, ", ".join(EXPERTS)))
         self.lib = ctypes.CDLL(lib or os.path.join(ROOT, "build", "libpsenv.so"))
         L = self.lib
         L.ps_env_create.argtypes = [ctypes.c_char_p, ctypes.POINTER(EnvCfg),
@@ -41,7 +46,7 @@ class Env:
         L.ps_env_set_push_dv_max.argtypes = [ctypes.c_void_p, ctypes.c_float]
         L.ps_env_set_push.argtypes = [ctypes.c_void_p, ctypes.c_uint32] + [ctypes.c_float] * 4
         cfg = EnvCfg(n_envs, n_threads, seed, episode_s, push_dv_max, int(dr), 1, push_dv_min,
-                     harness_p, focus_p, focus_dir_rad, int(expert_slow))
+                     harness_p, focus_p, focus_dir_rad, int(expert == "slow"))
         err = ctypes.create_string_buffer(1024)
         h = ctypes.c_void_p()
         path = (robot or os.path.join(ROOT, "robots", "ps1.yaml")).encode()

@@ -338,7 +338,7 @@ def main():
     ap.add_argument("--stair-step", type=float, default=0.02, help="staircase step (m/s)")
     ap.add_argument("--stair-dv0", type=float, default=0.4,
                     help="staircase starting delta-v (m/s)")
-    ap.add_argument("--expert", choices=("quick", "slow"), default="quick",
+    ap.add_argument("--expert", choices=psenv.EXPERTS, default="quick",
                     help="the capture-point controller cloned and used for the cloning term: "
                          "quick, the runtime's (0.15 s swings, the swing leg solved from the "
                          "trunk's pose); slow, as it was until 2026-12-03 (0.3 s swings, 5 cm "
@@ -360,7 +360,7 @@ def main():
     env = psenv.Env(a.envs, a.threads, seed=a.seed, push_dv_max=a.push_dv_start,
                     dr=not a.no_dr, push_dv_min=a.push_dv_min, harness_p=a.harness_p,
                     focus_p=a.focus_p, focus_dir_rad=float(np.radians(a.focus_dir_deg)),
-                    expert_slow=a.expert == "slow")
+                    expert=a.expert)
     n_obs_contract = psfile.obs_size(ct.OBS_FIELDS, len(doc["joints"]), len(ct.LEGS))
     if env.n_obs != n_obs_contract or env.n_act != len(ct.LEGS):
         raise SystemExit("environment (%d obs, %d actions) and contract.py (%d, %d) disagree"
