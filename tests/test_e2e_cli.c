@@ -98,6 +98,54 @@ static void test_cli_help_documents_every_option(void **state)
             fail_msg("--help does not mention %s", OPTIONS[i]);
 }
 
+/* Whether every condition in "A|B|..." is one of the allowed names. */
+static bool has_only_conditions(const char *conditions, const char *const *allowed, size_t n)
+{
+    char buf[256];
+    snprintf(buf, sizeof(buf), "%s", conditions);
+    char *save = NULL;
+    for (char *c = strtok_r(buf, "|", &save); c != NULL; c = strtok_r(NULL, "|", &save)) {
+        bool is_allowed = false;
+        for (size_t i = 0; i < n && !is_allowed; i++)
+            is_allowed = strcmp(c, allowed[i]) == 0;
+        if (!is_allowed)
+            return false;
+    }
+    return true;
+}
+
+/* The stand scenario's states, printed and in the summary. Undisturbed:
+ * STANDBY -> RAMP -> ACTIVE -> DAMPING (the stop) -> STANDBY, exactly. A
+ * policy step late on CPU time or a run of overruns (seen once in CI, in the
+ * sanitized build: its policy step took up to 0.42 ms of the 0.5 ms
+ * deadline on an idle machine) holds the pose or damps, so the path differs;
+ * then every transition must still have been caused by the scenario or by
+ * that lateness, and the run must still end damped in STANDBY. */
+static void assert_stop_path(const cJSON *j, bool is_undisturbed)
+{
+    const cJSON *tr = obj(j, "transitions");
+    const int n = cJSON_GetArraySize(tr);
+    assert_true(n >= 3);
+    assert_non_null(strstr(out, "state STANDBY -> RAMP"));
+    assert_non_null(strstr(out, "state DAMPING -> STANDBY"));
+    assert_string_equal(obj(cJSON_GetArrayItem(tr, n - 1), "to")->valuestring, "STANDBY");
+    if (is_undisturbed) {
+        assert_non_null(strstr(out, "state ACTIVE -> DAMPING (REQ_STOP"));
+        assert_int_equal(n, 4);
+        return;
+    }
+    static const char *const ALLOWED[] = {"REQ_START", "RAMP_DONE",   "REQ_STOP",
+                                          "DAMP_DONE", "POLICY_LATE", "OVERRUN"};
+    for (int i = 0; i < n; i++) {
+        const char *cond = obj(cJSON_GetArrayItem(tr, i), "conditions")->valuestring;
+        if (!has_only_conditions(cond, ALLOWED, sizeof(ALLOWED) / sizeof(ALLOWED[0])))
+            fail_msg("transition %d caused by %s in a run disturbed only by lateness", i, cond);
+    }
+    print_message("disturbed run (a late policy step or overruns): %d transitions, each caused by "
+                  "the scenario or the lateness\n",
+                  n);
+}
+
 static void test_cli_lockstep_summary_json_has_the_figures(void **state)
 {
     (void)state;
@@ -109,9 +157,6 @@ static void test_cli_lockstep_summary_json_has_the_figures(void **state)
     int rc = run(args);
     if (rc != 0)
         fail_msg("exit %d:\n%s", rc, out);
-    assert_non_null(strstr(out, "state STANDBY -> RAMP"));
-    assert_non_null(strstr(out, "state ACTIVE -> DAMPING (REQ_STOP"));
-    assert_non_null(strstr(out, "state DAMPING -> STANDBY"));
     cJSON *j = read_json(path);
     assert_true(num(j, "ticks") >= 6000);
     /* Present and a count; not asserted zero: lockstep counts a tick's
@@ -127,6 +172,7 @@ static void test_cli_lockstep_summary_json_has_the_figures(void **state)
     const bool is_undisturbed = overruns == 0 && num(obj(j, "counters"), "policy_late") == 0;
     assert_true(cJSON_IsBool(obj(j, "deterministic")));
     assert_int_equal(cJSON_IsTrue(obj(j, "deterministic")), is_undisturbed);
+    assert_stop_path(j, is_undisturbed);
     const cJSON *lat = obj(j, "latency");
     static const char *const STAGES[] = {"wake",  "read", "estimate",   "policy",     "servo",
                                          "write", "tick", "tick_plain", "tick_policy"};
@@ -140,7 +186,6 @@ static void test_cli_lockstep_summary_json_has_the_figures(void **state)
     ps_cli_assert_after_init_clean(j);
     assert_true(cJSON_IsFalse(obj(j, "fall_detected")));
     assert_true(cJSON_IsFalse(obj(obj(j, "sim_truth"), "fell_while_active")));
-    assert_true(cJSON_GetArraySize(obj(j, "transitions")) == 4);
     assert_int_equal(cJSON_GetArraySize(obj(j, "buses")), 4);
     const cJSON *bus0 = cJSON_GetArrayItem(obj(j, "buses"), 0);
     assert_true(num(bus0, "observed_load") > 0.3 && num(bus0, "observed_load") < 0.8);
@@ -859,6 +904,7 @@ static void test_cli_lockstep_late_policy_step_not_deterministic(void **state)
     cJSON *j = read_json(path);
     assert_true(num(obj(j, "counters"), "policy_late") > 0);
     assert_true(cJSON_IsFalse(obj(j, "deterministic")));
+    assert_stop_path(j, false); /* the disturbed path of the summary test, forced */
     if (strstr(out, "not deterministic: ") == NULL || strstr(out, "late policy steps") == NULL)
         fail_msg("the printed summary does not say so:\n%s", out);
     cJSON_Delete(j);
