@@ -116,11 +116,12 @@ static bool has_only_conditions(const char *conditions, const char *const *allow
 
 /* The stand scenario's states, printed and in the summary. Undisturbed:
  * STANDBY -> RAMP -> ACTIVE -> DAMPING (the stop) -> STANDBY, exactly. A
- * policy step late on CPU time or a run of overruns (seen once in CI, in the
- * sanitized build: its policy step took up to 0.42 ms of the 0.5 ms
- * deadline on an idle machine) holds the pose or damps, so the path differs;
- * then every transition must still have been caused by the scenario or by
- * that lateness, and the run must still end damped in STANDBY. */
+ * policy step late on CPU time or a run of overruns holds the pose or damps,
+ * so the path differs (CI's sanitized run once printed no "ACTIVE ->
+ * DAMPING (REQ_STOP"; in lockstep nothing else changes this path, and that
+ * build's policy step took up to 0.42 ms of the 0.5 ms deadline on an idle
+ * machine here); then every transition must still have been caused by the
+ * scenario or by that lateness, and the run must still end in STANDBY. */
 static void assert_stop_path(const cJSON *j, bool is_undisturbed)
 {
     const cJSON *tr = obj(j, "transitions");
