@@ -65,14 +65,30 @@ static float clampf(float x, float lo, float hi)
     return x < lo ? lo : (x > hi ? hi : x);
 }
 
-/* The MLP's targets; the fault bits when it misbehaves (targets then unused). */
+/* The action added to action a: 0, or for a residual policy the capture
+ * controller's (base; NULL when it had none this step), in action units and
+ * clipped, as training's environment adds it (tools/psenv). */
+static float base_action(const ps_mlp_policy_t *p, const ps_targets_t *base, uint32_t a)
+{
+    const ps_weights_contract_t *c = &p->w->contract;
+    if (c->act_base != PS_WEIGHTS_BASE_CAPTURE)
+        return 0.0f;
+    const uint32_t j = c->act_joint[a];
+    return clampf((base->q_rad[j] - c->stance_rad[j]) / c->act_scale[a], -c->act_clip, c->act_clip);
+}
+
+/* The MLP's targets; the fault bits when it misbehaves (targets then unused).
+ * base: the fallback's targets this step, NULL when it failed. */
 static uint32_t run_mlp(ps_mlp_policy_t *p, const ps_meas_t *meas, const ps_estimate_t *est,
-                        ps_targets_t *t)
+                        const ps_targets_t *base, ps_targets_t *t)
 {
     const ps_weights_contract_t *c = &p->w->contract;
     const int64_t t0 = p->clock != NULL ? ps_clock_now_ns(p->clock) : 0;
     uint32_t faults = 0;
-    if (est == NULL || ps_obs_build(&p->obs, meas, est, p->in, NULL) < 0)
+    /* a residual without its base (the capture controller found no support)
+     * counts as no observation: the same condition stops the builder */
+    const bool has_base = base != NULL || c->act_base != PS_WEIGHTS_BASE_CAPTURE;
+    if (!has_base || est == NULL || ps_obs_build(&p->obs, meas, est, p->in, NULL) < 0)
         faults |= PS_MLP_FAULT_OBS;
     if (faults == 0 && ps_mlp_forward(&p->w->mlp, p->in, NULL, p->act) != 0)
         faults |= PS_MLP_FAULT_NAN;
@@ -93,10 +109,12 @@ static uint32_t run_mlp(ps_mlp_policy_t *p, const ps_meas_t *meas, const ps_esti
     for (uint32_t a = 0; a < c->n_act; a++) {
         const uint32_t j = c->act_joint[a];
         const ps_act_limits_t *l = &p->joints[j].lim;
-        t->q_rad[j] = clampf(c->stance_rad[j] + c->act_scale[a] * p->act[a], l->pos_min_rad,
+        /* the action applied, also the observation's previous action */
+        p->applied[a] = clampf(base_action(p, base, a) + p->act[a], -c->act_clip, c->act_clip);
+        t->q_rad[j] = clampf(c->stance_rad[j] + c->act_scale[a] * p->applied[a], l->pos_min_rad,
                              l->pos_max_rad);
     }
-    ps_obs_set_action(&p->obs, p->act);
+    ps_obs_set_action(&p->obs, p->applied);
     return 0;
 }
 
@@ -118,7 +136,7 @@ static int mlp_step(void *ctx, const ps_meas_t *meas, const ps_estimate_t *est, 
     }
     if (!p->is_fallback) {
         ps_targets_t t;
-        const uint32_t faults = run_mlp(p, meas, est, &t);
+        const uint32_t faults = run_mlp(p, meas, est, fb_rc == 0 ? &fb : NULL, &t);
         p->last_faults = faults;
         if (faults == 0) {
             *out = t;

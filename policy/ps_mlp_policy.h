@@ -4,9 +4,15 @@
  * Each step: the observation (policy/ps_obs, the contract's layout and
  * normalisation), one forward pass (policy/ps_mlp), then joint targets
  * q = stance + scale * a for the contract's action joints (the others hold
- * their stance), clamped to the joints' limits; qd = tau_ff = 0.
+ * their stance), clamped to the joints' limits; qd = tau_ff = 0. A residual
+ * policy (contract action.base "capture", policy/ps_weights.h) adds its
+ * action a to the capture-point controller's of the same step (the
+ * fallback's, in action units, clipped), the sum clipped to the contract's
+ * clip: q = stance + scale * clip(a_capture + a); the observation's previous
+ * action is that sum, as in training (tools/psenv).
  *
- * The policy misbehaves when the observation cannot be built (-ERANGE), an
+ * The policy misbehaves when the observation cannot be built (-ERANGE; for a
+ * residual policy also when the capture controller has no targets), an
  * action is NaN or beyond the contract's clip ("out of range"), or the step
  * takes longer than late_ns on the given clock ("late"). Then the fallback
  * policy (the capture-point controller) computes this step's targets, and
@@ -46,7 +52,7 @@ typedef struct {
     int64_t late_ns;
     float fallback_hold_s, dt_s;
     uint32_t joint_idx[PS_MAX_JOINTS]; /**< robot joint of each contract joint */
-    float in[PS_OBS_MAX], act[PS_MAX_JOINTS];
+    float in[PS_OBS_MAX], act[PS_MAX_JOINTS], applied[PS_MAX_JOINTS];
     /* read-only */
     bool is_fallback;
     float fallback_left_s;

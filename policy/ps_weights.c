@@ -20,8 +20,8 @@ void ps_weights_free(ps_weights_t *w)
 
 /* ---- contract --------------------------------------------------------- */
 
-static int get_floats(const cJSON *o, const char *key, float *out, uint32_t n_max,
-                      uint32_t *out_n, char *err, size_t err_len)
+static int get_floats(const cJSON *o, const char *key, float *out, uint32_t n_max, uint32_t *out_n,
+                      char *err, size_t err_len)
 {
     const cJSON *a = cJSON_GetObjectItemCaseSensitive(o, key);
     if (!cJSON_IsArray(a) || (uint32_t)cJSON_GetArraySize(a) > n_max) {
@@ -66,8 +66,26 @@ static int get_names(const cJSON *o, const char *key, char (*out)[PS_NAME_LEN], 
     return 0;
 }
 
-static int get_number(const cJSON *o, const char *key, double lo, double hi, double *out,
-                      char *err, size_t err_len)
+/* action.base: absent or "stance", or "capture". */
+static int get_base(const cJSON *act, ps_weights_base_t *out, char *err, size_t err_len)
+{
+    const cJSON *b = cJSON_GetObjectItemCaseSensitive(act, "base");
+    *out = PS_WEIGHTS_BASE_STANCE;
+    if (b == NULL)
+        return 0;
+    if (cJSON_IsString(b) && strcmp(b->valuestring, "stance") == 0)
+        return 0;
+    if (cJSON_IsString(b) && strcmp(b->valuestring, "capture") == 0) {
+        *out = PS_WEIGHTS_BASE_CAPTURE;
+        return 0;
+    }
+    ps_err_format(err, err_len, "contract: action.base %s is not \"stance\" or \"capture\"",
+                  cJSON_IsString(b) ? b->valuestring : "(not a string)");
+    return -EINVAL;
+}
+
+static int get_number(const cJSON *o, const char *key, double lo, double hi, double *out, char *err,
+                      size_t err_len)
 {
     const cJSON *v = cJSON_GetObjectItemCaseSensitive(o, key);
     if (!cJSON_IsNumber(v) || !(v->valuedouble >= lo) || !(v->valuedouble <= hi)) {
@@ -182,6 +200,8 @@ static int parse_contract(const char *json, ps_weights_contract_t *c, net_spec_t
     if (rc == 0)
         rc = get_number(act, "clip", 1e-6, 1e6, &v, err, err_len);
     c->act_clip = (float)v;
+    if (rc == 0)
+        rc = get_base(act, &c->act_base, err, err_len);
 
     const cJSON *obs = cJSON_GetObjectItemCaseSensitive(root, "observation");
     char fnames[PS_OBS_MAX_FIELDS][PS_NAME_LEN];
@@ -194,8 +214,9 @@ static int parse_contract(const char *json, ps_weights_contract_t *c, net_spec_t
     for (uint32_t f = 0; rc == 0 && f < c->n_fields; f++) {
         const int id = ps_obs_field_find(fnames[f]);
         if (id < 0) {
-            ps_err_format(err, err_len, "contract: observation.fields[%u] '%s' is not a field of "
-                                        "the observation builder (policy/ps_obs.h)",
+            ps_err_format(err, err_len,
+                          "contract: observation.fields[%u] '%s' is not a field of "
+                          "the observation builder (policy/ps_obs.h)",
                           f, fnames[f]);
             rc = -EINVAL;
         } else {
@@ -230,8 +251,8 @@ static int parse_contract(const char *json, ps_weights_contract_t *c, net_spec_t
         rc = get_acts(root, "activations", ns->act, PS_MLP_MAX_LAYERS, &ns->n_act, err, err_len);
     const cJSON *ea = cJSON_GetObjectItemCaseSensitive(root, "embed_activations");
     if (rc == 0 && ea != NULL)
-        rc = get_acts(root, "embed_activations", ns->embed_act, PS_MLP_MAX_EMBED,
-                      &ns->n_embed_act, err, err_len);
+        rc = get_acts(root, "embed_activations", ns->embed_act, PS_MLP_MAX_EMBED, &ns->n_embed_act,
+                      err, err_len);
     if (rc == 0 && cJSON_GetObjectItemCaseSensitive(root, "inject_layer") != NULL) {
         rc = get_number(root, "inject_layer", 0, PS_MLP_MAX_LAYERS - 1, &v, err, err_len);
         ns->inject_layer = (uint32_t)v;
@@ -312,17 +333,16 @@ static int build_desc(const ps_st_file_t *st, const net_spec_t *ns, ps_mlp_desc_
             }
             l->b = vals + at;
             if (l->n_out != 0 && l->n_out != t->shape[0]) {
-                ps_err_format(err, err_len, "tensor %s: %llu outputs, its weight has %u",
-                              t->name, (unsigned long long)t->shape[0], l->n_out);
+                ps_err_format(err, err_len, "tensor %s: %llu outputs, its weight has %u", t->name,
+                              (unsigned long long)t->shape[0], l->n_out);
                 return -EINVAL;
             }
             l->n_out = (uint32_t)t->shape[0];
         } else {
             if (t->n_dims != 2 || t->shape[0] > PS_MLP_MAX_WIDTH ||
                 t->shape[1] > PS_MLP_MAX_WIDTH) {
-                ps_err_format(err, err_len,
-                              "tensor %s: a weight is [out, in] with sizes up to %u", t->name,
-                              PS_MLP_MAX_WIDTH);
+                ps_err_format(err, err_len, "tensor %s: a weight is [out, in] with sizes up to %u",
+                              t->name, PS_MLP_MAX_WIDTH);
                 return -EINVAL;
             }
             if (l->b != NULL && l->n_out != t->shape[0]) {
@@ -430,9 +450,8 @@ int ps_weights_load(ps_weights_t *w, const char *path, char *err, size_t err_len
 }
 
 int ps_weights_check_robot(const ps_weights_contract_t *c, uint32_t n_joints,
-                           const char (*joint_name)[PS_NAME_LEN],
-                           const ps_servo_joint_cfg_t *servo, uint32_t policy_hz, char *err,
-                           size_t err_len)
+                           const char (*joint_name)[PS_NAME_LEN], const ps_servo_joint_cfg_t *servo,
+                           uint32_t policy_hz, char *err, size_t err_len)
 {
     if (c == NULL || joint_name == NULL || servo == NULL)
         return -EINVAL;

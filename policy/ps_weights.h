@@ -17,8 +17,13 @@
  *   stance             per joint, the offset of joint_pos and of the actions
  *   observation        {"fields": [names, ps_obs.h], "mean": [...], "std":
  *                      [...], "clip": c}
- *   action             {"joints": [names], "scale": [...], "clip": c}:
- *                      target q = stance + scale * a, |a| <= clip
+ *   action             {"joints": [names], "scale": [...], "clip": c, "base": b}:
+ *                      target q = stance + scale * (base_a + a), |a| <= clip,
+ *                      the sum clipped to clip too; base "stance" (the
+ *                      default, base_a = 0) or "capture" (a residual policy:
+ *                      base_a is the capture-point controller's action,
+ *                      (q_capture - stance) / scale clipped to clip, computed
+ *                      in the same step: policy/ps_mlp_policy.h)
  *   activations        one per base layer ("elu", "relu", ... ps_mlp.h)
  *   embed_activations  one per embedding layer; inject_layer; extra_size
  *   trained_by         the command and seed that made it (informative)
@@ -44,6 +49,12 @@
 #define PS_WEIGHTS_VERSION      1u
 #define PS_WEIGHTS_CONTRACT_KEY "pushstep.contract"
 
+/** What the actions are added to (contract action.base). */
+typedef enum {
+    PS_WEIGHTS_BASE_STANCE = 0, /**< "stance": the actions alone */
+    PS_WEIGHTS_BASE_CAPTURE,    /**< "capture": a residual on the capture-point controller */
+} ps_weights_base_t;
+
 typedef struct {
     uint32_t version;
     char robot[PS_NAME_LEN];
@@ -58,6 +69,7 @@ typedef struct {
     uint32_t n_act;
     uint32_t act_joint[PS_MAX_JOINTS]; /**< index into joint_name */
     float act_scale[PS_MAX_JOINTS], act_clip;
+    ps_weights_base_t act_base;
     uint32_t n_extra;
     char trained_by[1024]; /**< how the file was made; longer text is cut */
 } ps_weights_contract_t;
@@ -82,9 +94,8 @@ int ps_weights_load(ps_weights_t *w, const char *path, char *err, size_t err_len
  *  l_hip_pitch (trained for another joint order)".
  *  @return 0 | -PS_ERR_CONFIG | -EINVAL NULL  @rt INIT */
 int ps_weights_check_robot(const ps_weights_contract_t *c, uint32_t n_joints,
-                           const char (*joint_name)[PS_NAME_LEN],
-                           const ps_servo_joint_cfg_t *servo, uint32_t policy_hz, char *err,
-                           size_t err_len);
+                           const char (*joint_name)[PS_NAME_LEN], const ps_servo_joint_cfg_t *servo,
+                           uint32_t policy_hz, char *err, size_t err_len);
 
 /** Safe on a zeroed struct and twice. */
 void ps_weights_free(ps_weights_t *w);

@@ -112,6 +112,12 @@ static double first_takeover_s(const ps_summary_policy_t *p)
     return t_ns > p->start_ns ? ps_ns_to_s(t_ns - p->start_ns) : 0.0;
 }
 
+/* What the MLP's actions are added to: its contract's action.base. */
+static const char *action_base_name(const ps_mlp_policy_t *m)
+{
+    return m->w->contract.act_base == PS_WEIGHTS_BASE_CAPTURE ? "capture" : "stance";
+}
+
 static cJSON *policy_json(const ps_summary_policy_t *p)
 {
     cJSON *o = cJSON_CreateObject();
@@ -120,6 +126,7 @@ static cJSON *policy_json(const ps_summary_policy_t *p)
     if (m == NULL)
         return o;
     cJSON_AddStringToObject(o, "weights", p->weights_path ? p->weights_path : "");
+    cJSON_AddStringToObject(o, "action_base", action_base_name(m));
     cJSON_AddNumberToObject(o, "steps", (double)m->n_steps);
     cJSON_AddNumberToObject(o, "fallback_steps", (double)m->n_fallback_steps);
     cJSON *t = cJSON_AddObjectToObject(o, "fallback_takeovers");
@@ -398,8 +405,9 @@ static void print_recorder(const ps_recorder_stats_t *r, FILE *out)
     }
 }
 
-/* " controller mlp (FILE): fallback in charge N of M steps; it took over after
- * N bad observations, ..., N late steps[, first at T s]" */
+/* " controller mlp (FILE[, a residual on capture]): fallback in charge N of M
+ * steps; it took over after N bad observations, ..., N late steps[, first at
+ * T s]" */
 static void print_policy(const ps_summary_policy_t *p, FILE *out)
 {
     if (p->name == NULL)
@@ -410,10 +418,11 @@ static void print_policy(const ps_summary_policy_t *p, FILE *out)
         return;
     }
     fprintf(out,
-            " controller %s (%s): fallback in charge %llu of %llu steps; it took over after "
+            " controller %s (%s%s): fallback in charge %llu of %llu steps; it took over after "
             "%llu bad observations, %llu NaN actions, %llu actions out of range, %llu late "
             "steps",
             p->name, p->weights_path ? p->weights_path : "?",
+            m->w->contract.act_base == PS_WEIGHTS_BASE_CAPTURE ? ", a residual on capture" : "",
             (unsigned long long)m->n_fallback_steps, (unsigned long long)m->n_steps,
             (unsigned long long)m->n_obs_faults, (unsigned long long)m->n_nan,
             (unsigned long long)m->n_range, (unsigned long long)m->n_late);

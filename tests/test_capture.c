@@ -90,9 +90,9 @@ static void test_ps_capture_init_errors(void **st)
     assert_int_equal(
         ps_capture_init(&c, g_robot.n_joints, g_robot.joint_name, g_robot.servo, &k, 0.02f),
         -EINVAL);
-    assert_int_equal(ps_capture_init(&c, 12, g_robot.joint_name + 9, g_robot.servo, &g_robot.kin,
-                                     0.02f),
-                     -ENOENT); /* from l_ankle_pitch on: the hips are missing */
+    assert_int_equal(
+        ps_capture_init(&c, 12, g_robot.joint_name + 9, g_robot.servo, &g_robot.kin, 0.02f),
+        -ENOENT); /* from l_ankle_pitch on: the hips are missing */
     init_capture(&c);
     assert_float_equal(c.height_m, 0.654f - 0.0f, 0.01); /* pelvis over the soles at stance */
 }
@@ -352,6 +352,47 @@ static void test_ps_mlp_policy_late_or_wild_falls_back(void **st)
     ps_weights_free(&f.w);
 }
 
+/* A zero residual policy (action base "capture") is the capture-point
+ * controller: step by step through a sideways step, its targets are those of
+ * a controller of its own fed the same states (the leg joints' as training
+ * adds them, clipped to the contract's clip; the others at stance), and the
+ * action it applied, the observation's previous action, is that
+ * controller's. */
+static void test_ps_mlp_policy_zero_residual_is_the_capture_controller(void **st)
+{
+    (void)st;
+    static mlp_fx_t f;
+    mlp_setup(&f, "tests/data/policy/ps1_zero_residual.safetensors");
+    ps_capture_t ref;
+    init_capture(&ref);
+    ps_policy_t rp;
+    ps_capture_as_policy(&ref, &rp);
+    const ps_weights_contract_t *c = &f.w.contract;
+    float most_rad = 0.0f;
+    for (int k = 0; k < 30; k++) {
+        ps_meas_t m;
+        ps_estimate_t e;
+        ps_targets_t t, want;
+        state(&ref, 0.0f, 0.02f * (float)(k < 15 ? k : 15), &m, &e); /* left at 1 m/s, then still */
+        assert_int_equal(rp.ops->step(rp.ctx, &m, &e, &want), 0);
+        assert_int_equal(f.p.ops->step(f.p.ctx, &m, &e, &t), 0);
+        for (uint32_t a = 0; a < c->n_act; a++) {
+            const uint32_t j = c->act_joint[a];
+            float u = (want.q_rad[j] - c->stance_rad[j]) / c->act_scale[a];
+            u = u > c->act_clip ? c->act_clip : (u < -c->act_clip ? -c->act_clip : u);
+            assert_float_equal(f.mlp.applied[a], u, 1e-6);
+            assert_float_equal(t.q_rad[j], c->stance_rad[j] + c->act_scale[a] * u, 1e-6);
+            most_rad = fmaxf(most_rad, fabsf(t.q_rad[j] - c->stance_rad[j]));
+        }
+        for (uint32_t i = 0; i < t.n_joints; i++)
+            assert_float_equal(t.q_rad[i], want.q_rad[i], 1e-6); /* no clip reached here */
+    }
+    assert_true(ref.n_steps >= 1); /* it stepped */
+    assert_true(most_rad > 0.1f);  /* and the legs moved with it */
+    assert_int_equal(f.mlp.n_fallback_steps, 0);
+    ps_weights_free(&f.w);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -362,6 +403,7 @@ int main(void)
         cmocka_unit_test(test_ps_capture_level_trunk_swing_keeps_the_old_solution),
         cmocka_unit_test(test_ps_mlp_policy_zero_net_targets_stance),
         cmocka_unit_test(test_ps_mlp_policy_late_or_wild_falls_back),
+        cmocka_unit_test(test_ps_mlp_policy_zero_residual_is_the_capture_controller),
     };
     return cmocka_run_group_tests(tests, setup, NULL);
 }

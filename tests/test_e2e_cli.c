@@ -411,6 +411,15 @@ static void test_cli_summary_reports_the_policy_and_its_fallback(void **state)
     assert_true(num(pol, "steps") >= 140);
     assert_true(num(pol, "fallback_steps") == 0);
     assert_true(cJSON_IsNull(obj(pol, "first_takeover_t_s")));
+    assert_string_equal(cJSON_GetStringValue(obj(pol, "action_base")), "stance");
+    cJSON_Delete(j);
+
+    snprintf(args, sizeof(args),
+             "%s --duration 3 --weights tests/data/policy/ps1_zero_residual.safetensors", stand);
+    j = undisturbed_run(args, path);
+    if (strstr(out, ", a residual on capture): fallback in charge 0 of ") == NULL)
+        fail_msg("the policy line does not say it is a residual on capture:\n%s", out);
+    assert_string_equal(cJSON_GetStringValue(obj(obj(j, "policy"), "action_base")), "capture");
     cJSON_Delete(j);
 
     snprintf(args, sizeof(args), "%s --duration 1 --policy stand", stand);

@@ -510,9 +510,9 @@ static void test_lockstep_refused_requests_while_estop_pressed_guarded(void **st
     /* The robot fell while the e-stop cut the drives' power (the harness is
      * off), so the restart sees the fall and damps; lying still, it may
      * already be back in STANDBY by then (DAMP_DONE after MIN_DAMPING_NS). */
-    assert_true(app.loop.state == PS_SM_RAMP || app.loop.state == PS_SM_DAMPING ||
-                (app.loop.state == PS_SM_STANDBY &&
-                 find_transition(PS_SM_DAMPING, PS_SM_STANDBY) != NULL));
+    assert_true(
+        app.loop.state == PS_SM_RAMP || app.loop.state == PS_SM_DAMPING ||
+        (app.loop.state == PS_SM_STANDBY && find_transition(PS_SM_DAMPING, PS_SM_STANDBY) != NULL));
 }
 
 /* ---- overruns in lockstep ---------------------------------------------- */
@@ -807,6 +807,36 @@ static void test_lockstep_capture_steps_out_sideways(void **state)
     assert_int_equal(t.n_cmd_out_of_limits, 0);
 }
 
+/* A residual policy of zeros (action base "capture") is the capture-point
+ * controller in the real loop too: through the hard sideways push (a step
+ * out, then a fall) the plant's truth is that of --policy capture, and the
+ * MLP stayed in charge. */
+static void test_lockstep_zero_residual_policy_is_the_capture_controller(void **state)
+{
+    (void)state;
+    static const char scen[] = "tests/data/scenarios/push-left-hard.yaml";
+    start_policy(scen, "capture", NULL);
+    step_until(6.0);
+    ps_sim_truth_t want, t;
+    ps_sim_get_truth(app.sim, &want);
+    const uint32_t n_steps = app.capture.n_steps;
+    ps_app_deinit(&app);
+
+    start_policy(scen, "mlp", "tests/data/policy/ps1_zero_residual.safetensors");
+    step_until(6.0);
+    ps_sim_get_truth(app.sim, &t);
+    print_message("capture: %u step(s), fall at %.3f s; zero residual: %u, %.3f s\n", n_steps,
+                  want.first_fall_t_s, app.capture.n_steps, t.first_fall_t_s);
+    assert_true(n_steps >= 1 && want.first_fall_t_s > 0); /* it stepped and fell */
+    assert_int_equal(app.capture.n_steps, n_steps);
+    assert_int_equal(app.mlp.n_fallback_steps, 0);
+    assert_true(app.mlp.n_steps > 250);
+    assert_float_equal(t.first_fall_t_s, want.first_fall_t_s, 1e-9);
+    for (int k = 0; k < 3; k++)
+        assert_float_equal(t.com_m[k], want.com_m[k], 1e-4);
+    assert_int_equal(t.n_cmd_out_of_limits, 0);
+}
+
 /* The MLP in the slot: a policy of zeros (targets = stance) stays in
  * charge and the robot stands, nothing allocated on the loop thread. */
 static void test_lockstep_mlp_policy_in_charge_guarded(void **state)
@@ -838,8 +868,7 @@ static void test_lockstep_mlp_out_of_range_falls_back_to_capture(void **state)
     ps_sim_truth_t t;
     ps_sim_get_truth(app.sim, &t);
     print_message("wild policy: %llu steps, %llu on the fallback, %llu out of range\n",
-                  (unsigned long long)app.mlp.n_steps,
-                  (unsigned long long)app.mlp.n_fallback_steps,
+                  (unsigned long long)app.mlp.n_steps, (unsigned long long)app.mlp.n_fallback_steps,
                   (unsigned long long)app.mlp.n_range);
     assert_true(app.mlp.n_range >= 1);
     assert_true(app.mlp.n_fallback_steps == app.mlp.n_steps);
@@ -871,6 +900,8 @@ int main(void)
         cmocka_unit_test_teardown(test_lockstep_subtick_estop_press_reaches_estop, teardown),
         cmocka_unit_test_teardown(test_lockstep_capture_stands_where_stand_falls, teardown),
         cmocka_unit_test_teardown(test_lockstep_capture_steps_out_sideways, teardown),
+        cmocka_unit_test_teardown(test_lockstep_zero_residual_policy_is_the_capture_controller,
+                                  teardown),
         cmocka_unit_test_teardown(test_lockstep_mlp_policy_in_charge_guarded, teardown),
         cmocka_unit_test_teardown(test_lockstep_mlp_out_of_range_falls_back_to_capture, teardown),
     };

@@ -68,6 +68,22 @@ check bash -c "/usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --ste
     && /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 --bc-iters 0 --ppo-iters 2 \
     --critic-warmup 0 --ppo-lr 1e-3 --init $out/p.safetensors --out $out/g.safetensors --log-dir $out/g \
     >/dev/null 2>&1 && ! same_policy $out/p.safetensors $out/g.safetensors"
+name="--residual: base capture in the contract, the last layer moved from zero, the runtime runs it, --init wants --residual"
+# a residual run's first policy is the capture-point controller (its last
+# layer zero); after 2 PPO iterations at a high learning rate it is not
+check bash -c "/usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 --bc-iters 0 \
+    --ppo-iters 2 --ppo-lr 1e-3 --residual --out $out/res.safetensors --log-dir $out/res >/dev/null 2>&1 \
+    && /usr/bin/python3 -c \"
+import sys, json, numpy as np; sys.path.insert(0, 'policy/train'); import psfile
+t, m = psfile.read_safetensors('$out/res.safetensors')
+assert json.loads(m[psfile.CONTRACT_KEY])['action']['base'] == 'capture'
+assert '--residual' in json.loads(m[psfile.CONTRACT_KEY])['trained_by']
+assert np.abs(t['base.2.weight']).max() > 0\" \
+    && ${PUSHSTEP_BIN:-build/pushstep} --lockstep --quiet --duration 3 --scenario scenarios/stand.yaml \
+    --weights $out/res.safetensors --summary $out/rs.json >$out/rs.out 2>&1 \
+    && grep -q 'a residual on capture' $out/rs.out \
+    && ! /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --bc-iters 0 --ppo-iters 1 \
+    --init $out/res.safetensors --out $out/res2.safetensors --log-dir $out/res2 >/dev/null 2>&1"
 name="GAE: a time-limit cut bootstraps from the state's value, a fall does not (--bootstrap-timeouts)"
 # one environment, 2 steps, reward 1, values 10 and 20, both episodes end at
 # step 0: a fall (info[0] = 1) gives delta = 1 - 10; a cut gives

@@ -183,9 +183,36 @@ static void test_ps_weights_load_golden_contract(void **st)
     assert_int_equal(c->fields[1], PS_OBS_JOINT_POS);
     assert_float_equal(c->stance_rad[3], 0.2f, 1e-7);
     assert_float_equal(c->act_scale[0], 0.5f, 0.0);
+    assert_int_equal(c->act_base, PS_WEIGHTS_BASE_STANCE); /* no action.base */
     assert_int_equal(w.mlp.n_layers, 3);
     ps_weights_free(&w);
     ps_weights_free(&w);
+}
+
+/* action.base: "stance" or "capture" (a residual policy) load; anything
+ * else is refused, named. */
+static void test_ps_weights_action_base(void **st)
+{
+    (void)st;
+    static const struct {
+        const char *base;
+        ps_weights_base_t want;
+    } OK[] = {{"stance", PS_WEIGHTS_BASE_STANCE}, {"capture", PS_WEIGHTS_BASE_CAPTURE}};
+    static const char SCALE[] = "\\\"scale\\\": [0.5, 0.5, 0.5, 0.5]";
+    for (size_t i = 0; i < sizeof(OK) / sizeof(OK[0]); i++) {
+        char to[128], path[128], err[512] = "";
+        snprintf(to, sizeof(to), "%s, \\\"base\\\": \\\"%s\\\"", SCALE, OK[i].base);
+        edited(SCALE, to, path, sizeof(path));
+        ps_weights_t w;
+        if (ps_weights_load(&w, path, err, sizeof(err)) != 0)
+            fail_msg("base %s: %s", OK[i].base, err);
+        assert_int_equal(w.contract.act_base, OK[i].want);
+        ps_weights_free(&w);
+    }
+    expect_load_refused(SCALE, "\\\"scale\\\": [0.5, 0.5, 0.5, 0.5], \\\"base\\\": \\\"crowd\\\"",
+                        -EINVAL, "action.base crowd is not \"stance\" or \"capture\"");
+    expect_load_refused(SCALE, "\\\"scale\\\": [0.5, 0.5, 0.5, 0.5], \\\"base\\\": 1", -EINVAL,
+                        "action.base (not a string) is not");
 }
 
 static void test_ps_weights_load_refuses_bad_contracts(void **st)
@@ -201,10 +228,10 @@ static void test_ps_weights_load_refuses_bad_contracts(void **st)
                         "activations[1] 'gelu' is not an activation");
     expect_load_refused("\\\"elu\\\", \\\"elu\\\", ", "\\\"elu\\\", ", -EINVAL,
                         "2 activations for 3 base layers");
-    expect_load_refused("\\\"kp\\\": [100.0, 100.0, 100.0, 100.0]", "\\\"kp\\\": [100.0]",
-                        -EINVAL, "kp has 1 entries, want 4");
-    expect_load_refused("\\\"j3\\\"], \\\"scale\\\"", "\\\"jx\\\"], \\\"scale\\\"",
-                        -EINVAL, "action.joints[3] 'jx' is not in joints");
+    expect_load_refused("\\\"kp\\\": [100.0, 100.0, 100.0, 100.0]", "\\\"kp\\\": [100.0]", -EINVAL,
+                        "kp has 1 entries, want 4");
+    expect_load_refused("\\\"j3\\\"], \\\"scale\\\"", "\\\"jx\\\"], \\\"scale\\\"", -EINVAL,
+                        "action.joints[3] 'jx' is not in joints");
     expect_load_refused("pushstep.contract", "other.key", -EINVAL,
                         "no metadata pushstep.contract: not a pushstep policy file");
     expect_load_refused("\"base.1.bias\"", "\"extra.1.bias\"", -EINVAL,
@@ -239,26 +266,22 @@ static void test_ps_weights_check_robot_names_each_difference(void **st)
     /* another joint order: never moves the robot */
     snprintf(names[1], PS_NAME_LEN, "j2");
     snprintf(names[2], PS_NAME_LEN, "j1");
-    assert_int_equal(ps_weights_check_robot(c, 4, names, s, 50, err, sizeof(err)),
-                     -PS_ERR_CONFIG);
+    assert_int_equal(ps_weights_check_robot(c, 4, names, s, 50, err, sizeof(err)), -PS_ERR_CONFIG);
     assert_string_equal(err, "joints[1]: policy has j1, robot file has j2 (trained for another "
                              "joint order or robot)");
     servo_of(c, s, names);
-    assert_int_equal(ps_weights_check_robot(c, 3, names, s, 50, err, sizeof(err)),
-                     -PS_ERR_CONFIG);
+    assert_int_equal(ps_weights_check_robot(c, 3, names, s, 50, err, sizeof(err)), -PS_ERR_CONFIG);
     assert_string_equal(err, "joints: policy has 4 joints, robot file 3");
     s[2].kp_nm_rad = 150.0f;
-    assert_int_equal(ps_weights_check_robot(c, 4, names, s, 50, err, sizeof(err)),
-                     -PS_ERR_CONFIG);
-    assert_string_equal(err, "joints[2] j2: kp_nm_rad: policy trained with 100, robot file has 150");
+    assert_int_equal(ps_weights_check_robot(c, 4, names, s, 50, err, sizeof(err)), -PS_ERR_CONFIG);
+    assert_string_equal(err,
+                        "joints[2] j2: kp_nm_rad: policy trained with 100, robot file has 150");
     servo_of(c, s, names);
     s[3].stance_rad = 0.25f;
-    assert_int_equal(ps_weights_check_robot(c, 4, names, s, 50, err, sizeof(err)),
-                     -PS_ERR_CONFIG);
+    assert_int_equal(ps_weights_check_robot(c, 4, names, s, 50, err, sizeof(err)), -PS_ERR_CONFIG);
     assert_non_null(strstr(err, "stance_rad: policy trained with 0.2, robot file has 0.25"));
     servo_of(c, s, names);
-    assert_int_equal(ps_weights_check_robot(c, 4, names, s, 100, err, sizeof(err)),
-                     -PS_ERR_CONFIG);
+    assert_int_equal(ps_weights_check_robot(c, 4, names, s, 100, err, sizeof(err)), -PS_ERR_CONFIG);
     assert_string_equal(err, "policy_hz: policy trained at 50 Hz, robot file runs 100 Hz");
     ps_weights_free(&w);
 }
@@ -270,6 +293,7 @@ int main(void)
         cmocka_unit_test(test_ps_st_copy_f32_refuses_nan_and_inf),
         cmocka_unit_test(test_ps_weights_load_golden_contract),
         cmocka_unit_test(test_ps_weights_load_refuses_bad_contracts),
+        cmocka_unit_test(test_ps_weights_action_base),
         cmocka_unit_test(test_ps_weights_check_robot_names_each_difference),
     };
     return cmocka_run_group_tests(tests, setup, teardown);

@@ -38,11 +38,13 @@ class Mlp:
         self.std = np.asarray(o["std"])
         self.clip = float(o["clip"])
         self.act_clip = float(self.c["action"]["clip"])
+        self.is_residual = self.c["action"].get("base") == "capture"
 
     def __call__(self, obs, expert):
         x = np.clip((obs - self.mean) / self.std, -self.clip, self.clip)
         a = psfile.forward(self.t, x, contract=self.c)
-        return np.clip(a, -self.act_clip, self.act_clip).astype(np.float32)
+        a = np.clip(a, -self.act_clip, self.act_clip).astype(np.float32)
+        return a + expert if self.is_residual else a
 
 
 def expert_ctl(obs, expert):

@@ -3,7 +3,9 @@
   ps1_zero.safetensors  every weight and bias 0: actions 0, targets = stance
   ps1_wild.safetensors  last bias 100 (beyond the action clip of 4): the
                         runtime must refuse its actions and fall back
-Both carry ps1's contract (policy/train/contract.py). numpy only.
+  ps1_zero_residual.safetensors  ps1_zero as a residual policy (action base
+                        "capture"): targets = the capture-point controller's
+All carry ps1's contract (policy/train/contract.py). numpy only.
 """
 import os
 import sys
@@ -29,6 +31,9 @@ def main():
     psfile.write_policy(os.path.join(OUT, "ps1_zero.safetensors"), layers, c)
     layers[-1] = (layers[-1][0], np.full(n_act, 100.0))
     psfile.write_policy(os.path.join(OUT, "ps1_wild.safetensors"), layers, c)
+    layers[-1] = (layers[-1][0], np.zeros(n_act))
+    c["action"]["base"] = "capture"
+    psfile.write_policy(os.path.join(OUT, "ps1_zero_residual.safetensors"), layers, c)
     print("n_obs %d, n_act %d" % (n_obs, n_act))
 
 

@@ -20,6 +20,11 @@ not hold, first learns alone for --critic-warmup iterations); with
 harness as the runtime's do, and its pushes can be harder or come more often
 from one side (docs/policy.md).
 
+With --residual the policy is a residual on the capture-point controller
+(the contract's action.base "capture"; the runtime adds the two the same
+way, policy/ps_mlp_policy.h): the network starts at zero, i.e. at the
+controller, and PPO starts there with no cloning.
+
 Observations are normalised by running mean and standard deviation, which
 go into the policy file's contract, so the runtime's observation builder
 normalises exactly as here. One torch thread (a measured probe found two
@@ -118,8 +123,10 @@ def load_init(path, net, norm, hidden):
     return c
 
 
-def save(path, net, norm, doc, hidden, trained_by):
+def save(path, net, norm, doc, hidden, trained_by, residual=False):
     c = ct.contract(doc, mean=norm.mean, std=norm.std(), trained_by=trained_by)
+    if residual:
+        c["action"]["base"] = "capture"
     c["observation"]["clip"] = OBS_CLIP
     c["activations"] = ["elu"] * len(hidden) + ["identity"]
     layers = [(m.weight.detach().numpy(), m.bias.detach().numpy()) for m in net.linears()]
@@ -141,7 +148,7 @@ def plot(log_csv, png):
 
 
 def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=True,
-            explore=True, dart_std=0.0, stair=None):
+            explore=True, dart_std=0.0, stair=None, residual=False):
     """n_steps of every environment. beta_expert: probability that an
     environment follows the expert this step (DAgger)."""
     n = env.n
@@ -168,7 +175,8 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
             # previous-action input included; without it the clone copies
             # its previous action and integrates PPO's exploration noise
             a = a + dart_std * rng.standard_normal(a.shape).astype(np.float32)
-        obs2, rew, done, expert2, info = env.step(a)
+        # a residual policy's action is added to the expert's (both in action units)
+        obs2, rew, done, expert2, info = env.step(a + expert if residual else a)
         if stair is not None:
             stair.observe(info)
         buf["obs"].append(o)
@@ -178,7 +186,7 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
         buf["rew"].append(rew)
         buf["done"].append(done)
         buf["val"].append(v.numpy())
-        buf["expert"].append(expert)
+        buf["expert"].append(np.zeros_like(expert) if residual else expert)
         buf["info"].append(info)
         obs, expert = obs2, expert2
     with torch.no_grad():
@@ -338,6 +346,10 @@ def main():
     ap.add_argument("--stair-step", type=float, default=0.02, help="staircase step (m/s)")
     ap.add_argument("--stair-dv0", type=float, default=0.4,
                     help="staircase starting delta-v (m/s)")
+    ap.add_argument("--residual", action="store_true",
+                    help="the policy's action is added to the expert's (the runtime's "
+                         "capture-point controller, --expert quick): PPO from a zero residual, "
+                         "no cloning (--bc-iters 0); the cloning term pulls toward zero")
     ap.add_argument("--expert", choices=psenv.EXPERTS, default="quick",
                     help="the capture-point controller cloned and used for the cloning term: "
                          "quick, the runtime's (0.15 s swings, the swing leg solved from the "
@@ -355,6 +367,8 @@ def main():
     rng = np.random.default_rng(a.seed)
     hidden = [int(x) for x in a.hidden.split(",")]
     doc = ct.robot()
+    if a.residual and (a.bc_iters or a.expert != "quick"):
+        raise SystemExit("--residual: give --bc-iters 0; the runtime adds the quick expert")
     if a.init and a.bc_iters:
         raise SystemExit("--init fine-tunes: give --bc-iters 0")
     env = psenv.Env(a.envs, a.threads, seed=a.seed, push_dv_max=a.push_dv_start,
@@ -366,6 +380,10 @@ def main():
         raise SystemExit("environment (%d obs, %d actions) and contract.py (%d, %d) disagree"
                          % (env.n_obs, env.n_act, n_obs_contract, len(ct.LEGS)))
     net = Policy(env.n_obs, env.n_act, hidden)
+    if a.residual:  # a zero residual: exactly the expert
+        with torch.no_grad():
+            net.pi[-1].weight.zero_()
+            net.pi[-1].bias.zero_()
     opt = torch.optim.Adam(net.parameters(), lr=a.lr)
     # PPO fine-tunes the clone: a small step for the actor (a clone that
     # stands needs its joint targets right to a few hundredths of a radian),
@@ -376,6 +394,9 @@ def main():
     opt_v = torch.optim.Adam(net.v.parameters(), lr=a.lr)
     norm = RunningNorm(env.n_obs)
     init_c = load_init(a.init, net, norm, hidden) if a.init else None
+    if init_c and (init_c["action"].get("base") == "capture") != a.residual:
+        raise SystemExit("--init %s: a residual policy file fine-tunes with --residual, "
+                         "no other" % a.init)
     os.makedirs(a.log_dir, exist_ok=True)
     log_path = os.path.join(a.log_dir, "log.csv")
     logf = open(log_path, "w", newline="")
@@ -400,6 +421,8 @@ def main():
             a.stair_p, a.stair_step, a.stair_dv0)
     if a.bootstrap_timeouts:
         trained_by += " --bootstrap-timeouts"
+    if a.residual:
+        trained_by += " --residual"
     if a.expert != "quick":
         trained_by += " --expert %s" % a.expert
     if a.init:  # and how the file it started from was made
@@ -408,7 +431,7 @@ def main():
     stair_csv = os.path.join(a.log_dir, "stair.csv")
 
     def checkpoint():
-        save(a.out, net, norm, doc, hidden, trained_by)
+        save(a.out, net, norm, doc, hidden, trained_by, a.residual)
         if stair:
             stair.write(stair_csv)
 
@@ -436,7 +459,8 @@ def main():
         beta = max(0.0, 1.0 - it / max(1, a.bc_iters * 0.75)) if is_bc else 0.0
         buf, obs, expert, last_v = rollout(env, net, norm, obs, a.steps, beta, expert, rng,
                                            update_norm=not a.init, explore=not is_bc,
-                                           dart_std=a.dart_std if is_bc else 0.0, stair=stair)
+                                           dart_std=a.dart_std if is_bc else 0.0, stair=stair,
+                                           residual=a.residual)
         n_env_steps += a.steps * env.n
         st = stats(buf)
         O = torch.from_numpy(buf["obs"].reshape(-1, env.n_obs))
