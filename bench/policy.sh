@@ -11,7 +11,8 @@
 #     bench/policy.sh --full), parallel over the cores with GNU parallel:
 #     bench/results/push.json, push.md, push_dv50_0.1s.png, push_dv50_0.3s.png
 #  3. with a trained policy, the same pushes in the training environment
-#     (policy/train/eval.py) beside the runtime's: bench/results/train_env.*
+#     (policy/train/eval.py, each trial starting as the runtime's: held limp,
+#     then the ramp) beside the runtime's: bench/results/train_env.*
 # PUSH_DIRECTIONS=8 halves the grid (the shipped results: docs/policy.md).
 # PUSH_SSH="host1,host2" runs the grid with parallel --sshlogin on those hosts
 # (the repository and build at the same path there); bench/push-slurm.sh is a
@@ -70,10 +71,10 @@ echo "grid: $(ls "$RES/push_trials" | wc -l) trials in $(($(date +%s) - start)) 
 rm -rf "$RES/push_trials"
 
 if [ -f "$WEIGHTS" ]; then
-    echo "== the same grid in the training environment (nominal robot), beside the runtime's"
+    echo "== the same grid in the training environment (nominal robot, the runtime's start), beside the runtime's"
     make -s build/libpsenv.so
     /usr/bin/python3 policy/train/eval.py --weights "$WEIGHTS" --runtime "$RES/push.json" \
-        --directions "$DIRS" \
+        --directions "$DIRS" --harness --ramp-start \
         --out "$RES/train_env.json" >"$RES/train_env.md"
     cat "$RES/train_env.md"
 fi

@@ -106,6 +106,9 @@ def main():
     ap.add_argument("--lib", help="the environment library (default build/libpsenv.so)")
     ap.add_argument("--harness", action="store_true",
                     help="start each trial held by the harness, as the runtime does")
+    ap.add_argument("--ramp-start", action="store_true",
+                    help="with --harness: limp in the harness, then the servo layer's ramp, "
+                         "as the runtime's trials start (train.py --ramp-start)")
     ap.add_argument("--expert", choices=psenv.EXPERTS, default="quick",
                     help="the capture-point controller's tunables (train.py --expert)")
     a = ap.parse_args()
@@ -115,7 +118,7 @@ def main():
     rng = np.random.default_rng(a.seed)
     env = psenv.Env(a.directions, a.threads, seed=a.seed, episode_s=8.0, dr=False,
                      lib=a.lib, harness_p=1.0 if a.harness else 0.0,
-                     expert=a.expert)
+                     expert=a.expert, ramp_start=a.ramp_start)
     doc = psfile.read_safetensors(a.weights)[1] if a.weights else {}
     policy_hz = json.loads(doc[psfile.CONTRACT_KEY])["policy_hz"] if doc else 50
     ctls = [("capture", expert_ctl)] + ([("mlp", Mlp(a.weights))] if a.weights else [])
@@ -143,7 +146,8 @@ def main():
     if a.out:
         with open(a.out, "w") as f:
             json.dump({"what": "training environment (nominal) vs runtime, same push grid",
-                       "seed": a.seed, "expert": a.expert,
+                       "seed": a.seed, "expert": a.expert, "harness": a.harness,
+                       "ramp_start": a.ramp_start,
                        "weights": os.path.basename(a.weights) if a.weights else None,
                        "cells": cells}, f, indent=1)
     return 0

@@ -346,6 +346,10 @@ def main():
     ap.add_argument("--stair-step", type=float, default=0.02, help="staircase step (m/s)")
     ap.add_argument("--stair-dv0", type=float, default=0.4,
                     help="staircase starting delta-v (m/s)")
+    ap.add_argument("--ramp-start", action="store_true",
+                    help="a harnessed episode (--harness-p) starts as the runtime's trials: "
+                         "limp in the harness, then the servo layer's ramp to the policy's "
+                         "targets over ramp_s, let go 0.2-1 s after")
     ap.add_argument("--residual", action="store_true",
                     help="the policy's action is added to the expert's (the runtime's "
                          "capture-point controller, --expert quick): PPO from a zero residual, "
@@ -374,7 +378,7 @@ def main():
     env = psenv.Env(a.envs, a.threads, seed=a.seed, push_dv_max=a.push_dv_start,
                     dr=not a.no_dr, push_dv_min=a.push_dv_min, harness_p=a.harness_p,
                     focus_p=a.focus_p, focus_dir_rad=float(np.radians(a.focus_dir_deg)),
-                    expert=a.expert)
+                    expert=a.expert, ramp_start=a.ramp_start)
     n_obs_contract = psfile.obs_size(ct.OBS_FIELDS, len(doc["joints"]), len(ct.LEGS))
     if env.n_obs != n_obs_contract or env.n_act != len(ct.LEGS):
         raise SystemExit("environment (%d obs, %d actions) and contract.py (%d, %d) disagree"
@@ -416,6 +420,13 @@ def main():
                            os.path.basename(a.init), a.critic_warmup, a.bc_weight,
                            a.push_dv_min, a.harness_p, a.focus_p, a.focus_dir_deg, a.gamma,
                            a.gae_lambda, " --fixed-std" if a.fixed_std else ""))
+    else:  # the options a fine-tuning run lists above, where a first run changed them
+        for key in ("bc_weight", "harness_p", "push_dv_min", "focus_p", "focus_dir_deg", "gamma",
+                    "gae_lambda"):
+            if getattr(a, key) != ap.get_default(key):
+                trained_by += " --%s %g" % (key.replace("_", "-"), getattr(a, key))
+        if a.fixed_std:
+            trained_by += " --fixed-std"
     if a.stair_p > 0.0:
         trained_by += " --stair-p %g --stair-step %g --stair-dv0 %g" % (
             a.stair_p, a.stair_step, a.stair_dv0)
@@ -423,6 +434,8 @@ def main():
         trained_by += " --bootstrap-timeouts"
     if a.residual:
         trained_by += " --residual"
+    if a.ramp_start:
+        trained_by += " --ramp-start"
     if a.expert != "quick":
         trained_by += " --expert %s" % a.expert
     if a.init:  # and how the file it started from was made

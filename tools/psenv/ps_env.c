@@ -68,6 +68,10 @@ typedef struct {
     push_t push[2];
     int n_push;
     double release_s; /* the harness lets go at this episode time; 0: free from the start */
+    /* is_ramp_start: the servo layer's mode, and the ramp's start and pose */
+    ps_servo_mode_kind_t servo_kind;
+    int64_t ramp_t0_ns;
+    float ramp_from_q[PS_MAX_JOINTS];
     bool is_held;
     push_t fixed; /* ps_env_set_push: this push every episode instead */
     bool has_fixed;
@@ -214,7 +218,15 @@ static void servo_tick(const ps_env_t *e, env1_t *v)
     float meas_q[PS_MAX_JOINTS];
     for (uint32_t j = 0; j < r->n_joints; j++)
         meas_q[j] = v->meas.joints[j].q_rad;
-    const ps_servo_mode_t mode = {.kind = PS_SERVO_TRACK, .meas_q_rad = meas_q};
+    ps_servo_mode_t mode = {.kind = v->servo_kind, .meas_q_rad = meas_q};
+    if (v->servo_kind == PS_SERVO_RAMP) {
+        const double alpha = (double)(v->t_ns - v->ramp_t0_ns) /
+                             ((double)r->control.ramp_s * (double)PS_NS_PER_S);
+        mode.ramp_alpha = (float)fmin(fmax(alpha, 0.0), 1.0);
+        mode.ramp_from_q_rad = v->ramp_from_q;
+        if (alpha >= 1.0)
+            v->servo_kind = PS_SERVO_TRACK;
+    }
     for (uint32_t j = 0; j < r->n_joints; j++) {
         if (v->tick % r->act[j].rate_div != 0)
             continue;
@@ -422,6 +434,10 @@ static int reset1(const ps_env_t *e, env1_t *v, float *obs, float *expert)
     if (e->cfg.harness_p > 0.0f && uni(&v->rng, 0.0, 1.0) < e->cfg.harness_p)
         v->release_s = uni(&v->rng, 0.2, 2.0);
     v->is_held = v->release_s > 0.0;
+    const bool is_ramped = v->is_held && e->cfg.is_ramp_start;
+    if (is_ramped)
+        v->release_s = (double)r->control.ramp_s + uni(&v->rng, 0.2, 1.0);
+    v->servo_kind = is_ramped ? PS_SERVO_LIMP : PS_SERVO_TRACK;
     ps_plant_reset(v->plant, e->stance, v->is_held);
     plan_pushes(e, v);
     memset(v->pend, 0, sizeof(v->pend));
@@ -450,6 +466,12 @@ static int reset1(const ps_env_t *e, env1_t *v, float *obs, float *expert)
     for (int k = 0; k < 10 && rc == 0; k++)
         rc = run_ticks(e, v);
     v->est.filter_tau_s = PS_ESTIMATE_FILTER_TAU_S;
+    if (is_ramped) { /* the runtime's RAMP: from the pose the limp drives let it sag to */
+        for (uint32_t j = 0; j < r->n_joints; j++)
+            v->ramp_from_q[j] = v->meas.joints[j].q_rad;
+        v->ramp_t0_ns = v->t_ns;
+        v->servo_kind = PS_SERVO_RAMP;
+    }
     ps_obs_reset(&v->obs);
     ps_obs_set_action(&v->obs, applied);
     v->cap_pol.ops->reset(v->cap_pol.ctx);

@@ -71,6 +71,12 @@ typedef struct {
                            swing, 5 cm lift, 0.1 s trigger lookahead, 0.3 s settling, the
                            swing leg solved for a level trunk (what the shipped policy
                            cloned; its clone measured better, docs/policy.md) */
+    /* Added 2026-12-04; zero keeps the harnessed start above. */
+    int is_ramp_start; /**< a harnessed episode starts as the runtime's trials do: the drives
+                          limp in the harness for the 0.2 s settling, then the targets ramp
+                          from that pose over the robot's ramp_s (the servo layer's RAMP),
+                          the harness letting go ramp_s + [0.2, 1.0] s in (the runtime's
+                          trials: 0.8 s) */
 } ps_env_cfg_t;
 
 #define PS_ENV_INFO 8 /**< floats of info per environment and step: */
