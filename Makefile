@@ -141,7 +141,7 @@ QEMU_WORK ?= $(BUILD)/qemu
 
 .PHONY: fuzz
 .PHONY: all deps deps-build deps-test deps-npm deps-bench deps-train run test test-hw clean format help \
-        bench bench-hw train install deb test-deb aarch64-test-bins soak test-build
+        bench bench-hw train train-clone install deb test-deb aarch64-test-bins soak test-build
 all: $(BUILD)/pushstep $(CAMERA_SO)
 
 help:
@@ -168,8 +168,10 @@ help:
 	@echo "             random fault every 8 s, each recovered; checks states, limits,"
 	@echo "             recorder, memory: bench/results/soak.json, soak.md"
 	@echo "make train   train the balance policy on the C environment (CPU, 2 cores,"
-	@echo "             seeded, about 17 min): policy/weights/ps1_stage1.safetensors (the"
-	@echo "             shipped file, reproduced bit for bit), $(BUILD)/train/"
+	@echo "             seeded, about 10 min): policy/weights/ps1_stage1.safetensors (the"
+	@echo "             shipped file, reproduced bit for bit), $(BUILD)/train/residual/"
+	@echo "make train-clone the recipe of the file shipped until 2026-12-04 (about 17"
+	@echo "             min): $(BUILD)/train/clone.safetensors"
 	@echo "make install PREFIX=/usr/local [DESTDIR=]: the binary, its data (boards, robots,"
 	@echo "             scenarios, models) in PREFIX/share/pushstep, the systemd unit"
 	@echo "             pushstep@.service and the udev rules (docs/deploy.md)"
@@ -378,24 +380,34 @@ bench: deps-bench $(BUILD)/pushstep $(CAMERA_SO) $(BUILD)/crowd_bench $(BUILD)/t
 $(BUILD)/crowd_bench: $(call OBJ,bench/crowd_bench.c) $(LIB_OBJS)
 	$(CC) $(CFLAGS) -o $@ $^ $(LDLIBS)
 
-# The balance policy's training (docs/policy.md): seeded, on the CPUs, in
-# two runs, which reproduce the shipped file bit for bit: cloning the
-# capture-point controller with its tunables before its 2026-12-03 change
-# (--expert slow: its clone measured better, docs/policy.md) and PPO (TRAIN_ARGS), then
-# PPO fine-tuning from that file with the runtime's harness phase and more
-# pushes from the front (TRAIN_FT_ARGS). The commands and seeds are written
-# into the policy file's contract.
-TRAIN_ARGS ?= --seed 1 --envs 16 --threads 2 --steps 64 --bc-iters 100 --ppo-iters 600 \
+# The balance policy's training (docs/policy.md): seeded, on the CPUs, one
+# run that reproduces the shipped file bit for bit (TRAIN_ARGS): PPO of a
+# residual on the capture-point controller (--residual: the policy's actions
+# are added to the controller's; it starts as the controller), 70 % of the
+# episodes starting as the runtime's trials do (limp in the harness, the
+# servo layer's ramp: --ramp-start). The command and seed are written into
+# the policy file's contract. `make train-clone` runs the recipe of the file
+# shipped until 2026-12-04 (cloning the capture-point controller with its
+# tunables before its 2026-12-03 change, PPO: TRAIN_CLONE_ARGS; then PPO
+# fine-tuning from that file: TRAIN_FT_ARGS), which it reproduces bit for bit,
+# into $(BUILD)/train/clone.safetensors.
+TRAIN_ARGS ?= --seed 1 --envs 16 --threads 2 --steps 64 --bc-iters 0 --ppo-iters 600 \
+              --push-dv-start 0.3 --push-dv-max 0.7 --residual --bc-weight 0 --ppo-lr 1e-4 \
+              --gamma 0.995 --gae-lambda 0.98 --harness-p 0.7 --ramp-start
+TRAIN_CLONE_ARGS ?= --seed 1 --envs 16 --threads 2 --steps 64 --bc-iters 100 --ppo-iters 600 \
               --push-dv-max 0.6 --expert slow
 TRAIN_FT_ARGS ?= --seed 2 --envs 16 --threads 2 --steps 64 --bc-iters 0 --ppo-iters 320 \
               --critic-warmup 40 --bc-weight 0.2 --harness-p 0.5 --push-dv-min 0.05 \
               --push-dv-start 0.6 --push-dv-max 0.6 --ppo-lr 3e-5 --focus-p 0.3 \
               --gamma 0.995 --gae-lambda 0.98 --fixed-std --expert slow
 train: deps-train $(BUILD)/pushstep $(BUILD)/libpsenv.so
-	/usr/bin/python3 policy/train/train.py $(TRAIN_ARGS) --out $(BUILD)/train/first.safetensors \
+	/usr/bin/python3 policy/train/train.py $(TRAIN_ARGS) \
+	    --out policy/weights/ps1_stage1.safetensors --log-dir $(BUILD)/train/residual
+train-clone: deps-train $(BUILD)/pushstep $(BUILD)/libpsenv.so
+	/usr/bin/python3 policy/train/train.py $(TRAIN_CLONE_ARGS) --out $(BUILD)/train/first.safetensors \
 	    --log-dir $(BUILD)/train/first
 	/usr/bin/python3 policy/train/train.py $(TRAIN_FT_ARGS) --init $(BUILD)/train/first.safetensors \
-	    --out policy/weights/ps1_stage1.safetensors --log-dir $(BUILD)/train/finetune
+	    --out $(BUILD)/train/clone.safetensors --log-dir $(BUILD)/train/finetune
 
 bench-hw: deps-test $(BUILD)/pushstep
 	@QEMU_WORK=$(QEMU_WORK) bash bench/hw.sh

@@ -22,14 +22,20 @@ name="same seed, same first iterations (deterministic environment and trainer)"
 check bash -c "/usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 \
     --bc-iters 3 --ppo-iters 2 --out $out/q.safetensors --log-dir $out/b >/dev/null 2>&1 \
     && cmp -s <(cut -d, -f1-8 $out/log.csv) <(cut -d, -f1-8 $out/b/log.csv)"
-# make train clones the slow expert (--expert slow in TRAIN_ARGS): its first
-# stage's log is the shipped file's, bench/results/train_log.csv; with the
-# runtime's capture-point controller as the expert (--expert quick) it is
+# make train's run (TRAIN_ARGS, a residual policy) has the shipped file's
+# log, bench/results/train_log_residual.csv; make train-clone's first stage
+# (TRAIN_CLONE_ARGS, --expert slow) the previous file's, train_log.csv; with
+# the runtime's capture-point controller as its expert (--expert quick) it is
 # bench/results/train_log_make_train.csv (docs/policy.md)
-name="make train's first stage reproduces the shipped file's learning log (first 2 iterations)"
 # a make variable's value, continuation lines joined
 make_var() { sed -n "/^$1 ?=/,/[^\\\\]\$/p" Makefile | sed "s/^$1 ?=//; s/\\\\\$//" | tr '\n' ' '; }
+name="make train reproduces the shipped file's learning log (first 3 iterations)"
 args=$(make_var TRAIN_ARGS)
+check bash -c "/usr/bin/python3 policy/train/train.py $args --threads 2 \
+    --stop-after 3 --out $out/t.safetensors --log-dir $out/t >/dev/null 2>&1 \
+    && cmp -s <(cut -d, -f1-9 $out/t/log.csv) <(head -4 bench/results/train_log_residual.csv | cut -d, -f1-9)"
+name="make train-clone's first stage reproduces the previous file's learning log (first 2 iterations)"
+args=$(make_var TRAIN_CLONE_ARGS)
 check bash -c "/usr/bin/python3 policy/train/train.py $args --threads 2 \
     --stop-after 2 --out $out/r.safetensors --log-dir $out/r >/dev/null 2>&1 \
     && cmp -s <(cut -d, -f1-9 $out/r/log.csv) <(head -3 bench/results/train_log.csv | cut -d, -f1-9)"
@@ -53,6 +59,26 @@ def ends(p):
 free, held = ends(0.0), ends(1.0)
 assert all(abs(x - 1.0) < 0.03 for x in free), free
 assert all(1.2 <= x <= 3.03 for x in held) and len(set(held)) > 1, held
+"
+name="--ramp-start: held limp, the joints sag, the servo ramp brings them back, let go 1.2-2 s in"
+check /usr/bin/python3 -c "
+import sys; sys.path.insert(0, 'policy/train'); import numpy as np, psenv, contract as ct
+doc = ct.robot(); names = [j['name'] for j in doc['joints']]
+knee = 6 + names.index('l_knee')  # after gravity and gyro: joint_pos, less the stance
+def run(ramp):
+    e = psenv.Env(4, 2, seed=3, episode_s=1.0, push_dv_max=0.06, dr=False, harness_p=1.0,
+                  ramp_start=ramp)
+    first = e.reset()[:, knee].copy(); t = [None] * 4
+    for _ in range(200):
+        obs, _, done, _, info = e.step(np.zeros((4, e.n_act), np.float32))
+        for i in range(4):
+            if done[i] and t[i] is None:
+                assert info[i, 0] == 0, 'fell'
+                t[i] = float(info[i, 2])
+    e.close(); return first, t
+still, _ = run(False); sag, ends = run(True)
+assert np.abs(still).max() < 0.05 and np.abs(sag).min() > 0.1, (still, sag)
+assert all(1.0 + 1.2 - 0.03 <= x <= 1.0 + 2.0 + 0.03 for x in ends) and len(set(ends)) > 1, ends
 "
 name="fine-tuning (--init) keeps the file's policy while only the critic learns, then moves it"
 same_policy() { /usr/bin/python3 -c "
