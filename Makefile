@@ -168,7 +168,7 @@ help:
 	@echo "             random fault every 8 s, each recovered; checks states, limits,"
 	@echo "             recorder, memory: bench/results/soak.json, soak.md"
 	@echo "make train   train the balance policy on the C environment (CPU, 2 cores,"
-	@echo "             seeded, about 10 min): policy/weights/ps1_stage1.safetensors (the"
+	@echo "             seeded, about 12 min): policy/weights/ps1_stage1.safetensors (the"
 	@echo "             shipped file, reproduced bit for bit), $(BUILD)/train/residual/"
 	@echo "make train-clone the recipe of the file shipped until 2026-12-04 (about 17"
 	@echo "             min): $(BUILD)/train/clone.safetensors"

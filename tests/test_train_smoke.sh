@@ -43,40 +43,33 @@ name="with the runtime's controller as the expert, the first stage's recorded lo
 check bash -c "/usr/bin/python3 policy/train/train.py $args --expert quick --threads 2 \
     --stop-after 2 --out $out/r2.safetensors --log-dir $out/r2 >/dev/null 2>&1 \
     && cmp -s <(cut -d, -f1-9 $out/r2/log.csv) <(head -3 bench/results/train_log_make_train.csv | cut -d, -f1-9)"
-name="held episodes (--harness-p 1) end later by the time held, free ones at episode_s"
-check /usr/bin/python3 -c "
-import sys; sys.path.insert(0, 'policy/train'); import numpy as np, psenv
-def ends(p):
-    e = psenv.Env(4, 2, seed=3, episode_s=1.0, push_dv_max=0.06, dr=False, harness_p=p)
-    e.reset(); t = [None] * 4
+# held episodes (zero actions, 4 environments): the left knee's first
+# observation (joint_pos, less the stance, after gravity and gyro) and each
+# episode's end time; a fall fails the check
+EPISODES_PY="
+import sys; sys.path.insert(0, 'policy/train'); import numpy as np, psenv, contract as ct
+knee = 6 + [j['name'] for j in ct.robot()['joints']].index('l_knee')
+def run(harness_p, ramp=False):
+    e = psenv.Env(4, 2, seed=3, episode_s=1.0, push_dv_max=0.06, dr=False, harness_p=harness_p,
+                  ramp_start=ramp)
+    first = e.reset()[:, knee].copy(); t = [None] * 4
     for _ in range(200):
         _, _, done, _, info = e.step(np.zeros((4, e.n_act), np.float32))
         for i in range(4):
             if done[i] and t[i] is None:
                 assert info[i, 0] == 0, 'fell'
                 t[i] = float(info[i, 2])
-    e.close(); return t
-free, held = ends(0.0), ends(1.0)
+    e.close(); return first, t
+"
+name="held episodes (--harness-p 1) end later by the time held, free ones at episode_s"
+check /usr/bin/python3 -c "$EPISODES_PY
+free, held = run(0.0)[1], run(1.0)[1]
 assert all(abs(x - 1.0) < 0.03 for x in free), free
 assert all(1.2 <= x <= 3.03 for x in held) and len(set(held)) > 1, held
 "
 name="--ramp-start: held limp, the joints sag, the servo ramp brings them back, let go 1.2-2 s in"
-check /usr/bin/python3 -c "
-import sys; sys.path.insert(0, 'policy/train'); import numpy as np, psenv, contract as ct
-doc = ct.robot(); names = [j['name'] for j in doc['joints']]
-knee = 6 + names.index('l_knee')  # after gravity and gyro: joint_pos, less the stance
-def run(ramp):
-    e = psenv.Env(4, 2, seed=3, episode_s=1.0, push_dv_max=0.06, dr=False, harness_p=1.0,
-                  ramp_start=ramp)
-    first = e.reset()[:, knee].copy(); t = [None] * 4
-    for _ in range(200):
-        obs, _, done, _, info = e.step(np.zeros((4, e.n_act), np.float32))
-        for i in range(4):
-            if done[i] and t[i] is None:
-                assert info[i, 0] == 0, 'fell'
-                t[i] = float(info[i, 2])
-    e.close(); return first, t
-still, _ = run(False); sag, ends = run(True)
+check /usr/bin/python3 -c "$EPISODES_PY
+still, _ = run(1.0); sag, ends = run(1.0, ramp=True)
 assert np.abs(still).max() < 0.05 and np.abs(sag).min() > 0.1, (still, sag)
 assert all(1.0 + 1.2 - 0.03 <= x <= 1.0 + 2.0 + 0.03 for x in ends) and len(set(ends)) > 1, ends
 "
