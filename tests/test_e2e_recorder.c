@@ -46,6 +46,12 @@
 
 #define START_NS PS_NS_PER_S
 #define OUT_MAX  (1u << 20)
+/* Loop time of the in-process shove: the fall comes before 7 s (asserted), and
+ * the fall dump wants 2 s after it. One number for the run and what
+ * `pushstep log` must say of it. */
+#define SHOVE_RUN_S 9
+#define STR_(x)     #x
+#define STR(x)      STR_(x)
 
 extern char **environ;
 
@@ -278,7 +284,7 @@ static void check_log_command(const char *path, uint64_t n_ticks)
 {
     assert_int_equal(sh("%s log %s", bin(), path), 0);
     static const char *const SUMMARY[] = {"closed (summary and index present)",
-                                          "duration 9.000 s",
+                                          "duration " STR(SHOVE_RUN_S) ".000 s",
                                           "/joints",
                                           "pushstep_msgs/msg/Estimate",
                                           "scenario=scenarios/shove.yaml",
@@ -396,9 +402,8 @@ static void test_e2e_rec_lockstep_shove_guarded_files_match_foxglove_readers(voi
         (void)ps_rtsetup_prefault_maps();
     ps_rtsetup_prefault_stack(256 * 1024);
 
-    /* the fall comes before 7 s (asserted below); 9 s holds the dump's 2 s after it */
     ps_guard_arm();
-    while (app.loop.t_deadline_ns < START_NS + 9 * PS_NS_PER_S)
+    while (app.loop.t_deadline_ns < START_NS + SHOVE_RUN_S * PS_NS_PER_S)
         assert_int_equal(ps_loop_step(&app.loop), 0);
     ps_guard_counts_t counts;
     ps_guard_disarm(&counts);
@@ -407,7 +412,7 @@ static void test_e2e_rec_lockstep_shove_guarded_files_match_foxglove_readers(voi
     ps_app_deinit(&app);
 
     /* the recorder's tap on the loop thread: nothing allocated, locked or faulted */
-    ps_san_assert_guard_clean(&counts, "shove 0..9 s with the recorder");
+    ps_san_assert_guard_clean(&counts, "shove 0.." STR(SHOVE_RUN_S) " s with the recorder");
     const ps_recorder_stats_t *s = &rec.stats;
     assert_int_equal(s->n_pushed, n_ticks);
     assert_int_equal(s->cont.n_records, n_ticks);
