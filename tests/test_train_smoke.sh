@@ -149,6 +149,25 @@ name="eval.py runs the benchmark's pushes in the training environment"
 check bash -c "/usr/bin/python3 policy/train/eval.py --weights $out/p.safetensors --dv 0.15 \
     --durations 0.1 --directions 2 --harness --out $out/e.json >$out/eval.out 2>&1 \
     && grep -q '\"controller\": \"mlp\"' $out/e.json"
+name="eval.py --zero-residual: those joints get the controller's targets, the rest the policy's"
+# on the residual file above: all 12 joints zeroed is the controller itself,
+# one zeroed differs from the full policy there only; names are checked
+check bash -c "/usr/bin/python3 -c \"
+import sys, numpy as np; sys.path.insert(0, 'policy/train'); import eval as ev
+full = ev.Mlp('$out/res.safetensors'); joints = full.c['action']['joints']
+rng = np.random.default_rng(5); obs = rng.normal(size=(4, full.mean.size)).astype(np.float32)
+expert = rng.normal(size=(4, len(joints))).astype(np.float32)
+assert np.array_equal(ev.Mlp('$out/res.safetensors', joints)(obs, expert), expert)
+one = ev.Mlp('$out/res.safetensors', ['l_hip_roll'])(obs, expert); k = joints.index('l_hip_roll')
+want = full(obs, expert); assert not np.array_equal(want[:, k], expert[:, k])
+want[:, k] = expert[:, k]; assert np.array_equal(one, want)\" \
+    && /usr/bin/python3 policy/train/eval.py --weights $out/res.safetensors --dv 0.15 --durations 0.1 \
+    --directions 2 --dr --only-dir-deg 90 --zero-residual l_hip_roll,r_hip_roll --out $out/z.json >/dev/null 2>&1 \
+    && grep -q '\"zero_residual\": \[' $out/z.json && grep -q '\"dr\": true' $out/z.json \
+    && ! /usr/bin/python3 policy/train/eval.py --weights $out/res.safetensors --directions 2 \
+    --zero-residual l_hip_rol >$out/zr.out 2>&1 && grep -q 'l_hip_rol is not one of' $out/zr.out \
+    && ! /usr/bin/python3 policy/train/eval.py --weights $out/p.safetensors --directions 2 \
+    --zero-residual l_hip_roll >$out/zp.out 2>&1 && grep -q 'not a residual policy' $out/zp.out"
 name="the shipped policy (policy/weights/ps1_stage1.safetensors) stands in lockstep, contract checked"
 check bash -c "${PUSHSTEP_BIN:-build/pushstep} --lockstep --quiet --duration 6 --scenario scenarios/stand.yaml \
     --policy mlp --weights policy/weights/ps1_stage1.safetensors --summary $out/shipped.json \

@@ -12,6 +12,16 @@ push's duration at a random time in [1, 2] s after the release, success = no
 fall before the push's start + 5 s. The directions of a
 cell's trials are the 16 of the grid, one environment each.
 
+For a look at where a policy wins or loses (docs/policy.md, "Pushes from
+behind"): --dr draws the robot as training does (domain randomisation),
+--only-dir-deg D pushes every trial of a cell from D, and --zero-residual
+JOINTS runs a residual policy with its residual on those action joints set
+to zero (the controller's own targets there):
+
+  policy/train/eval.py --weights policy/weights/ps1_stage1.safetensors --dr \
+      --harness --ramp-start --dv 0.45 --durations 0.1 --only-dir-deg 0 \
+      --zero-residual l_hip_roll,r_hip_roll
+
   policy/train/eval.py --weights policy/weights/ps1_stage1.safetensors \\
       --runtime bench/results/push.json --out bench/results/train_env.json
 """
@@ -30,7 +40,7 @@ import psfile  # noqa: E402
 
 
 class Mlp:
-    def __init__(self, path):
+    def __init__(self, path, zero_residual=()):
         self.t, meta = psfile.read_safetensors(path)
         self.c = json.loads(meta[psfile.CONTRACT_KEY])
         o = self.c["observation"]
@@ -39,12 +49,22 @@ class Mlp:
         self.clip = float(o["clip"])
         self.act_clip = float(self.c["action"]["clip"])
         self.is_residual = self.c["action"].get("base") == "capture"
+        joints = self.c["action"]["joints"]
+        self.keep = np.ones(len(joints), np.float32)
+        for name in zero_residual:
+            if not self.is_residual:
+                raise SystemExit("--zero-residual: %s is not a residual policy "
+                                 "(its contract's action.base is not capture)" % path)
+            if name not in joints:
+                raise SystemExit("--zero-residual: %s is not one of %s's action joints (%s)"
+                                 % (name, path, ", ".join(joints)))
+            self.keep[joints.index(name)] = 0.0
 
     def __call__(self, obs, expert):
         x = np.clip((obs - self.mean) / self.std, -self.clip, self.clip)
         a = psfile.forward(self.t, x, contract=self.c)
         a = np.clip(a, -self.act_clip, self.act_clip).astype(np.float32)
-        return a + expert if self.is_residual else a
+        return a * self.keep + expert if self.is_residual else a
 
 
 def expert_ctl(obs, expert):
@@ -111,17 +131,30 @@ def main():
                          "as the runtime's trials start (train.py --ramp-start)")
     ap.add_argument("--expert", choices=psenv.EXPERTS, default="quick",
                     help="the capture-point controller's tunables (train.py --expert)")
+    ap.add_argument("--dr", action="store_true",
+                    help="domain randomisation as in training (default: the nominal robot)")
+    ap.add_argument("--only-dir-deg", type=float,
+                    help="every trial's push from this force direction (0 = +x, forward); "
+                         "--directions then counts the trials of a cell")
+    ap.add_argument("--zero-residual", default="",
+                    help="comma-separated action joints whose residual is set to zero "
+                         "(a residual policy only)")
     a = ap.parse_args()
     dvs = [float(x) for x in a.dv.split(",")]
     durs = [float(x) for x in a.durations.split(",")]
     dirs = [2 * math.pi * k / a.directions for k in range(a.directions)]
+    if a.only_dir_deg is not None:
+        dirs = [math.radians(a.only_dir_deg)] * a.directions
+    zero = [j for j in a.zero_residual.split(",") if j]
     rng = np.random.default_rng(a.seed)
-    env = psenv.Env(a.directions, a.threads, seed=a.seed, episode_s=8.0, dr=False,
+    env = psenv.Env(a.directions, a.threads, seed=a.seed, episode_s=8.0, dr=a.dr,
                      lib=a.lib, harness_p=1.0 if a.harness else 0.0,
                      expert=a.expert, ramp_start=a.ramp_start)
     doc = psfile.read_safetensors(a.weights)[1] if a.weights else {}
     policy_hz = json.loads(doc[psfile.CONTRACT_KEY])["policy_hz"] if doc else 50
-    ctls = [("capture", expert_ctl)] + ([("mlp", Mlp(a.weights))] if a.weights else [])
+    if zero and not a.weights:
+        raise SystemExit("--zero-residual needs --weights")
+    ctls = [("capture", expert_ctl)] + ([("mlp", Mlp(a.weights, zero))] if a.weights else [])
     cells = []
     for name, ctl in ctls:
         for dur in durs:
@@ -129,8 +162,8 @@ def main():
                 ok = run_cell(env, ctl, dv, dur, dirs, rng, policy_hz)
                 cells.append({"controller": name, "dur_s": dur, "dv_m_s": dv,
                               "success": sum(ok), "trials": len(ok),
-                              "by_direction_deg": {str(round(math.degrees(d))): o
-                                                   for d, o in zip(dirs, ok)}})
+                              "direction_deg": [round(math.degrees(d), 1) for d in dirs],
+                              "held": ok})
                 print("env %-8s %.1f s dv %.2f: %2d/%d" % (name, dur, dv, sum(ok), len(ok)),
                       file=sys.stderr)
     env.close()
@@ -147,7 +180,8 @@ def main():
         with open(a.out, "w") as f:
             json.dump({"what": "training environment (nominal) vs runtime, same push grid",
                        "seed": a.seed, "expert": a.expert, "harness": a.harness,
-                       "ramp_start": a.ramp_start,
+                       "ramp_start": a.ramp_start, "dr": a.dr,
+                       "zero_residual": zero,
                        "weights": os.path.basename(a.weights) if a.weights else None,
                        "cells": cells}, f, indent=1)
     return 0
