@@ -386,7 +386,7 @@ $(BUILD)/crowd_bench: $(call OBJ,bench/crowd_bench.c) $(LIB_OBJS)
 # are added to the controller's; it starts as the controller) over 1,000
 # iterations, 70 % of the episodes starting as the runtime's trials do (limp
 # in the harness, the servo layer's ramp: --ramp-start) and half of the
-# pushes drawn from a staircase per direction and duration (--stair-p 0.5).
+# episodes' push from a staircase per direction and duration (--stair-p 0.5).
 # The command and seed are written into the policy file's contract. `make train-clone` runs the recipe of the file
 # shipped until 2026-12-04 (cloning the capture-point controller with its
 # tunables before its 2026-12-03 change, PPO: TRAIN_CLONE_ARGS; then PPO

@@ -163,11 +163,16 @@ want = full(obs, expert); assert not np.array_equal(want[:, k], expert[:, k])
 want[:, k] = expert[:, k]; assert np.array_equal(one, want)\" \
     && /usr/bin/python3 policy/train/eval.py --weights $out/res.safetensors --dv 0.15 --durations 0.1 \
     --directions 2 --dr --only-dir-deg 90 --zero-residual l_hip_roll,r_hip_roll --out $out/z.json >/dev/null 2>&1 \
-    && grep -q '\"zero_residual\": \[' $out/z.json && grep -q '\"dr\": true' $out/z.json \
+    && /usr/bin/python3 -c \"
+import json; d = json.load(open('$out/z.json'))
+assert d['zero_residual'] == ['l_hip_roll', 'r_hip_roll'] and d['dr'] is True, d
+assert all(c['direction_deg'] == [90.0, 90.0] for c in d['cells']), d['cells']\" \
     && ! /usr/bin/python3 policy/train/eval.py --weights $out/res.safetensors --directions 2 \
     --zero-residual l_hip_rol >$out/zr.out 2>&1 && grep -q 'l_hip_rol is not one of' $out/zr.out \
     && ! /usr/bin/python3 policy/train/eval.py --weights $out/p.safetensors --directions 2 \
-    --zero-residual l_hip_roll >$out/zp.out 2>&1 && grep -q 'not a residual policy' $out/zp.out"
+    --zero-residual l_hip_roll >$out/zp.out 2>&1 && grep -q 'not a residual policy' $out/zp.out \
+    && ! /usr/bin/python3 policy/train/eval.py --directions 2 --dr --runtime bench/results/push.json \
+    >$out/zd.out 2>&1 && grep -q 'not with --dr or --only-dir-deg' $out/zd.out"
 name="the shipped policy (policy/weights/ps1_stage1.safetensors) stands in lockstep, contract checked"
 check bash -c "${PUSHSTEP_BIN:-build/pushstep} --lockstep --quiet --duration 6 --scenario scenarios/stand.yaml \
     --policy mlp --weights policy/weights/ps1_stage1.safetensors --summary $out/shipped.json \

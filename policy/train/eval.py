@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""The benchmark's pushes in the training environment (tools/psenv, nominal
-robot: no domain randomisation), for a policy file and for the capture-point
+"""The benchmark's pushes in the training environment (tools/psenv; the
+nominal robot unless --dr), for a policy file and for the capture-point
 expert, so that the runtime's grid (bench/results/push.json, made by
 `pushstep --lockstep`) and the environment the policy was trained in can be
 compared cell by cell.
@@ -10,7 +10,7 @@ while the controller acts and let go at a random time in [0.2, 2] s, as the
 runtime's trials are), a torso push of delta-v dv (impulse / mass) over the
 push's duration at a random time in [1, 2] s after the release, success = no
 fall before the push's start + 5 s. The directions of a
-cell's trials are the 16 of the grid, one environment each.
+cell's trials are the grid's (--directions, 16), one environment each.
 
 For a look at where a policy wins or loses (docs/policy.md, "Pushes from
 behind"): --dr draws the robot as training does (domain randomisation),
@@ -18,9 +18,12 @@ behind"): --dr draws the robot as training does (domain randomisation),
 JOINTS runs a residual policy with its residual on those action joints set
 to zero (the controller's own targets there):
 
-  policy/train/eval.py --weights policy/weights/ps1_stage1.safetensors --dr \
-      --harness --ramp-start --dv 0.45 --durations 0.1 --only-dir-deg 0 \
+  policy/train/eval.py --weights policy/weights/ps1_stage1.safetensors --dr \\
+      --harness --ramp-start --dv 0.45 --durations 0.1 --only-dir-deg 0 \\
       --zero-residual l_hip_roll,r_hip_roll
+
+(--runtime, the comparison with the runtime's grid, takes neither --dr nor
+--only-dir-deg.)
 
   policy/train/eval.py --weights policy/weights/ps1_stage1.safetensors \\
       --runtime bench/results/push.json --out bench/results/train_env.json
@@ -146,15 +149,18 @@ def main():
     if a.only_dir_deg is not None:
         dirs = [math.radians(a.only_dir_deg)] * a.directions
     zero = [j for j in a.zero_residual.split(",") if j]
+    if zero and not a.weights:
+        raise SystemExit("--zero-residual needs --weights")
+    if a.runtime and (a.dr or a.only_dir_deg is not None):
+        raise SystemExit("--runtime compares the nominal robot over the grid's directions: "
+                         "not with --dr or --only-dir-deg")
+    ctls = [("capture", expert_ctl)] + ([("mlp", Mlp(a.weights, zero))] if a.weights else [])
     rng = np.random.default_rng(a.seed)
     env = psenv.Env(a.directions, a.threads, seed=a.seed, episode_s=8.0, dr=a.dr,
                      lib=a.lib, harness_p=1.0 if a.harness else 0.0,
                      expert=a.expert, ramp_start=a.ramp_start)
     doc = psfile.read_safetensors(a.weights)[1] if a.weights else {}
     policy_hz = json.loads(doc[psfile.CONTRACT_KEY])["policy_hz"] if doc else 50
-    if zero and not a.weights:
-        raise SystemExit("--zero-residual needs --weights")
-    ctls = [("capture", expert_ctl)] + ([("mlp", Mlp(a.weights, zero))] if a.weights else [])
     cells = []
     for name, ctl in ctls:
         for dur in durs:
@@ -178,7 +184,13 @@ def main():
             "%d/%d" % tuple(r) if r else "-"))
     if a.out:
         with open(a.out, "w") as f:
-            json.dump({"what": "training environment (nominal) vs runtime, same push grid",
+            what = "training environment (%s), %s" % (
+                "domain randomisation" if a.dr else "nominal",
+                "every push from %g deg" % a.only_dir_deg if a.only_dir_deg is not None
+                else "the push grid's directions")
+            if a.runtime:
+                what += ", beside the runtime's grid"
+            json.dump({"what": what,
                        "seed": a.seed, "expert": a.expert, "harness": a.harness,
                        "ramp_start": a.ramp_start, "dr": a.dr,
                        "zero_residual": zero,
