@@ -154,13 +154,13 @@ def main():
     if a.runtime and (a.dr or a.only_dir_deg is not None):
         raise SystemExit("--runtime compares the nominal robot over the grid's directions: "
                          "not with --dr or --only-dir-deg")
-    ctls = [("capture", expert_ctl)] + ([("mlp", Mlp(a.weights, zero))] if a.weights else [])
+    mlp = Mlp(a.weights, zero) if a.weights else None
+    ctls = [("capture", expert_ctl)] + ([("mlp", mlp)] if mlp else [])
     rng = np.random.default_rng(a.seed)
     env = psenv.Env(a.directions, a.threads, seed=a.seed, episode_s=8.0, dr=a.dr,
                      lib=a.lib, harness_p=1.0 if a.harness else 0.0,
                      expert=a.expert, ramp_start=a.ramp_start)
-    doc = psfile.read_safetensors(a.weights)[1] if a.weights else {}
-    policy_hz = json.loads(doc[psfile.CONTRACT_KEY])["policy_hz"] if doc else 50
+    policy_hz = mlp.c["policy_hz"] if mlp else 50
     cells = []
     for name, ctl in ctls:
         for dur in durs:
