@@ -15,6 +15,7 @@
 #include <setjmp.h>
 #include <cmocka.h>
 
+#include <errno.h>
 #include <fcntl.h>
 #include <signal.h>
 #include <stdio.h>
@@ -47,6 +48,11 @@ static int g_n_children;
 
 static pid_t spawn(char *const argv[], const char *out_path)
 {
+    /* An earlier run's file (build/hw stays between VM boots) is gone before
+     * the child starts: read before the child truncates it, a stale run.out
+     * said ACTIVE at once, and the test watched a runtime still starting. */
+    if (unlink(out_path) != 0 && errno != ENOENT)
+        fail_msg("cannot remove %s: %s", out_path, strerror(errno));
     pid_t pid = fork();
     assert_true(pid >= 0);
     if (pid > 0 && g_n_children < 16)
@@ -271,9 +277,18 @@ static bool make_run_once(void)
     pid_t rt = spawn(argv, OUT_DIR "/run.out");
     /* in ACTIVE: watch the live buses from the runtime's side (the output
      * is looked at once a second: reading it over 9p often disturbs the VM) */
+    const int64_t t_start_ns = mono_ns();
     for (int i = 0; i < 120 && strstr(slurp_maybe(OUT_DIR "/run.out"), "RAMP -> ACTIVE") == NULL;
          i++)
         sleep(1);
+    if (strstr(slurp_maybe(OUT_DIR "/run.out"), "RAMP -> ACTIVE") == NULL) {
+        /* what make and the runtime said, so that a slow start (make
+         * rebuilding in the VM?) or a refusal shows in the test's output */
+        print_message("  run.out after %.0f s:\n%s\n", (double)(mono_ns() - t_start_ns) * 1e-9,
+                      slurp_maybe(OUT_DIR "/run.out"));
+        fail_msg("`make run` did not reach ACTIVE within 120 s");
+    }
+    print_message("  `make run` ACTIVE after %.1f s\n", (double)(mono_ns() - t_start_ns) * 1e-9);
     char *mon_argv[] = {BIN,   "monitor",    "--board", BOARD,     "--robot",
                         ROBOT, "--duration", "1.5",     "--rates", NULL};
     /* can-utils' candump on two of the runtime's buses, beside it */
