@@ -5,13 +5,20 @@
 #include <string.h>
 
 static const char *const NAMES[PS_OBS_FIELD_COUNT] = {
-    [PS_OBS_GRAVITY_BODY] = "gravity_body", [PS_OBS_GYRO_BODY] = "gyro_body",
-    [PS_OBS_JOINT_POS] = "joint_pos",       [PS_OBS_JOINT_VEL] = "joint_vel",
-    [PS_OBS_PREV_ACTION] = "prev_action",   [PS_OBS_COM_POS] = "com_pos",
-    [PS_OBS_COM_VEL] = "com_vel",           [PS_OBS_COP] = "cop",
-    [PS_OBS_CAPTURE_POINT] = "capture_point", [PS_OBS_BOS_MARGIN] = "bos_margin",
-    [PS_OBS_FEET] = "feet",                 [PS_OBS_CONTACT] = "contact",
+    [PS_OBS_GRAVITY_BODY] = "gravity_body",
+    [PS_OBS_GYRO_BODY] = "gyro_body",
+    [PS_OBS_JOINT_POS] = "joint_pos",
+    [PS_OBS_JOINT_VEL] = "joint_vel",
+    [PS_OBS_PREV_ACTION] = "prev_action",
+    [PS_OBS_COM_POS] = "com_pos",
+    [PS_OBS_COM_VEL] = "com_vel",
+    [PS_OBS_COP] = "cop",
+    [PS_OBS_CAPTURE_POINT] = "capture_point",
+    [PS_OBS_BOS_MARGIN] = "bos_margin",
+    [PS_OBS_FEET] = "feet",
+    [PS_OBS_CONTACT] = "contact",
     [PS_OBS_MOMENTUM] = "momentum",
+    [PS_OBS_BASE_ACTION] = "base_action",
 };
 
 const char *ps_obs_field_name(ps_obs_field_t f)
@@ -39,6 +46,7 @@ uint32_t ps_obs_field_size(ps_obs_field_t f, uint32_t n_joints, uint32_t n_act)
     case PS_OBS_JOINT_VEL:
         return n_joints;
     case PS_OBS_PREV_ACTION:
+    case PS_OBS_BASE_ACTION:
         return n_act;
     case PS_OBS_COP:
     case PS_OBS_CAPTURE_POINT:
@@ -55,6 +63,13 @@ uint32_t ps_obs_field_size(ps_obs_field_t f, uint32_t n_joints, uint32_t n_act)
     }
 }
 
+/* A field whose size is N or A, which a cfg may make 0. */
+static bool is_sized_by_cfg(ps_obs_field_t f)
+{
+    return f == PS_OBS_PREV_ACTION || f == PS_OBS_BASE_ACTION || f == PS_OBS_JOINT_POS ||
+           f == PS_OBS_JOINT_VEL;
+}
+
 uint32_t ps_obs_size(const ps_obs_cfg_t *cfg)
 {
     if (cfg == NULL || cfg->n_fields == 0 || cfg->n_fields > PS_OBS_MAX_FIELDS)
@@ -62,8 +77,7 @@ uint32_t ps_obs_size(const ps_obs_cfg_t *cfg)
     uint32_t n = 0;
     for (uint32_t i = 0; i < cfg->n_fields; i++) {
         const uint32_t k = ps_obs_field_size(cfg->fields[i], cfg->n_joints, cfg->n_act);
-        if (k == 0u && cfg->fields[i] != PS_OBS_PREV_ACTION && cfg->fields[i] != PS_OBS_JOINT_POS &&
-            cfg->fields[i] != PS_OBS_JOINT_VEL)
+        if (k == 0u && !is_sized_by_cfg(cfg->fields[i]))
             return 0u;
         n += k;
     }
@@ -100,6 +114,7 @@ void ps_obs_reset(ps_obs_t *o)
         return;
     o->has_prev = false;
     memset(o->prev_action, 0, sizeof(o->prev_action));
+    memset(o->base_action, 0, sizeof(o->base_action));
 }
 
 void ps_obs_set_action(ps_obs_t *o, const float *a)
@@ -107,6 +122,13 @@ void ps_obs_set_action(ps_obs_t *o, const float *a)
     if (o == NULL || a == NULL)
         return;
     memcpy(o->prev_action, a, o->cfg.n_act * sizeof(float));
+}
+
+void ps_obs_set_base_action(ps_obs_t *o, const float *a)
+{
+    if (o == NULL || a == NULL)
+        return;
+    memcpy(o->base_action, a, o->cfg.n_act * sizeof(float));
 }
 
 static float meas_q(const ps_meas_t *m, uint32_t idx)
@@ -122,8 +144,7 @@ typedef struct {
     float yaw[2];
 } geometry_t;
 
-static int geometry(const ps_obs_t *o, const ps_meas_t *m, const ps_estimate_t *est,
-                    geometry_t *g)
+static int geometry(const ps_obs_t *o, const ps_meas_t *m, const ps_estimate_t *est, geometry_t *g)
 {
     const ps_obs_cfg_t *c = &o->cfg;
     float q[2][PS_LEG_N_JOINTS];
@@ -185,8 +206,8 @@ int ps_obs_build(ps_obs_t *o, const ps_meas_t *m, const ps_estimate_t *est, floa
                 before[i].pos_m[a] += d[a] / (float)n_ref;
         }
         for (int a = 0; a < 3; a++)
-            vel[a] = (g.com[a] - o->prev_com_m[a] - (n_ref > 0 ? d[a] / (float)n_ref : 0.0f)) /
-                     c->dt_s;
+            vel[a] =
+                (g.com[a] - o->prev_com_m[a] - (n_ref > 0 ? d[a] / (float)n_ref : 0.0f)) / c->dt_s;
         (void)ps_balance_momentum(g.pts, before, PS_BALANCE_N_POINTS, c->dt_s, mom_p, mom_l);
     }
     const float mass = c->kin.mass_kg > 0.0f ? c->kin.mass_kg : 1.0f;
@@ -197,9 +218,8 @@ int ps_obs_build(ps_obs_t *o, const ps_meas_t *m, const ps_estimate_t *est, floa
         soles[s][0] = est->foot_m[s][0];
         soles[s][1] = est->foot_m[s][1];
     }
-    const int n_poly = ps_balance_support_polygon((const float(*)[2])soles, g.yaw,
-                                                  est->is_contact, c->kin.foot_length_m,
-                                                  c->kin.foot_width_m, poly);
+    const int n_poly = ps_balance_support_polygon((const float(*)[2])soles, g.yaw, est->is_contact,
+                                                  c->kin.foot_length_m, c->kin.foot_width_m, poly);
     if (n_poly <= 0 || ps_balance_polygon_centre((const float(*)[2])poly, n_poly, centre) != 0)
         rc = -ERANGE;
     float cp[2] = {0, 0};
@@ -278,6 +298,10 @@ int ps_obs_build(ps_obs_t *o, const ps_meas_t *m, const ps_estimate_t *est, floa
                 v[3 + a] = mom_l[a] / mass;
             }
             n += 6;
+            break;
+        case PS_OBS_BASE_ACTION:
+            memcpy(v, o->base_action, c->n_act * sizeof(float));
+            n += c->n_act;
             break;
         case PS_OBS_FIELD_COUNT:
         default:

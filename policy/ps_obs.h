@@ -25,6 +25,13 @@
  *   contact       2  1 when the foot is in contact, else 0
  *   momentum      6  linear momentum / mass (m/s), angular momentum about the
  *                    CoM / mass (m^2/s), point-mass model
+ *   base_action   A  a residual policy's base this step: the capture-point
+ *                    controller's targets in action units, clipped, as the
+ *                    action is added to them (set with ps_obs_set_base_action
+ *                    before the build; the contract allows it only with
+ *                    action.base "capture"). prev_action holds the total
+ *                    applied, so without this field the policy cannot tell
+ *                    its own part from the controller's step of this instant
  *
  * Threads: loop thread (or one training worker per instance). Allocation:
  * none.
@@ -56,21 +63,22 @@ typedef enum {
     PS_OBS_FEET,
     PS_OBS_CONTACT,
     PS_OBS_MOMENTUM,
+    PS_OBS_BASE_ACTION,
     PS_OBS_FIELD_COUNT
 } ps_obs_field_t;
 
 typedef struct {
     uint32_t n_fields;
     ps_obs_field_t fields[PS_OBS_MAX_FIELDS];
-    uint32_t n_joints;                     /**< N: joints of joint_pos / joint_vel */
-    uint32_t joint_idx[PS_MAX_JOINTS];     /**< measurement index of each */
-    float joint_offset_rad[PS_MAX_JOINTS]; /**< subtracted from q (the stance) */
-    uint32_t n_act;                        /**< A: size of prev_action */
+    uint32_t n_joints;                       /**< N: joints of joint_pos / joint_vel */
+    uint32_t joint_idx[PS_MAX_JOINTS];       /**< measurement index of each */
+    float joint_offset_rad[PS_MAX_JOINTS];   /**< subtracted from q (the stance) */
+    uint32_t n_act;                          /**< A: size of prev_action, base_action */
     float mean[PS_OBS_MAX], std[PS_OBS_MAX]; /**< per observation float; std > 0 */
-    float clip;                            /**< |normalised| <= clip; > 0 */
-    ps_kinematics_cfg_t kin;               /**< with a mass model */
-    int leg_idx[2][PS_LEG_N_JOINTS];       /**< measurement index of the leg joints */
-    float dt_s;                            /**< time between builds (the policy period) */
+    float clip;                              /**< |normalised| <= clip; > 0 */
+    ps_kinematics_cfg_t kin;                 /**< with a mass model */
+    int leg_idx[2][PS_LEG_N_JOINTS];         /**< measurement index of the leg joints */
+    float dt_s;                              /**< time between builds (the policy period) */
 } ps_obs_cfg_t;
 
 typedef struct {
@@ -82,6 +90,7 @@ typedef struct {
     bool prev_contact[2];
     bool has_prev;
     float prev_action[PS_MAX_JOINTS];
+    float base_action[PS_MAX_JOINTS];
 } ps_obs_t;
 
 /** @return the field's name ("gravity_body", ...), NULL out of range */
@@ -101,12 +110,16 @@ uint32_t ps_obs_size(const ps_obs_cfg_t *cfg);
  *          mass model  @rt INIT */
 int ps_obs_init(ps_obs_t *o, const ps_obs_cfg_t *cfg);
 
-/** Forget the previous build and action (velocities 0 on the next build). */
+/** Forget the previous build, action and base (velocities 0 on the next build). */
 void ps_obs_reset(ps_obs_t *o);
 
 /** Record the action the policy applied (prev_action of the next build).
  *  @pre a has cfg.n_act floats  @rt RT-SAFE */
 void ps_obs_set_action(ps_obs_t *o, const float *a);
+
+/** Record the residual's base of this step (base_action of the next build).
+ *  @pre a has cfg.n_act floats  @rt RT-SAFE */
+void ps_obs_set_base_action(ps_obs_t *o, const float *a);
 
 /** Build one observation from the latest measurement and estimate.
  *  @post out_norm (n_obs floats) normalised and clipped; out_raw (may be

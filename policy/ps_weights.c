@@ -219,6 +219,12 @@ static int parse_contract(const char *json, ps_weights_contract_t *c, net_spec_t
                           "the observation builder (policy/ps_obs.h)",
                           f, fnames[f]);
             rc = -EINVAL;
+        } else if (id == PS_OBS_BASE_ACTION && c->act_base != PS_WEIGHTS_BASE_CAPTURE) {
+            ps_err_format(err, err_len,
+                          "contract: observation.fields[%u] 'base_action' needs "
+                          "action.base \"capture\" (a residual policy): there is no base",
+                          f);
+            rc = -EINVAL;
         } else {
             c->fields[f] = (ps_obs_field_t)id;
             c->n_obs += ps_obs_field_size(c->fields[f], c->n_joints, c->n_act);

@@ -393,6 +393,45 @@ static void test_ps_mlp_policy_zero_residual_is_the_capture_controller(void **st
     ps_weights_free(&f.w);
 }
 
+/* A residual policy observing its base: each step's observation holds the
+ * capture controller's action of that step (base_action, before the build:
+ * the MLP's input at the field's place), as training's environment puts it
+ * there (tools/psenv), and the targets are still the controller's. */
+static void test_ps_mlp_policy_observes_its_base_action(void **st)
+{
+    (void)st;
+    static mlp_fx_t f;
+    mlp_setup(&f, "tests/data/policy/ps1_zero_residual_base.safetensors");
+    ps_capture_t ref;
+    init_capture(&ref);
+    ps_policy_t rp;
+    ps_capture_as_policy(&ref, &rp);
+    const ps_weights_contract_t *c = &f.w.contract;
+    assert_int_equal(c->fields[c->n_fields - 1], PS_OBS_BASE_ACTION);
+    const uint32_t at = c->n_obs - c->n_act; /* the last field */
+    float most = 0.0f;
+    for (int k = 0; k < 30; k++) {
+        ps_meas_t m;
+        ps_estimate_t e;
+        ps_targets_t t, want;
+        state(&ref, 0.0f, 0.02f * (float)(k < 15 ? k : 15), &m, &e);
+        assert_int_equal(rp.ops->step(rp.ctx, &m, &e, &want), 0);
+        assert_int_equal(f.p.ops->step(f.p.ctx, &m, &e, &t), 0);
+        for (uint32_t a = 0; a < c->n_act; a++) {
+            const uint32_t j = c->act_joint[a];
+            float u = (want.q_rad[j] - c->stance_rad[j]) / c->act_scale[a];
+            u = u > c->act_clip ? c->act_clip : (u < -c->act_clip ? -c->act_clip : u);
+            /* mean 0, std 1: the input is the raw value, clipped to 10 */
+            assert_float_equal(f.mlp.in[at + a], u, 1e-6);
+            assert_float_equal(t.q_rad[j], want.q_rad[j], 1e-6);
+            most = fmaxf(most, fabsf(u));
+        }
+    }
+    assert_true(ref.n_steps >= 1);
+    assert_true(most > 0.4f); /* the field moved with the step (0.1 rad / 0.25) */
+    ps_weights_free(&f.w);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -404,6 +443,7 @@ int main(void)
         cmocka_unit_test(test_ps_mlp_policy_zero_net_targets_stance),
         cmocka_unit_test(test_ps_mlp_policy_late_or_wild_falls_back),
         cmocka_unit_test(test_ps_mlp_policy_zero_residual_is_the_capture_controller),
+        cmocka_unit_test(test_ps_mlp_policy_observes_its_base_action),
     };
     return cmocka_run_group_tests(tests, setup, NULL);
 }

@@ -38,12 +38,23 @@ static ps_obs_cfg_t cfg_all(void)
     c.clip = 100.0f;
     c.dt_s = 0.02f;
     c.kin = (ps_kinematics_cfg_t){
-        .mass_kg = 30.0f, .hip_offset_y_m = 0.1f, .hip_offset_z_m = 0.05f,
-        .thigh_m = 0.3f, .shank_m = 0.3f, .ankle_height_m = 0.05f,
-        .foot_length_m = 0.2f, .foot_width_m = 0.1f,
-        .trunk_mass_kg = 20.0f, .trunk_com_z_m = 0.2f, .hip_mass_kg = 1.0f,
-        .thigh_mass_kg = 2.0f, .thigh_com_m = 0.1f, .shank_mass_kg = 1.0f,
-        .shank_com_m = 0.15f, .foot_mass_kg = 1.0f, .foot_com_x_m = 0.04f,
+        .mass_kg = 30.0f,
+        .hip_offset_y_m = 0.1f,
+        .hip_offset_z_m = 0.05f,
+        .thigh_m = 0.3f,
+        .shank_m = 0.3f,
+        .ankle_height_m = 0.05f,
+        .foot_length_m = 0.2f,
+        .foot_width_m = 0.1f,
+        .trunk_mass_kg = 20.0f,
+        .trunk_com_z_m = 0.2f,
+        .hip_mass_kg = 1.0f,
+        .thigh_mass_kg = 2.0f,
+        .thigh_com_m = 0.1f,
+        .shank_mass_kg = 1.0f,
+        .shank_com_m = 0.15f,
+        .foot_mass_kg = 1.0f,
+        .foot_com_x_m = 0.04f,
         .foot_com_z_m = -0.02f,
     };
     return c;
@@ -84,7 +95,7 @@ static void test_ps_obs_build_fields_by_hand(void **st)
     const ps_obs_cfg_t c = cfg_all();
     ps_obs_t o;
     assert_int_equal(ps_obs_init(&o, &c), 0);
-    assert_int_equal(o.n_obs, 3 + 3 + N_J + N_J + N_J + 3 + 3 + 2 + 2 + 1 + 6 + 2 + 6);
+    assert_int_equal(o.n_obs, 3 + 3 + N_J + N_J + N_J + 3 + 3 + 2 + 2 + 1 + 6 + 2 + 6 + N_J);
     ps_meas_t m;
     ps_estimate_t e;
     float z[PS_OBS_MAX], raw[PS_OBS_MAX];
@@ -114,7 +125,7 @@ static void test_ps_obs_build_fields_by_hand(void **st)
     assert_float_equal(raw[at(PS_OBS_COM_VEL)], 1.0f, 1e-4);
     assert_float_equal(raw[at(PS_OBS_CAPTURE_POINT)],
                        0.02f + 0.08f / 30.0f + 1.0f / sqrtf(9.81f / 0.732f), 1e-4);
-    assert_true(raw[at(PS_OBS_BOS_MARGIN)] < 0.0f); /* outside the feet */
+    assert_true(raw[at(PS_OBS_BOS_MARGIN)] < 0.0f);           /* outside the feet */
     assert_float_equal(raw[at(PS_OBS_MOMENTUM)], 1.0f, 1e-4); /* p / M */
     assert_float_equal(raw[at(PS_OBS_MOMENTUM) + 4], 0.0f, 1e-4);
 
@@ -149,9 +160,18 @@ static void test_ps_obs_build_normalises_and_clips(void **st)
     ps_obs_set_action(&o, a);
     assert_true(ps_obs_build(&o, &m, &e, z, raw) > 0);
     assert_float_equal(raw[at(PS_OBS_PREV_ACTION) + 3], 0.03f, 1e-7);
+    /* base_action carries the residual's base, apart from prev_action */
+    float b[N_J];
+    for (int j = 0; j < N_J; j++)
+        b[j] = -0.02f * (float)j;
+    ps_obs_set_base_action(&o, b);
+    assert_true(ps_obs_build(&o, &m, &e, z, raw) > 0);
+    assert_float_equal(raw[at(PS_OBS_BASE_ACTION) + 3], -0.06f, 1e-7);
+    assert_float_equal(raw[at(PS_OBS_PREV_ACTION) + 3], 0.03f, 1e-7);
     ps_obs_reset(&o);
     assert_true(ps_obs_build(&o, &m, &e, z, raw) > 0);
     assert_float_equal(raw[at(PS_OBS_PREV_ACTION) + 3], 0.0f, 0.0);
+    assert_float_equal(raw[at(PS_OBS_BASE_ACTION) + 3], 0.0f, 0.0);
 }
 
 /* A subset in another order: the layout follows the list. */
@@ -177,6 +197,7 @@ static void test_ps_obs_layout_follows_field_list(void **st)
     assert_int_equal(ps_obs_field_find("capture_point"), PS_OBS_CAPTURE_POINT);
     assert_int_equal(ps_obs_field_find("nope"), -ENOENT);
     assert_string_equal(ps_obs_field_name(PS_OBS_MOMENTUM), "momentum");
+    assert_int_equal(ps_obs_field_find("base_action"), PS_OBS_BASE_ACTION);
 }
 
 static void test_ps_obs_errors(void **st)

@@ -103,6 +103,42 @@ assert np.abs(t['base.2.weight']).max() > 0\" \
     && grep -q 'a residual on capture' $out/rs.out \
     && ! /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --bc-iters 0 --ppo-iters 1 \
     --init $out/res.safetensors --out $out/res2.safetensors --log-dir $out/res2 >/dev/null 2>&1"
+name="--obs-base-action: the observation ends with the controller's action of that step; the file says so and runs"
+# the environment: the observation's tail is the expert output of the same
+# step (auto-resets included), the rest the stage-1 layout; train.py: the
+# contract lists base_action, the runtime runs the file (its builder puts
+# the base there, tests/test_capture.c), refused without --residual and
+# for an --init file of the other layout
+check bash -c "/usr/bin/python3 -c \"
+import sys; sys.path.insert(0, 'policy/train'); import numpy as np, psenv
+plain = psenv.Env(4, 2, seed=3, episode_s=1.5, push_dv_max=0.4, dr=True)
+based = psenv.Env(4, 2, seed=3, episode_s=1.5, push_dv_max=0.4, dr=True, obs_base_action=True)
+n = plain.n_obs; assert based.n_obs == n + plain.n_act, (based.n_obs, n)
+assert np.array_equal(plain.reset(), based.reset()[:, :n])
+_, _, _, e, _ = based.step(np.zeros((4, plain.n_act), np.float32)); moved = 0.0; ends = 0
+for k in range(150):
+    o, _, d, e, _ = based.step(e)
+    assert np.array_equal(o[:, n:], e), k
+    moved = max(moved, float(np.abs(e).max())); ends += int(d.sum())
+assert moved > 0.2 and ends > 0, (moved, ends)\" \
+    && /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 --bc-iters 0 \
+    --ppo-iters 2 --ppo-lr 1e-3 --residual --obs-base-action --out $out/rb.safetensors \
+    --log-dir $out/rb >/dev/null 2>&1 \
+    && /usr/bin/python3 -c \"
+import sys, json; sys.path.insert(0, 'policy/train'); import psfile
+c = json.loads(psfile.read_safetensors('$out/rb.safetensors')[1][psfile.CONTRACT_KEY])
+assert c['observation']['fields'][-1] == 'base_action' and len(c['observation']['mean']) == 89, c
+assert '--obs-base-action' in c['trained_by']\" \
+    && ${PUSHSTEP_BIN:-build/pushstep} --lockstep --quiet --duration 3 --scenario scenarios/stand.yaml \
+    --weights $out/rb.safetensors --summary $out/rbs.json >$out/rbs.out 2>&1 \
+    && grep -q 'a residual on capture' $out/rbs.out \
+    && grep -Eq '\"policy_runs\":[[:space:]]*[1-9]' $out/rbs.json \
+    && ! /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --bc-iters 0 --ppo-iters 1 \
+    --obs-base-action --out $out/rb2.safetensors --log-dir $out/rb2 >$out/rb2.out 2>&1 \
+    && grep -q 'give --residual' $out/rb2.out \
+    && ! /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --bc-iters 0 --ppo-iters 1 \
+    --residual --obs-base-action --init $out/res.safetensors --out $out/rb3.safetensors \
+    --log-dir $out/rb3 >$out/rb3.out 2>&1 && grep -q 'are not this run' $out/rb3.out"
 name="GAE: a time-limit cut bootstraps from the state's value, a fall does not (--bootstrap-timeouts)"
 # one environment, 2 steps, reward 1, values 10 and 20, both episodes end at
 # step 0: a fall (info[0] = 1) gives delta = 1 - 10; a cut gives

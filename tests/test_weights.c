@@ -128,10 +128,11 @@ static int teardown(void **st)
     return system(cmd) == 0 ? 0 : -1;
 }
 
-/* The golden base file with its contract's text edited: "from" -> "to". */
-static void edited(const char *from, const char *to, char *path, size_t len)
+/* Policy file src with its contract's text edited: "from" -> "to", written
+ * to path (src may be path: it is read whole first). */
+static void edited_from(const char *src, const char *from, const char *to, char *path, size_t len)
 {
-    FILE *f = fopen(GOLDEN, "rb");
+    FILE *f = fopen(src, "rb");
     assert_non_null(f);
     static uint8_t raw[1 << 16];
     const size_t n = fread(raw, 1, sizeof(raw), f);
@@ -154,6 +155,12 @@ static void edited(const char *from, const char *to, char *path, size_t len)
     assert_non_null(f);
     assert_int_equal(fwrite(img, 1, m, f), m);
     fclose(f);
+}
+
+/* The golden base file with its contract's text edited: "from" -> "to". */
+static void edited(const char *from, const char *to, char *path, size_t len)
+{
+    edited_from(GOLDEN, from, to, path, len);
 }
 
 static void expect_load_refused(const char *from, const char *to, int want_rc, const char *text)
@@ -213,6 +220,27 @@ static void test_ps_weights_action_base(void **st)
                         -EINVAL, "action.base crowd is not \"stance\" or \"capture\"");
     expect_load_refused(SCALE, "\\\"scale\\\": [0.5, 0.5, 0.5, 0.5], \\\"base\\\": 1", -EINVAL,
                         "action.base (not a string) is not");
+    /* the base_action observation field: only with a base to observe */
+    expect_load_refused("\\\"prev_action\\\"]", "\\\"base_action\\\"]", -EINVAL,
+                        "observation.fields[3] 'base_action' needs action.base \"capture\"");
+}
+
+/* A residual policy may observe its base (base_action, A floats). */
+static void test_ps_weights_base_action_field_with_capture(void **st)
+{
+    (void)st;
+    char path[128], err[512] = "";
+    edited("\\\"prev_action\\\"]", "\\\"base_action\\\"]", path, sizeof(path));
+    edited_from(path, "\\\"clip\\\": 10.0}, \\\"activations",
+                "\\\"clip\\\": 10.0, \\\"base\\\": \\\"capture\\\"}, \\\"activations", path,
+                sizeof(path));
+    ps_weights_t w;
+    if (ps_weights_load(&w, path, err, sizeof(err)) != 0)
+        fail_msg("%s", err);
+    assert_int_equal(w.contract.fields[3], PS_OBS_BASE_ACTION);
+    assert_int_equal(w.contract.n_obs, 15);
+    assert_int_equal(w.contract.act_base, PS_WEIGHTS_BASE_CAPTURE);
+    ps_weights_free(&w);
 }
 
 static void test_ps_weights_load_refuses_bad_contracts(void **st)
@@ -294,6 +322,7 @@ int main(void)
         cmocka_unit_test(test_ps_weights_load_golden_contract),
         cmocka_unit_test(test_ps_weights_load_refuses_bad_contracts),
         cmocka_unit_test(test_ps_weights_action_base),
+        cmocka_unit_test(test_ps_weights_base_action_field_with_capture),
         cmocka_unit_test(test_ps_weights_check_robot_names_each_difference),
     };
     return cmocka_run_group_tests(tests, setup, teardown);

@@ -47,6 +47,7 @@ class Mlp:
         self.t, meta = psfile.read_safetensors(path)
         self.c = json.loads(meta[psfile.CONTRACT_KEY])
         o = self.c["observation"]
+        self.fields = o["fields"]
         self.mean = np.asarray(o["mean"])
         self.std = np.asarray(o["std"])
         self.clip = float(o["clip"])
@@ -159,7 +160,11 @@ def main():
     rng = np.random.default_rng(a.seed)
     env = psenv.Env(a.directions, a.threads, seed=a.seed, episode_s=8.0, dr=a.dr,
                      lib=a.lib, harness_p=1.0 if a.harness else 0.0,
-                     expert=a.expert, ramp_start=a.ramp_start)
+                     expert=a.expert, ramp_start=a.ramp_start,
+                     obs_base_action=bool(mlp) and "base_action" in mlp.fields)
+    if mlp and env.n_obs != len(mlp.mean):
+        raise SystemExit("%s: %d observation floats (%s), the environment gives %d" % (
+            a.weights, len(mlp.mean), ", ".join(mlp.fields), env.n_obs))
     policy_hz = mlp.c["policy_hz"] if mlp else 50
     cells = []
     for name, ctl in ctls:

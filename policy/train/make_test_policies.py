@@ -5,6 +5,8 @@
                         runtime must refuse its actions and fall back
   ps1_zero_residual.safetensors  ps1_zero as a residual policy (action base
                         "capture"): targets = the capture-point controller's
+  ps1_zero_residual_base.safetensors  the same observing its base (the
+                        observation field base_action, train.py --obs-base-action)
 All carry ps1's contract (policy/train/contract.py). numpy only.
 """
 import os
@@ -34,6 +36,12 @@ def main():
     layers[-1] = (layers[-1][0], np.zeros(n_act))
     c["action"]["base"] = "capture"
     psfile.write_policy(os.path.join(OUT, "ps1_zero_residual.safetensors"), layers, c)
+    cb = ct.contract(doc, trained_by=c["trained_by"], fields=ct.OBS_FIELDS_BASE)
+    cb["activations"] = c["activations"]
+    cb["action"]["base"] = "capture"
+    n_obs_b = len(cb["observation"]["mean"])
+    layers_b = [(np.zeros((32, n_obs_b)), np.zeros(32))] + layers[1:]
+    psfile.write_policy(os.path.join(OUT, "ps1_zero_residual_base.safetensors"), layers_b, cb)
     print("n_obs %d, n_act %d" % (n_obs, n_act))
 
 

@@ -20,7 +20,7 @@ class EnvCfg(ctypes.Structure):
                 ("is_expert", ctypes.c_int), ("push_dv_min_m_s", ctypes.c_double),
                 ("harness_p", ctypes.c_float), ("focus_p", ctypes.c_float),
                 ("focus_dir_rad", ctypes.c_float), ("is_expert_slow", ctypes.c_int),
-                ("is_ramp_start", ctypes.c_int)]
+                ("is_ramp_start", ctypes.c_int), ("is_obs_base_action", ctypes.c_int)]
 
 
 def _f32(a):
@@ -30,7 +30,7 @@ def _f32(a):
 class Env:
     def __init__(self, n_envs, n_threads=2, seed=1, episode_s=6.0, push_dv_max=0.8, dr=True,
                  robot=None, lib=None, push_dv_min=0.05, harness_p=0.0, focus_p=0.0,
-                 focus_dir_rad=0.0, expert="quick", ramp_start=False):
+                 focus_dir_rad=0.0, expert="quick", ramp_start=False, obs_base_action=False):
         if expert not in EXPERTS:
             raise ValueError("expert %r: one of %s" % (expert, ", ".join(EXPERTS)))
         self.lib = ctypes.CDLL(lib or os.path.join(ROOT, "build", "libpsenv.so"))
@@ -47,7 +47,8 @@ class Env:
         L.ps_env_set_push_dv_max.argtypes = [ctypes.c_void_p, ctypes.c_float]
         L.ps_env_set_push.argtypes = [ctypes.c_void_p, ctypes.c_uint32] + [ctypes.c_float] * 4
         cfg = EnvCfg(n_envs, n_threads, seed, episode_s, push_dv_max, int(dr), 1, push_dv_min,
-                     harness_p, focus_p, focus_dir_rad, int(expert == "slow"), int(ramp_start))
+                     harness_p, focus_p, focus_dir_rad, int(expert == "slow"), int(ramp_start),
+                     int(obs_base_action))
         err = ctypes.create_string_buffer(1024)
         h = ctypes.c_void_p()
         path = (robot or os.path.join(ROOT, "robots", "ps1.yaml")).encode()

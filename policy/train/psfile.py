@@ -16,7 +16,7 @@ VERSION = 1
 OBS_FIELDS = {
     "gravity_body": 3, "gyro_body": 3, "joint_pos": "N", "joint_vel": "N",
     "prev_action": "A", "com_pos": 3, "com_vel": 3, "cop": 2, "capture_point": 2,
-    "bos_margin": 1, "feet": 6, "contact": 2, "momentum": 6,
+    "bos_margin": 1, "feet": 6, "contact": 2, "momentum": 6, "base_action": "A",
 }
 ACTIVATIONS = ("identity", "relu", "elu", "tanh", "sigmoid", "silu")
 

@@ -100,11 +100,14 @@ class Policy(torch.nn.Module):
         return [m for m in self.pi if isinstance(m, torch.nn.Linear)]
 
 
-def load_init(path, net, norm, hidden):
-    """The actor's layers and the observation normalisation of a policy file;
-    returns its contract."""
+def load_init(path, net, norm, hidden, fields):
+    """The actor's layers and the observation normalisation of a policy file
+    observing fields; returns its contract."""
     t, meta = psfile.read_safetensors(path)
     c = json.loads(meta[psfile.CONTRACT_KEY])
+    if c["observation"]["fields"] != fields:
+        raise SystemExit("--init %s: its observation fields (%s) are not this run's (%s)" % (
+            path, ", ".join(c["observation"]["fields"]), ", ".join(fields)))
     lin = net.linears()
     if len(lin) != len(hidden) + 1:
         raise SystemExit("--init: --hidden does not match")
@@ -123,8 +126,8 @@ def load_init(path, net, norm, hidden):
     return c
 
 
-def save(path, net, norm, doc, hidden, trained_by, residual=False):
-    c = ct.contract(doc, mean=norm.mean, std=norm.std(), trained_by=trained_by)
+def save(path, net, norm, doc, hidden, trained_by, residual=False, fields=None):
+    c = ct.contract(doc, mean=norm.mean, std=norm.std(), trained_by=trained_by, fields=fields)
     if residual:
         c["action"]["base"] = "capture"
     c["observation"]["clip"] = OBS_CLIP
@@ -354,6 +357,10 @@ def main():
                     help="the policy's action is added to the expert's (the runtime's "
                          "capture-point controller, --expert quick): PPO from a zero residual, "
                          "no cloning (--bc-iters 0); the cloning term pulls toward zero")
+    ap.add_argument("--obs-base-action", action="store_true",
+                    help="with --residual: the observation ends with the controller's action "
+                         "of this step (field base_action), which prev_action (the total "
+                         "applied) does not separate from the policy's own part")
     ap.add_argument("--expert", choices=psenv.EXPERTS, default="quick",
                     help="the capture-point controller cloned and used for the cloning term: "
                          "quick, the runtime's (0.15 s swings, the swing leg solved from the "
@@ -373,13 +380,16 @@ def main():
     doc = ct.robot()
     if a.residual and (a.bc_iters or a.expert != "quick"):
         raise SystemExit("--residual: give --bc-iters 0; the runtime adds the quick expert")
+    if a.obs_base_action and not a.residual:
+        raise SystemExit("--obs-base-action: a residual policy's field (give --residual)")
+    fields = ct.OBS_FIELDS_BASE if a.obs_base_action else ct.OBS_FIELDS
     if a.init and a.bc_iters:
         raise SystemExit("--init fine-tunes: give --bc-iters 0")
     env = psenv.Env(a.envs, a.threads, seed=a.seed, push_dv_max=a.push_dv_start,
                     dr=not a.no_dr, push_dv_min=a.push_dv_min, harness_p=a.harness_p,
                     focus_p=a.focus_p, focus_dir_rad=float(np.radians(a.focus_dir_deg)),
-                    expert=a.expert, ramp_start=a.ramp_start)
-    n_obs_contract = psfile.obs_size(ct.OBS_FIELDS, len(doc["joints"]), len(ct.LEGS))
+                    expert=a.expert, ramp_start=a.ramp_start, obs_base_action=a.obs_base_action)
+    n_obs_contract = psfile.obs_size(fields, len(doc["joints"]), len(ct.LEGS))
     if env.n_obs != n_obs_contract or env.n_act != len(ct.LEGS):
         raise SystemExit("environment (%d obs, %d actions) and contract.py (%d, %d) disagree"
                          % (env.n_obs, env.n_act, n_obs_contract, len(ct.LEGS)))
@@ -397,7 +407,7 @@ def main():
     opt_pi = torch.optim.Adam(actor_params, lr=a.ppo_lr)
     opt_v = torch.optim.Adam(net.v.parameters(), lr=a.lr)
     norm = RunningNorm(env.n_obs)
-    init_c = load_init(a.init, net, norm, hidden) if a.init else None
+    init_c = load_init(a.init, net, norm, hidden, fields) if a.init else None
     if init_c and (init_c["action"].get("base") == "capture") != a.residual:
         raise SystemExit("--init %s: a residual policy file fine-tunes with --residual, "
                          "no other" % a.init)
@@ -434,6 +444,8 @@ def main():
         trained_by += " --bootstrap-timeouts"
     if a.residual:
         trained_by += " --residual"
+    if a.obs_base_action:
+        trained_by += " --obs-base-action"
     if a.ramp_start:
         trained_by += " --ramp-start"
     if a.expert != "quick":
@@ -444,7 +456,7 @@ def main():
     stair_csv = os.path.join(a.log_dir, "stair.csv")
 
     def checkpoint():
-        save(a.out, net, norm, doc, hidden, trained_by, a.residual)
+        save(a.out, net, norm, doc, hidden, trained_by, a.residual, fields)
         if stair:
             stair.write(stair_csv)
 

@@ -21,10 +21,11 @@
 #include "../../sim/ps_devices.h"
 #include "../../sim/ps_plant.h"
 
-/* The stage-1 contract's layout (policy/train/contract.py says the same). */
+/* The stage-1 contract's layout (policy/train/contract.py says the same);
+ * is_obs_base_action appends PS_OBS_BASE_ACTION. */
 static const ps_obs_field_t FIELDS[] = {
-    PS_OBS_GRAVITY_BODY, PS_OBS_GYRO_BODY, PS_OBS_JOINT_POS,     PS_OBS_JOINT_VEL,
-    PS_OBS_PREV_ACTION,  PS_OBS_COM_POS,   PS_OBS_COM_VEL,       PS_OBS_CAPTURE_POINT,
+    PS_OBS_GRAVITY_BODY, PS_OBS_GYRO_BODY, PS_OBS_JOINT_POS, PS_OBS_JOINT_VEL,
+    PS_OBS_PREV_ACTION,  PS_OBS_COM_POS,   PS_OBS_COM_VEL,   PS_OBS_CAPTURE_POINT,
     PS_OBS_BOS_MARGIN,   PS_OBS_FEET,      PS_OBS_CONTACT,
 };
 #define N_FIELDS  (sizeof(FIELDS) / sizeof(FIELDS[0]))
@@ -83,6 +84,15 @@ typedef struct {
     int torso, pelvis, feet[2];
 } env1_t;
 
+struct ps_env;
+
+/* A worker thread's argument: its environment and slice (one per thread, in
+ * the environment: a second environment in the process has its own). */
+typedef struct {
+    struct ps_env *e;
+    uint32_t idx;
+} worker_arg_t;
+
 struct ps_env {
     ps_env_cfg_t cfg;
     ps_robot_cfg_t robot;
@@ -94,6 +104,7 @@ struct ps_env {
     float stance[PS_MAX_JOINTS];
     uint32_t ticks_per_step;
     pthread_t th[MAX_THREADS];
+    worker_arg_t th_arg[MAX_THREADS];
     uint32_t n_th;
     pthread_barrier_t go, done_b;
     bool is_quit, is_reset;
@@ -220,8 +231,8 @@ static void servo_tick(const ps_env_t *e, env1_t *v)
         meas_q[j] = v->meas.joints[j].q_rad;
     ps_servo_mode_t mode = {.kind = v->servo_kind, .meas_q_rad = meas_q};
     if (v->servo_kind == PS_SERVO_RAMP) {
-        const double alpha = (double)(v->t_ns - v->ramp_t0_ns) /
-                             ((double)r->control.ramp_s * (double)PS_NS_PER_S);
+        const double alpha =
+            (double)(v->t_ns - v->ramp_t0_ns) / ((double)r->control.ramp_s * (double)PS_NS_PER_S);
         mode.ramp_alpha = (float)fmin(fmax(alpha, 0.0), 1.0);
         mode.ramp_from_q_rad = v->ramp_from_q;
         if (alpha >= 1.0)
@@ -286,7 +297,8 @@ static int physics_step(const ps_env_t *e, env1_t *v, int64_t now_ns, double dt)
 
 static double yaw_of(const double qt[4])
 {
-    return atan2(2.0 * (qt[0] * qt[3] + qt[1] * qt[2]), 1.0 - 2.0 * (qt[2] * qt[2] + qt[3] * qt[3]));
+    return atan2(2.0 * (qt[0] * qt[3] + qt[1] * qt[2]),
+                 1.0 - 2.0 * (qt[2] * qt[2] + qt[3] * qt[3]));
 }
 
 static double wrap(double a)
@@ -330,8 +342,9 @@ static double reward(const ps_env_t *e, env1_t *v, bool *fell)
     if (n_c > 0) {
         centre[0] /= n_c, centre[1] /= n_c;
         cop[0] /= fz, cop[1] /= fz;
-        const double d_com = sqrt(pow(tr.com_m[0] - centre[0], 2) +
-                                  pow(tr.com_m[1] - centre[1], 2) + pow(tr.com_m[2] - v->z_rest, 2));
+        const double d_com =
+            sqrt(pow(tr.com_m[0] - centre[0], 2) + pow(tr.com_m[1] - centre[1], 2) +
+                 pow(tr.com_m[2] - v->z_rest, 2));
         const double w0 = sqrt(9.81 / fmax(tr.com_m[2], 0.2));
         double cp_t[2];
         for (int k = 0; k < 2; k++)
@@ -343,7 +356,8 @@ static double reward(const ps_env_t *e, env1_t *v, bool *fell)
     int n_s = 0;
     for (int s = 0; s < 2; s++) {
         if (contact[s] && v->prev_contact[s]) {
-            slide += hypot(ankle[s][0] - v->prev_ankle[s][0], ankle[s][1] - v->prev_ankle[s][1]) / dt;
+            slide +=
+                hypot(ankle[s][0] - v->prev_ankle[s][0], ankle[s][1] - v->prev_ankle[s][1]) / dt;
             n_s++;
         }
         v->prev_contact[s] = contact[s];
@@ -374,7 +388,8 @@ static void targets_from_action(const ps_env_t *e, env1_t *v, const float *a, fl
         const int j = e->leg_idx[k];
         const ps_act_limits_t *l = &r->servo[j].lim;
         float q = e->stance[j] + ACT_SCALE * x;
-        v->tgt.q_rad[j] = q < l->pos_min_rad ? l->pos_min_rad : (q > l->pos_max_rad ? l->pos_max_rad : q);
+        v->tgt.q_rad[j] =
+            q < l->pos_min_rad ? l->pos_min_rad : (q > l->pos_max_rad ? l->pos_max_rad : q);
     }
 }
 
@@ -401,6 +416,23 @@ static void observe(const ps_env_t *e, env1_t *v, float *obs)
     for (uint32_t i = 0; i < e->n_obs; i++)
         if (!isfinite(obs[i]))
             obs[i] = 0.0f;
+}
+
+/* The observation and, when asked for, the expert's action. The expert runs
+ * first when the observation holds its action (base_action), as in the
+ * runtime, where the fallback steps before the MLP's build; it is stepped
+ * only when needed, since it keeps state from step to step. */
+static void observe_with_expert(const ps_env_t *e, env1_t *v, float *obs, float *expert)
+{
+    float base[N_ACT];
+    const bool is_base = e->cfg.is_obs_base_action != 0;
+    if (is_base || expert != NULL)
+        expert_action(e, v, base);
+    if (is_base)
+        ps_obs_set_base_action(&v->obs, base);
+    observe(e, v, obs);
+    if (expert != NULL)
+        memcpy(expert, base, sizeof(base));
 }
 
 /* Run servo ticks until the next policy step. */
@@ -489,9 +521,7 @@ static int reset1(const ps_env_t *e, env1_t *v, float *obs, float *expert)
         ps_plant_get_body_pos(v->plant, v->feet[s], v->prev_ankle[s]);
         v->prev_contact[s] = force[s] > 20.0;
     }
-    observe(e, v, obs);
-    if (expert != NULL)
-        expert_action(e, v, expert);
+    observe_with_expert(e, v, obs, expert);
     return rc;
 }
 
@@ -519,26 +549,17 @@ static int step1(const ps_env_t *e, env1_t *v, const float *a, float *obs, float
         for (int i = 0; i < v->n_push; i++)
             n_done += t_s >= v->push[i].t_s;
         const float vals[PS_ENV_INFO] = {fell ? 1.0f : 0.0f, is_end ? 1.0f : 0.0f, (float)t_s,
-                                         (float)v->last_dv, (float)v->r_bal, (float)v->r_q,
+                                         (float)v->last_dv,  (float)v->r_bal,      (float)v->r_q,
                                          (float)tr.com_m[2], (float)n_done};
         memcpy(info, vals, sizeof(vals));
     }
     if (is_end)
         return reset1(e, v, obs, expert);
-    observe(e, v, obs);
-    if (expert != NULL)
-        expert_action(e, v, expert);
+    observe_with_expert(e, v, obs, expert);
     return 0;
 }
 
 /* ---- threads ------------------------------------------------------------------- */
-
-typedef struct {
-    ps_env_t *e;
-    uint32_t idx;
-} worker_arg_t;
-
-static worker_arg_t g_args[MAX_THREADS];
 
 static void run_slice(ps_env_t *e, uint32_t w)
 {
@@ -602,8 +623,8 @@ int ps_env_reset(ps_env_t *e, float *obs)
     return run_all(e);
 }
 
-int ps_env_step(ps_env_t *e, const float *act, float *obs, float *rew, uint8_t *done,
-                float *expert, float *info)
+int ps_env_step(ps_env_t *e, const float *act, float *obs, float *rew, uint8_t *done, float *expert,
+                float *info)
 {
     e->is_reset = false;
     e->act = act;
@@ -648,6 +669,8 @@ static int init1(ps_env_t *e, env1_t *v, uint32_t i, char *err, size_t len)
     memset(&oc, 0, sizeof(oc));
     oc.n_fields = N_FIELDS;
     memcpy(oc.fields, FIELDS, sizeof(FIELDS));
+    if (e->cfg.is_obs_base_action)
+        oc.fields[oc.n_fields++] = PS_OBS_BASE_ACTION;
     oc.n_joints = r->n_joints;
     oc.n_act = N_ACT;
     for (uint32_t j = 0; j < r->n_joints; j++) {
@@ -716,8 +739,8 @@ int ps_env_create(const char *robot_path, const ps_env_cfg_t *cfg, ps_env_t **ou
         pthread_barrier_init(&e->go, NULL, e->n_th);
         pthread_barrier_init(&e->done_b, NULL, e->n_th);
         for (uint32_t w = 1; w < e->n_th; w++) {
-            g_args[w] = (worker_arg_t){e, w};
-            pthread_create(&e->th[w], NULL, worker, &g_args[w]);
+            e->th_arg[w] = (worker_arg_t){e, w};
+            pthread_create(&e->th[w], NULL, worker, &e->th_arg[w]);
         }
         *out = e;
         return 0;
@@ -730,8 +753,7 @@ int ps_env_create(const char *robot_path, const ps_env_cfg_t *cfg, ps_env_t **ou
     return rc;
 }
 
-int ps_env_set_push(ps_env_t *e, uint32_t env, float t_s, float dur_s, float dv_m_s,
-                    float dir_rad)
+int ps_env_set_push(ps_env_t *e, uint32_t env, float t_s, float dur_s, float dv_m_s, float dir_rad)
 {
     if (e == NULL || env >= e->cfg.n_envs || !isfinite(t_s) || !isfinite(dur_s) ||
         !isfinite(dv_m_s) || !isfinite(dir_rad))
@@ -742,7 +764,9 @@ int ps_env_set_push(ps_env_t *e, uint32_t env, float t_s, float dur_s, float dv_
         return 0;
     }
     const double f = dv_m_s * e->robot.kin.mass_kg / dur_s;
-    v->fixed = (push_t){.t_s = t_s, .dur_s = dur_s, .dv_m_s = dv_m_s,
+    v->fixed = (push_t){.t_s = t_s,
+                        .dur_s = dur_s,
+                        .dv_m_s = dv_m_s,
                         .force_n = {f * cos(dir_rad), f * sin(dir_rad), 0.0}};
     v->has_fixed = true;
     return 0;

@@ -14,7 +14,9 @@
  * joint's protocol and decoded by its emulated drive (sim/ps_devices:
  * quantisation, the drive's PD at its rate, its torque-speed limit),
  * delayed by the episode's command latency; two physics steps per tick.
- * Every policy step (policy_hz) the observation is ps_obs_build's.
+ * Every policy step (policy_hz) the observation is ps_obs_build's; the
+ * layout is policy/train/contract.py's OBS_FIELDS (OBS_FIELDS_BASE with
+ * is_obs_base_action).
  *
  * Episodes (episode_s): the robot starts in its stance, free; one or two
  * pushes on the torso at random times, directions, delta-v in
@@ -77,6 +79,10 @@ typedef struct {
                           from that pose over the robot's ramp_s (the servo layer's RAMP),
                           the harness letting go ramp_s + [0.2, 1.0] s in (the runtime's
                           trials: 0.8 s) */
+    /* Added 2026-12-04; zero keeps the stage-1 layout. */
+    int is_obs_base_action; /**< the observation ends with base_action (policy/ps_obs.h): the
+                               capture-point controller's action of this step, which the
+                               expert output gives too (for a residual policy) */
 } ps_env_cfg_t;
 
 #define PS_ENV_INFO 8 /**< floats of info per environment and step: */
@@ -99,15 +105,14 @@ int ps_env_reset(ps_env_t *e, float *obs);
  *  (n_envs x act_size, the capture-point controller's actions for the new
  *  observation's state; may be NULL), info (n_envs x PS_ENV_INFO; may be
  *  NULL)  @return 0 | -errno */
-int ps_env_step(ps_env_t *e, const float *act, float *obs, float *rew, uint8_t *done,
-                float *expert, float *info);
+int ps_env_step(ps_env_t *e, const float *act, float *obs, float *rew, uint8_t *done, float *expert,
+                float *info);
 
 /** Evaluation: environment env's episodes from its next reset on get one
  *  torso push of delta-v dv_m_s (m/s; force dv m / dur_s) over dur_s seconds
  *  at t_s, in direction dir_rad (world frame, 0 = +x), instead of random
  *  pushes; dur_s <= 0 goes back to random pushes.  @return 0 | -EINVAL */
-int ps_env_set_push(ps_env_t *e, uint32_t env, float t_s, float dur_s, float dv_m_s,
-                    float dir_rad);
+int ps_env_set_push(ps_env_t *e, uint32_t env, float t_s, float dur_s, float dv_m_s, float dir_rad);
 
 /** Curriculum: the largest push delta-v from the next episodes on. */
 void ps_env_set_push_dv_max(ps_env_t *e, float dv_max_m_s);
