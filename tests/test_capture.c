@@ -357,17 +357,20 @@ static void test_ps_mlp_policy_late_or_wild_falls_back(void **st)
  * a controller of its own fed the same states (the leg joints' as training
  * adds them, clipped to the contract's clip; the others at stance), and the
  * action it applied, the observation's previous action, is that
- * controller's. */
-static void test_ps_mlp_policy_zero_residual_is_the_capture_controller(void **st)
+ * controller's. A file observing its base (base_action, the last field) has
+ * the controller's action of that step in the MLP's input, set before the
+ * build, as training's environment puts it there (tools/psenv). */
+static void check_zero_residual_is_the_controller(const char *path, bool is_base_observed)
 {
-    (void)st;
     static mlp_fx_t f;
-    mlp_setup(&f, "tests/data/policy/ps1_zero_residual.safetensors");
+    mlp_setup(&f, path);
     ps_capture_t ref;
     init_capture(&ref);
     ps_policy_t rp;
     ps_capture_as_policy(&ref, &rp);
     const ps_weights_contract_t *c = &f.w.contract;
+    assert_true((c->fields[c->n_fields - 1] == PS_OBS_BASE_ACTION) == is_base_observed);
+    const uint32_t at = c->n_obs - c->n_act; /* the base_action field's place */
     float most_rad = 0.0f;
     for (int k = 0; k < 30; k++) {
         ps_meas_t m;
@@ -382,6 +385,8 @@ static void test_ps_mlp_policy_zero_residual_is_the_capture_controller(void **st
             u = u > c->act_clip ? c->act_clip : (u < -c->act_clip ? -c->act_clip : u);
             assert_float_equal(f.mlp.applied[a], u, 1e-6);
             assert_float_equal(t.q_rad[j], c->stance_rad[j] + c->act_scale[a] * u, 1e-6);
+            if (is_base_observed) /* mean 0, std 1: the input is the raw value */
+                assert_float_equal(f.mlp.in[at + a], u, 1e-6);
             most_rad = fmaxf(most_rad, fabsf(t.q_rad[j] - c->stance_rad[j]));
         }
         for (uint32_t i = 0; i < t.n_joints; i++)
@@ -393,43 +398,17 @@ static void test_ps_mlp_policy_zero_residual_is_the_capture_controller(void **st
     ps_weights_free(&f.w);
 }
 
-/* A residual policy observing its base: each step's observation holds the
- * capture controller's action of that step (base_action, before the build:
- * the MLP's input at the field's place), as training's environment puts it
- * there (tools/psenv), and the targets are still the controller's. */
+static void test_ps_mlp_policy_zero_residual_is_the_capture_controller(void **st)
+{
+    (void)st;
+    check_zero_residual_is_the_controller("tests/data/policy/ps1_zero_residual.safetensors", false);
+}
+
 static void test_ps_mlp_policy_observes_its_base_action(void **st)
 {
     (void)st;
-    static mlp_fx_t f;
-    mlp_setup(&f, "tests/data/policy/ps1_zero_residual_base.safetensors");
-    ps_capture_t ref;
-    init_capture(&ref);
-    ps_policy_t rp;
-    ps_capture_as_policy(&ref, &rp);
-    const ps_weights_contract_t *c = &f.w.contract;
-    assert_int_equal(c->fields[c->n_fields - 1], PS_OBS_BASE_ACTION);
-    const uint32_t at = c->n_obs - c->n_act; /* the last field */
-    float most = 0.0f;
-    for (int k = 0; k < 30; k++) {
-        ps_meas_t m;
-        ps_estimate_t e;
-        ps_targets_t t, want;
-        state(&ref, 0.0f, 0.02f * (float)(k < 15 ? k : 15), &m, &e);
-        assert_int_equal(rp.ops->step(rp.ctx, &m, &e, &want), 0);
-        assert_int_equal(f.p.ops->step(f.p.ctx, &m, &e, &t), 0);
-        for (uint32_t a = 0; a < c->n_act; a++) {
-            const uint32_t j = c->act_joint[a];
-            float u = (want.q_rad[j] - c->stance_rad[j]) / c->act_scale[a];
-            u = u > c->act_clip ? c->act_clip : (u < -c->act_clip ? -c->act_clip : u);
-            /* mean 0, std 1: the input is the raw value, clipped to 10 */
-            assert_float_equal(f.mlp.in[at + a], u, 1e-6);
-            assert_float_equal(t.q_rad[j], want.q_rad[j], 1e-6);
-            most = fmaxf(most, fabsf(u));
-        }
-    }
-    assert_true(ref.n_steps >= 1);
-    assert_true(most > 0.4f); /* the field moved with the step (0.1 rad / 0.25) */
-    ps_weights_free(&f.w);
+    check_zero_residual_is_the_controller("tests/data/policy/ps1_zero_residual_base.safetensors",
+                                          true);
 }
 
 int main(void)

@@ -38,23 +38,12 @@ static ps_obs_cfg_t cfg_all(void)
     c.clip = 100.0f;
     c.dt_s = 0.02f;
     c.kin = (ps_kinematics_cfg_t){
-        .mass_kg = 30.0f,
-        .hip_offset_y_m = 0.1f,
-        .hip_offset_z_m = 0.05f,
-        .thigh_m = 0.3f,
-        .shank_m = 0.3f,
-        .ankle_height_m = 0.05f,
-        .foot_length_m = 0.2f,
-        .foot_width_m = 0.1f,
-        .trunk_mass_kg = 20.0f,
-        .trunk_com_z_m = 0.2f,
-        .hip_mass_kg = 1.0f,
-        .thigh_mass_kg = 2.0f,
-        .thigh_com_m = 0.1f,
-        .shank_mass_kg = 1.0f,
-        .shank_com_m = 0.15f,
-        .foot_mass_kg = 1.0f,
-        .foot_com_x_m = 0.04f,
+        .mass_kg = 30.0f, .hip_offset_y_m = 0.1f, .hip_offset_z_m = 0.05f,
+        .thigh_m = 0.3f, .shank_m = 0.3f, .ankle_height_m = 0.05f,
+        .foot_length_m = 0.2f, .foot_width_m = 0.1f,
+        .trunk_mass_kg = 20.0f, .trunk_com_z_m = 0.2f, .hip_mass_kg = 1.0f,
+        .thigh_mass_kg = 2.0f, .thigh_com_m = 0.1f, .shank_mass_kg = 1.0f,
+        .shank_com_m = 0.15f, .foot_mass_kg = 1.0f, .foot_com_x_m = 0.04f,
         .foot_com_z_m = -0.02f,
     };
     return c;
@@ -125,7 +114,7 @@ static void test_ps_obs_build_fields_by_hand(void **st)
     assert_float_equal(raw[at(PS_OBS_COM_VEL)], 1.0f, 1e-4);
     assert_float_equal(raw[at(PS_OBS_CAPTURE_POINT)],
                        0.02f + 0.08f / 30.0f + 1.0f / sqrtf(9.81f / 0.732f), 1e-4);
-    assert_true(raw[at(PS_OBS_BOS_MARGIN)] < 0.0f);           /* outside the feet */
+    assert_true(raw[at(PS_OBS_BOS_MARGIN)] < 0.0f); /* outside the feet */
     assert_float_equal(raw[at(PS_OBS_MOMENTUM)], 1.0f, 1e-4); /* p / M */
     assert_float_equal(raw[at(PS_OBS_MOMENTUM) + 4], 0.0f, 1e-4);
 
