@@ -108,7 +108,9 @@ name="--obs-base-action: the observation ends with the controller's action of th
 # step (auto-resets included), the rest the stage-1 layout; train.py: the
 # contract lists base_action, the runtime runs the file (its builder puts
 # the base there, tests/test_capture.c), refused without --residual and
-# for an --init file of the other layout
+# for an --init file of the other layout; eval.py runs the controller in an
+# environment without the field whatever the file (one that fills it steps
+# the controller once more at each reset), the file in one with its layout
 check bash -c "/usr/bin/python3 -c \"
 import sys; sys.path.insert(0, 'policy/train'); import numpy as np, psenv
 plain = psenv.Env(4, 2, seed=3, episode_s=1.5, push_dv_max=0.4, dr=True)
@@ -138,7 +140,19 @@ assert '--obs-base-action' in c['trained_by']\" \
     && grep -q 'give --residual' $out/rb2.out \
     && ! /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --bc-iters 0 --ppo-iters 1 \
     --residual --obs-base-action --init $out/res.safetensors --out $out/rb3.safetensors \
-    --log-dir $out/rb3 >$out/rb3.out 2>&1 && grep -q 'are not this run' $out/rb3.out"
+    --log-dir $out/rb3 >$out/rb3.out 2>&1 && grep -q 'are not this run' $out/rb3.out \
+    && /usr/bin/python3 -c \"
+import sys; sys.path.insert(0, 'policy/train'); import eval as ev, psenv
+made = []
+class Env(psenv.Env):
+    def __init__(self, *a, **k):
+        made.append(k.get('obs_base_action')); super().__init__(*a, **k)
+ev.psenv.Env = Env
+for f, want in (('rb', [False, True]), ('res', [False])):
+    made.clear()
+    sys.argv = ['eval.py', '--weights', '$out/' + f + '.safetensors', '--dv', '0.3',
+                '--durations', '0.1', '--directions', '2']
+    ev.main(); assert made == want, (f, made)\" >/dev/null 2>&1"
 name="GAE: a time-limit cut bootstraps from the state's value, a fall does not (--bootstrap-timeouts)"
 # one environment, 2 steps, reward 1, values 10 and 20, both episodes end at
 # step 0: a fall (info[0] = 1) gives delta = 1 - 10; a cut gives

@@ -158,16 +158,25 @@ def main():
     mlp = Mlp(a.weights, zero) if a.weights else None
     ctls = [("capture", expert_ctl)] + ([("mlp", mlp)] if mlp else [])
     rng = np.random.default_rng(a.seed)
-    env = psenv.Env(a.directions, a.threads, seed=a.seed, episode_s=8.0, dr=a.dr,
-                     lib=a.lib, harness_p=1.0 if a.harness else 0.0,
-                     expert=a.expert, ramp_start=a.ramp_start,
-                     obs_base_action=bool(mlp) and "base_action" in mlp.fields)
-    if mlp and env.n_obs != len(mlp.mean):
-        raise SystemExit("%s: %d observation floats (%s), the environment gives %d" % (
-            a.weights, len(mlp.mean), ", ".join(mlp.fields), env.n_obs))
     policy_hz = mlp.c["policy_hz"] if mlp else 50
+
+    def make_env(is_base):
+        return psenv.Env(a.directions, a.threads, seed=a.seed, episode_s=8.0, dr=a.dr,
+                         lib=a.lib, harness_p=1.0 if a.harness else 0.0, expert=a.expert,
+                         ramp_start=a.ramp_start, obs_base_action=is_base)
+    env = make_env(False)
     cells = []
     for name, ctl in ctls:
+        if ctl is mlp and "base_action" in mlp.fields:
+            # an environment of its own: one that fills base_action steps
+            # the controller once more at each reset, which must not change
+            # the controller's rows (a file without the field shares the
+            # controller's environment, as it always did)
+            env.close()
+            env = make_env(True)
+        if ctl is mlp and env.n_obs != len(mlp.mean):
+            raise SystemExit("%s: %d observation floats (%s), the environment gives %d" % (
+                a.weights, len(mlp.mean), ", ".join(mlp.fields), env.n_obs))
         for dur in durs:
             for dv in dvs:
                 ok = run_cell(env, ctl, dv, dur, dirs, rng, policy_hz)
