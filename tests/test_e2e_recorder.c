@@ -124,14 +124,23 @@ static double num(const cJSON *o, const char *key)
     return v->valuedouble;
 }
 
-/* The flight summary's file dumped for `trigger` (NULL when none). */
-static const cJSON *flight_file_by_trigger(const cJSON *flight, const char *trigger)
+/* The flight summary's file whose causes include `trigger` (NULL when
+ * none); *out_is_alone: it is the only cause. A trigger inside a dump being
+ * written is noted in that dump ("overrun|button"), so on a loaded machine
+ * an overrun near it may own the file. */
+static const cJSON *flight_file_by_trigger(const cJSON *flight, const char *trigger,
+                                           bool *out_is_alone)
 {
     const cJSON *fi = NULL;
     cJSON_ArrayForEach(fi, get(flight, "files"))
     {
-        if (strcmp(cJSON_GetStringValue(get(fi, "trigger")), trigger) == 0)
+        const char *causes = cJSON_GetStringValue(get(fi, "trigger"));
+        if (causes != NULL && strstr(causes, trigger) != NULL) {
+            *out_is_alone = strcmp(causes, trigger) == 0;
+            if (!*out_is_alone)
+                print_message("the %s dump shares its file with: %s\n", trigger, causes);
             return fi;
+        }
     }
     return NULL;
 }
@@ -711,13 +720,16 @@ static void test_e2e_rec_cli_sigusr1_dumps_the_window_around_it(void **state)
     const cJSON *r = get(j, "recorder");
     assert_int_equal(num(get(r, "triggers_by"), "signal"), 1);
     /* lockstep judges overruns on the loop thread's CPU time, which a
-     * loaded VM inflates: a burst may add its own dump; each is counted */
+     * loaded VM inflates: a burst may add its own dump, or hold the signal
+     * in its own (flight_file_by_trigger); each is counted */
     const cJSON *fl = get(r, "flight");
     const double n_overrun_dumps = num(get(r, "triggers_by"), "overrun");
-    assert_int_equal(num(fl, "dumps"), 1 + n_overrun_dumps);
-    const cJSON *f = flight_file_by_trigger(fl, "signal");
+    assert_true(num(fl, "dumps") >= 1 && num(fl, "dumps") <= 1 + n_overrun_dumps);
+    bool is_alone = false;
+    const cJSON *f = flight_file_by_trigger(fl, "signal", &is_alone);
     assert_non_null(f);
-    assert_int_equal(num(f, "records"), 1501);
+    if (is_alone)
+        assert_int_equal(num(f, "records"), 1501);
     char path[256];
     snprintf(path, sizeof(path), "%s", cJSON_GetStringValue(get(f, "path")));
     const double written = num(f, "messages");
@@ -749,15 +761,20 @@ static void test_e2e_rec_cli_gpio_button_dumps_the_window(void **state)
     cJSON *j = read_json(sum);
     const cJSON *r = get(j, "recorder");
     /* as above: a loaded machine (CI's sanitized build) may add overrun
-     * dumps of its own; the button's is the one asserted */
-    const double n_overrun_dumps = num(get(r, "triggers_by"), "overrun");
-    assert_int_equal(num(r, "triggers"), 1 + n_overrun_dumps);
+     * triggers of its own (an overrun on the press's tick is one trigger
+     * with both causes); the button's window is asserted when its dump is
+     * its own */
+    const double n_overrun = num(get(r, "triggers_by"), "overrun");
+    assert_true(num(r, "triggers") >= 1 && num(r, "triggers") <= 1 + n_overrun);
     assert_int_equal(num(get(r, "triggers_by"), "button"), 1);
-    const cJSON *file = flight_file_by_trigger(get(r, "flight"), "button");
+    bool is_alone = false;
+    const cJSON *file = flight_file_by_trigger(get(r, "flight"), "button", &is_alone);
     assert_non_null(file);
-    assert_int_equal(num(file, "records"), 1501);
-    /* the press at 2.5 s is read by the loop's next tick */
-    assert_true(num(file, "trigger_record") >= 2500 && num(file, "trigger_record") <= 2502);
+    if (is_alone) {
+        assert_int_equal(num(file, "records"), 1501);
+        /* the press at 2.5 s is read by the loop's next tick */
+        assert_true(num(file, "trigger_record") >= 2500 && num(file, "trigger_record") <= 2502);
+    }
     cJSON_Delete(j);
 }
 

@@ -371,7 +371,9 @@ static void test_estop_glitch_shorter_than_debounce_ignored(void **state)
             const double released_after_ms = (double)(mono_ns() - t_fix_ns) / 1e6;
             print_message("glitch try %d: released %.1f ms after the fix (%d reads pressed)\n", k,
                           released_after_ms, n_reads);
-            assert_true(n_reads < 200);
+            /* the debounce after the fix, not much more: 5 x covers the
+             * VM's stalls (0.1 s seen once) and catches a fix held long */
+            assert_true(released_after_ms < 5.0 * DEBOUNCE_US / 1e3);
             for (int i = 0; i < 5; i++) {
                 sleep_us(1000);
                 assert_false(read_pressed(&g_a));

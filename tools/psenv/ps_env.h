@@ -82,7 +82,10 @@ typedef struct {
     /* Added 2026-12-04; zero keeps the stage-1 layout. */
     int is_obs_base_action; /**< the observation ends with base_action (policy/ps_obs.h): the
                                capture-point controller's action of this step, which the
-                               expert output gives too (for a residual policy) */
+                               expert output gives too (for a residual policy); the
+                               controller then steps at ps_env_reset too (to fill the field),
+                               so its later actions differ from those of an environment
+                               without the flag */
 } ps_env_cfg_t;
 
 #define PS_ENV_INFO 8 /**< floats of info per environment and step: */
