@@ -88,10 +88,11 @@ static uint32_t run_mlp(ps_mlp_policy_t *p, const ps_meas_t *meas, const ps_esti
     /* a residual without its base (the capture controller found no support)
      * counts as no observation: the same condition stops the builder */
     const bool has_base = base != NULL || c->act_base != PS_WEIGHTS_BASE_CAPTURE;
+    float base_act[PS_MAX_JOINTS] = {0}; /* this step's base, action units */
     for (uint32_t a = 0; has_base && a < c->n_act; a++)
-        p->base_act[a] = base_action(p, base, a);
+        base_act[a] = base_action(p, base, a);
     /* known before the build: the observation's base_action field */
-    ps_obs_set_base_action(&p->obs, p->base_act);
+    ps_obs_set_base_action(&p->obs, base_act);
     if (!has_base || est == NULL || ps_obs_build(&p->obs, meas, est, p->in, NULL) < 0)
         faults |= PS_MLP_FAULT_OBS;
     if (faults == 0 && ps_mlp_forward(&p->w->mlp, p->in, NULL, p->act) != 0)
@@ -114,7 +115,7 @@ static uint32_t run_mlp(ps_mlp_policy_t *p, const ps_meas_t *meas, const ps_esti
         const uint32_t j = c->act_joint[a];
         const ps_act_limits_t *l = &p->joints[j].lim;
         /* the action applied, also the observation's previous action */
-        p->applied[a] = clampf(p->base_act[a] + p->act[a], -c->act_clip, c->act_clip);
+        p->applied[a] = clampf(base_act[a] + p->act[a], -c->act_clip, c->act_clip);
         t->q_rad[j] = clampf(c->stance_rad[j] + c->act_scale[a] * p->applied[a], l->pos_min_rad,
                              l->pos_max_rad);
     }

@@ -53,7 +53,6 @@ typedef struct {
     float fallback_hold_s, dt_s;
     uint32_t joint_idx[PS_MAX_JOINTS]; /**< robot joint of each contract joint */
     float in[PS_OBS_MAX], act[PS_MAX_JOINTS], applied[PS_MAX_JOINTS];
-    float base_act[PS_MAX_JOINTS]; /**< the residual's base this step, action units */
     /* read-only */
     bool is_fallback;
     float fallback_left_s;
