@@ -153,6 +153,42 @@ for f, want in (('rb', [False, True]), ('res', [False])):
     sys.argv = ['eval.py', '--weights', '$out/' + f + '.safetensors', '--dv', '0.3',
                 '--durations', '0.1', '--directions', '2']
     ev.main(); assert made == want, (f, made)\" >/dev/null 2>&1"
+name="--swing-cost: info flags the controller's swings; the cost is on the residual of the steps whose expert swings"
+# two rollouts of one zero-residual policy (same seeds, so the same actions
+# and states): their rewards differ by k x 0.25 rad x |residual| of the
+# joints named, on exactly the steps whose expert action was taken in a
+# swing (the flag of the step before); train.py writes the option into the
+# contract and refuses it without --residual and for a joint not in the action
+check bash -c "/usr/bin/python3 -c \"
+import sys; sys.path.insert(0, 'policy/train'); import numpy as np, torch, psenv, train
+def run(cost):
+    torch.manual_seed(5)
+    env = psenv.Env(4, 2, seed=7, episode_s=2.5, push_dv_max=0.6, dr=True)
+    net = train.Policy(env.n_obs, env.n_act, [32, 32])
+    with torch.no_grad():
+        net.pi[-1].weight.zero_(); net.pi[-1].bias.zero_(); net.log_std.fill_(np.log(0.05))
+    env.reset(); _, _, _, expert, info0 = env.step(np.zeros((4, env.n_act), np.float32))
+    buf = train.rollout(env, net, train.RunningNorm(env.n_obs), env.obs.copy(), 200, 0.0, expert,
+                        np.random.default_rng(1), residual=True, swing_cost=cost)[0]
+    return buf, info0
+(b0, i0), (b1, _) = run(None), run((2.0, [1, 7]))
+assert np.array_equal(b0['act'], b1['act']) and np.array_equal(b0['info'], b1['info'])
+flag = np.concatenate([i0[None, :, 8], b0['info'][:-1, :, 8]])
+assert set(np.unique(flag)) == {0.0, 1.0} and flag.mean() < 0.5, flag.mean()
+want = 2.0 * flag * 0.25 * np.abs(b0['act'][:, :, [1, 7]]).sum(-1)
+assert np.allclose(b0['rew'] - b1['rew'], want, atol=1e-6) and want.max() > 0\" \
+    && /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 --bc-iters 0 \
+    --ppo-iters 1 --residual --swing-cost 1 --out $out/sw.safetensors --log-dir $out/sw >/dev/null 2>&1 \
+    && /usr/bin/python3 -c \"
+import sys, json; sys.path.insert(0, 'policy/train'); import psfile
+c = json.loads(psfile.read_safetensors('$out/sw.safetensors')[1][psfile.CONTRACT_KEY])
+assert '--swing-cost 1 --swing-cost-joints l_hip_roll,r_hip_roll' in c['trained_by'], c\" \
+    && ! /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --bc-iters 0 --ppo-iters 1 \
+    --swing-cost 1 --out $out/sw2.safetensors --log-dir $out/sw2 >$out/sw2.out 2>&1 \
+    && grep -q 'give --residual' $out/sw2.out \
+    && ! /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --bc-iters 0 --ppo-iters 1 \
+    --residual --swing-cost 1 --swing-cost-joints l_hip_rol --out $out/sw3.safetensors \
+    --log-dir $out/sw3 >$out/sw3.out 2>&1 && grep -q 'l_hip_rol not among' $out/sw3.out"
 name="GAE: a time-limit cut bootstraps from the state's value, a fall does not (--bootstrap-timeouts)"
 # one environment, 2 steps, reward 1, values 10 and 20, both episodes end at
 # step 0: a fall (info[0] = 1) gives delta = 1 - 10; a cut gives

@@ -151,9 +151,11 @@ def plot(log_csv, png):
 
 
 def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=True,
-            explore=True, dart_std=0.0, stair=None, residual=False):
+            explore=True, dart_std=0.0, stair=None, residual=False, swing_cost=None):
     """n_steps of every environment. beta_expert: probability that an
-    environment follows the expert this step (DAgger)."""
+    environment follows the expert this step (DAgger). swing_cost (k, joint
+    indices): a residual's cost, k per radian of those joints' residual
+    targets, on the steps whose expert action is part of a step."""
     n = env.n
     buf = {k: [] for k in ("obs", "raw", "act", "logp", "rew", "done", "val", "expert", "info")}
     for _ in range(n_steps):
@@ -178,8 +180,15 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
             # previous-action input included; without it the clone copies
             # its previous action and integrates PPO's exploration noise
             a = a + dart_std * rng.standard_normal(a.shape).astype(np.float32)
+        # the expert's swing flag belongs to the state the expert acted on: the
+        # last step's info (psenv.INFO_KEYS), read before this step replaces it
+        swing = env.info[:, psenv.INFO_KEYS.index("expert_swing")].copy()
         # a residual policy's action is added to the expert's (both in action units)
         obs2, rew, done, expert2, info = env.step(a + expert if residual else a)
+        if swing_cost is not None:
+            k, idx = swing_cost
+            rew = (rew - k * swing * ct.ACTION_SCALE * np.abs(a[:, idx]).sum(axis=1)).astype(
+                np.float32)
         if stair is not None:
             stair.observe(info)
         buf["obs"].append(o)
@@ -357,6 +366,12 @@ def main():
                     help="the policy's action is added to the expert's (the runtime's "
                          "capture-point controller, --expert quick): PPO from a zero residual, "
                          "no cloning (--bc-iters 0); the cloning term pulls toward zero")
+    ap.add_argument("--swing-cost", type=float, default=0.0,
+                    help="with --residual: a cost, this much reward per radian, on the "
+                         "residual's targets of --swing-cost-joints while the capture-point "
+                         "controller swings a foot (its step is left to it)")
+    ap.add_argument("--swing-cost-joints", default="l_hip_roll,r_hip_roll",
+                    help="the action joints --swing-cost applies to")
     ap.add_argument("--obs-base-action", action="store_true",
                     help="with --residual: the observation ends with the controller's action "
                          "of this step (field base_action), which prev_action (the total "
@@ -382,6 +397,16 @@ def main():
         raise SystemExit("--residual: give --bc-iters 0; the runtime adds the quick expert")
     if a.obs_base_action and not a.residual:
         raise SystemExit("--obs-base-action: a residual policy's field (give --residual)")
+    swing_cost = None
+    if a.swing_cost != 0.0:
+        if not a.residual or a.swing_cost < 0.0:
+            raise SystemExit("--swing-cost: a cost (>= 0) on a residual (give --residual)")
+        names = [j for j in a.swing_cost_joints.split(",") if j]
+        unknown = [j for j in names if j not in ct.LEGS]
+        if unknown or not names:
+            raise SystemExit("--swing-cost-joints: %s not among the action joints (%s)"
+                             % (",".join(unknown) or "none given", ",".join(ct.LEGS)))
+        swing_cost = (a.swing_cost, [ct.LEGS.index(j) for j in names])
     fields = ct.OBS_FIELDS_BASE if a.obs_base_action else ct.OBS_FIELDS
     if a.init and a.bc_iters:
         raise SystemExit("--init fine-tunes: give --bc-iters 0")
@@ -446,6 +471,9 @@ def main():
         trained_by += " --residual"
     if a.obs_base_action:
         trained_by += " --obs-base-action"
+    if swing_cost is not None:
+        trained_by += " --swing-cost %g --swing-cost-joints %s" % (a.swing_cost,
+                                                                   a.swing_cost_joints)
     if a.ramp_start:
         trained_by += " --ramp-start"
     if a.expert != "quick":
@@ -485,7 +513,7 @@ def main():
         buf, obs, expert, last_v = rollout(env, net, norm, obs, a.steps, beta, expert, rng,
                                            update_norm=not a.init, explore=not is_bc,
                                            dart_std=a.dart_std if is_bc else 0.0, stair=stair,
-                                           residual=a.residual)
+                                           residual=a.residual, swing_cost=swing_cost)
         n_env_steps += a.steps * env.n
         st = stats(buf)
         O = torch.from_numpy(buf["obs"].reshape(-1, env.n_obs))

@@ -553,10 +553,14 @@ static int step1(const ps_env_t *e, env1_t *v, const float *a, float *obs, float
                                          (float)tr.com_m[2], (float)n_done};
         memcpy(info, vals, sizeof(vals));
     }
+    int rc_next = 0;
     if (is_end)
-        return reset1(e, v, obs, expert);
-    observe_with_expert(e, v, obs, expert);
-    return 0;
+        rc_next = reset1(e, v, obs, expert);
+    else
+        observe_with_expert(e, v, obs, expert);
+    if (info != NULL)
+        info[8] = expert != NULL && v->cap.phase == PS_CAPTURE_SWING ? 1.0f : 0.0f;
+    return rc_next;
 }
 
 /* ---- threads ------------------------------------------------------------------- */
