@@ -168,7 +168,7 @@ help:
 	@echo "             random fault every 8 s, each recovered; checks states, limits,"
 	@echo "             recorder, memory: bench/results/soak.json, soak.md"
 	@echo "make train   train the balance policy on the C environment (CPU, 2 cores,"
-	@echo "             seeded, about 23 min): policy/weights/ps1_stage1.safetensors (the"
+	@echo "             seeded, about 20 min): policy/weights/ps1_stage1.safetensors (the"
 	@echo "             shipped file, reproduced bit for bit), $(BUILD)/train/residual/"
 	@echo "make train-clone the recipe of the file shipped until 2026-12-04 (about 17"
 	@echo "             min): $(BUILD)/train/clone.safetensors"
@@ -385,16 +385,19 @@ $(BUILD)/crowd_bench: $(call OBJ,bench/crowd_bench.c) $(LIB_OBJS)
 # residual on the capture-point controller (--residual: the policy's actions
 # are added to the controller's; it starts as the controller) over 1,000
 # iterations, 70 % of the episodes starting as the runtime's trials do (limp
-# in the harness, the servo layer's ramp: --ramp-start) and half of the
-# episodes' push from a staircase per direction and duration (--stair-p 0.5).
+# in the harness, the servo layer's ramp: --ramp-start), half of the
+# episodes' push from a staircase per direction and duration (--stair-p 0.5)
+# and a cost on the hip roll residual while the controller swings a foot
+# (--swing-cost 2; seed 2: r16 of docs/policy.md, shipped 2026-12-05).
 # The command and seed are written into the policy file's contract. `make train-clone` runs the recipe of the file
 # shipped until 2026-12-04 (cloning the capture-point controller with its
 # tunables before its 2026-12-03 change, PPO: TRAIN_CLONE_ARGS; then PPO
 # fine-tuning from that file: TRAIN_FT_ARGS), which it reproduces bit for bit,
 # into $(BUILD)/train/clone.safetensors.
-TRAIN_ARGS ?= --seed 1 --envs 16 --threads 2 --steps 64 --bc-iters 0 --ppo-iters 1000 \
+TRAIN_ARGS ?= --seed 2 --envs 16 --threads 2 --steps 64 --bc-iters 0 --ppo-iters 1000 \
               --push-dv-start 0.3 --push-dv-max 0.7 --residual --bc-weight 0 --ppo-lr 1e-4 \
-              --gamma 0.995 --gae-lambda 0.98 --harness-p 0.7 --ramp-start --stair-p 0.5
+              --gamma 0.995 --gae-lambda 0.98 --harness-p 0.7 --ramp-start --stair-p 0.5 \
+              --swing-cost 2
 TRAIN_CLONE_ARGS ?= --seed 1 --envs 16 --threads 2 --steps 64 --bc-iters 100 --ppo-iters 600 \
               --push-dv-max 0.6 --expert slow
 TRAIN_FT_ARGS ?= --seed 2 --envs 16 --threads 2 --steps 64 --bc-iters 0 --ppo-iters 320 \
