@@ -559,7 +559,8 @@ static int step1(const ps_env_t *e, env1_t *v, const float *a, float *obs, float
     else
         observe_with_expert(e, v, obs, expert);
     if (info != NULL)
-        info[8] = expert != NULL && v->cap.phase == PS_CAPTURE_SWING ? 1.0f : 0.0f;
+        info[PS_ENV_INFO_EXPERT_SWING] =
+            expert != NULL && v->cap.phase == PS_CAPTURE_SWING ? 1.0f : 0.0f;
     return rc_next;
 }
 

@@ -95,6 +95,7 @@ typedef struct {
  * step (the capture-point controller is in its swing), 0 otherwise and when no
  * expert output is asked for (added 2026-12-04: a cost on a residual while the
  * controller steps, train.py --swing-cost) */
+#define PS_ENV_INFO_EXPERT_SWING 8 /**< the index of that last flag */
 
 /** @return 0 | -errno; err holds the reason  @rt INIT */
 int ps_env_create(const char *robot_path, const ps_env_cfg_t *cfg, ps_env_t **out, char *err,
