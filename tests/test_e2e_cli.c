@@ -973,7 +973,7 @@ static void test_cli_monitor_decodes_a_candump_log_per_joint(void **state)
     remove(log_path);
 }
 
-/* ---- SIGINT / SIGTERM in every state, in real time ---------------------- */
+/* ---- SIGINT / SIGTERM in every state, in real time (lockstep if stalled) - */
 
 extern char **environ;
 
@@ -1029,7 +1029,10 @@ static bool blocks_signal(pid_t pid, int sig)
  * ESTOP before ACTIVE). Or, in a case whose scenario never holds, a hold:
  * the real-time loop stalled by the host in ACTIVE (a fresh-check's loaded
  * chroot: "ACTIVE -> HOLD (REPLY_STALE)" at 1.44 s, and the DAMPING case's
- * stop then came from HOLD, never "ACTIVE -> DAMPING", its trigger). */
+ * stop then came from HOLD, never "ACTIVE -> DAMPING", its trigger). Or a
+ * start refused, the plant having fallen behind before the first START
+ * ("request REQ_START refused: start refused: actuator replies stale", seen
+ * here on an idle but stalling host: no case's state came after it). */
 static bool has_startup_fault(const char *text, const sig_case_t *c)
 {
     static const char ramp_end[] = "RAMP -> DAMPING (";
@@ -1037,7 +1040,8 @@ static bool has_startup_fault(const char *text, const sig_case_t *c)
         if (strncmp(p + strlen(ramp_end), "REQ_STOP", 8) != 0)
             return true;
     const bool is_hold_case = c->trigger != NULL && strstr(c->trigger, "HOLD") != NULL;
-    return strstr(text, "STANDBY -> ESTOP") != NULL || strstr(text, "RAMP -> ESTOP") != NULL ||
+    return strstr(text, "REQ_START refused") != NULL || strstr(text, "STANDBY -> ESTOP") != NULL ||
+           strstr(text, "RAMP -> ESTOP") != NULL ||
            (!is_hold_case && strstr(text, "ACTIVE -> HOLD") != NULL);
 }
 
@@ -1046,14 +1050,24 @@ static bool has_startup_fault(const char *text, const sig_case_t *c)
  * trigger, send sig, and wait for it to exit. Returns the exit status
  * (-1: killed by a signal); *out_exit_s is the time from signal to exit,
  * *out_sent_s from the spawn to the signal. */
-static int run_signalled(const sig_case_t *c, int sig, const char *summary, double *out_exit_s,
-                         double *out_sent_s, bool *out_is_startup_estop)
+static int run_signalled(const sig_case_t *c, int sig, bool is_lockstep, const char *summary,
+                         double *out_exit_s, double *out_sent_s, bool *out_is_startup_estop)
 {
     *out_is_startup_estop = false;
     char dur[16];
     snprintf(dur, sizeof(dur), "%d", SIG_DURATION_S);
-    char *argv[] = {(char *)bin(), "--duration",    dur, "--scenario", (char *)c->scenario,
-                    "--summary",   (char *)summary, NULL};
+    char *argv[] = {(char *)bin(),
+                    "--duration",
+                    dur,
+                    "--scenario",
+                    (char *)c->scenario,
+                    "--summary",
+                    (char *)summary,
+                    is_lockstep ? "--lockstep" : NULL,
+                    NULL};
+    /* Lockstep runs some 10x faster than real time: a ramp lasts 0.1 s of
+     * wall time, so the signal goes as soon as the trigger is read. */
+    const double delay_s = is_lockstep && c->trigger != NULL ? 0.0 : c->delay_s;
     pid_t pid;
     const int rd = ps_cli_spawn_piped(argv, &pid);
     size_t n = 0;
@@ -1067,9 +1081,9 @@ static int run_signalled(const sig_case_t *c, int sig, const char *summary, doub
          * host can take longer than delay_s) and the default action, not
          * pushstep, would handle it. Output also shows main runs. */
         if (t_sig < 0 && c->trigger == NULL && (blocks_signal(pid, sig) || n > 0))
-            t_sig = mono_s() + c->delay_s;
+            t_sig = mono_s() + delay_s;
         if (t_sig < 0 && c->trigger != NULL && strstr(out, c->trigger) != NULL)
-            t_sig = mono_s() + c->delay_s;
+            t_sig = mono_s() + delay_s;
         /* A start-up e-stop (a drive fault seen in real time on a loaded
          * machine), or a ramp a VM stall ended (stale replies or IMU: RAMP
          * damps on every soft fault), is not the state under test: signal
@@ -1113,8 +1127,10 @@ static int run_signalled(const sig_case_t *c, int sig, const char *summary, doub
 static const sig_case_t SIG_CASES[] = {
     {"STANDBY (start-up)", "tests/data/scenarios/sig-standby.yaml", NULL, 0.05, "STANDBY", NULL,
      "-> RAMP"},
-    {"STANDBY", "tests/data/scenarios/sig-standby.yaml", "running in real time", 0.3, "STANDBY",
-     NULL, "-> RAMP"},
+    /* the line that says the loop runs: "running in real time on board sim
+     * (...)", or "running lockstep on board sim (...)" */
+    {"STANDBY", "tests/data/scenarios/sig-standby.yaml", " on board sim (", 0.3, "STANDBY", NULL,
+     "-> RAMP"},
     {"RAMP", "scenarios/stand.yaml", "state STANDBY -> RAMP", 0.1, "STANDBY",
      "state RAMP -> DAMPING (REQ_STOP", "-> ACTIVE"},
     {"ACTIVE", "scenarios/stand.yaml", "state RAMP -> ACTIVE", 0.1, "STANDBY",
@@ -1135,8 +1151,16 @@ static const sig_case_t SIG_CASES[] = {
 #define SIG_REPEATS (ps_san_is_asan() ? 1 : 2)
 /* Tries again per state after a start-up fault: on a host loaded by other
  * work (two cores shared with builds) stalls end a ramp in spells; each
- * such try still checks the exit status and time (11 seen under load 4). */
-#define SIG_AGAIN_MAX 16
+ * such try still checks the exit status and time (11 seen under load 4).
+ * After SIG_AGAIN_RT_MAX disturbed real-time runs of a state the host is too
+ * busy for that state's timing (CI on 2026-12-05: 17 for ACTIVE with
+ * SIGINT, the loop stalled past the 10 ms reply timeout in most ramps), and
+ * the path is judged in lockstep runs instead, which a stalled host cannot
+ * take off their path: the same signal handler, stop and teardown, on
+ * simulated time. Those may be disturbed only by a policy step late on CPU
+ * time, SIG_AGAIN_MAX times at most. */
+#define SIG_AGAIN_RT_MAX 4
+#define SIG_AGAIN_MAX    16
 
 /* A `must` line names the transition and that REQ_STOP (the signal) is among
  * its causes, a '|' list in bit order (REQ_STOP before every fault): a VM
@@ -1158,61 +1182,80 @@ static bool took_expected_path(const sig_case_t *c, const cJSON *j, char *why, s
     return false;
 }
 
-/* Every run must exit with status 0 soon after the signal. The path through
- * the states is judged only on runs the host left alone: a run with
- * overruns (a loaded host took the loop's CPU: seen as OVERRUN holds and
- * drive timeouts while other builds ran beside the suite) or a start-up
- * fault did not test the state it meant to, and is tried again. */
+/* One run of case c: it must exit with status 0 soon after the signal, the
+ * signal (not the duration) having ended the loop. Returns whether the run
+ * took the path the case expects; *out_is_again: it did not, and the host
+ * (a start-up fault, overruns, a late policy step) is why. */
+static bool run_signal_case(const sig_case_t *c, int sig, const char *sig_name, bool is_lockstep,
+                            bool *out_is_again)
+{
+    const char *mode = is_lockstep ? " (lockstep)" : "";
+    char path[32];
+    make_temp_file(path, sizeof(path));
+    double exit_s = 0, sent_s = 0;
+    bool is_startup_estop = false;
+    const int rc = run_signalled(c, sig, is_lockstep, path, &exit_s, &sent_s, &is_startup_estop);
+    if (rc != 0)
+        fail_full("%s in %s%s: exit %d, want 0:\n%s", sig_name, c->state, mode, rc, out);
+    if (exit_s > SIG_EXIT_S)
+        fail_full("%s in %s%s: exited %.1f s after the signal:\n%s", sig_name, c->state, mode,
+                  exit_s, out);
+    cJSON *j = read_json(path);
+    /* The signal, not the duration, ended the loop. In real time it ran no
+     * longer than until the exit after the signal (loop time starts after
+     * the process's own start-up, so it is the shorter); a loaded host can
+     * delay the trigger itself: its run then took another path or overran,
+     * judged below. In lockstep loop time runs ahead of the wall clock, and
+     * every case's signal comes in its first few simulated seconds. */
+    const double loop_s = num(j, "loop_s");
+    const double loop_max_s = is_lockstep ? SIG_DURATION_S / 3.0 : sent_s + exit_s + 0.5;
+    if (loop_s > loop_max_s)
+        fail_full("%s in %s%s: loop ran %.2f s, signal %.2f s after spawn, exit %.2f s after "
+                  "it:\n%s",
+                  sig_name, c->state, mode, loop_s, sent_s, exit_s, out);
+    /* a late policy step (HOLD) as well as overruns: an ASan build's step
+     * once took 513 us against the 500 us deadline under load (real time:
+     * the summary's deterministic is false anyway) */
+    const bool is_host_disturbed =
+        num(j, "overruns") > 0 || num(obj(j, "counters"), "policy_late") > 0;
+    char why[160] = "";
+    const bool is_path_ok = !is_startup_estop && took_expected_path(c, j, why, sizeof(why));
+    cJSON_Delete(j);
+    unlink(path);
+    *out_is_again = !is_path_ok && (is_startup_estop || is_host_disturbed);
+    print_message("      %s in %s%s: exit %d after %.2f s%s%s\n", sig_name, c->state, mode, rc,
+                  exit_s, *out_is_again ? ", again: " : "",
+                  !*out_is_again     ? ""
+                  : is_startup_estop ? "start-up fault"
+                                     : "host disturbed the run (overruns or a late policy step)");
+    if (!is_path_ok && !*out_is_again)
+        fail_full("%s in %s%s: %s in:\n%s", sig_name, c->state, mode, why, out);
+    return is_path_ok;
+}
+
+/* Every state, SIG_REPEATS runs on its path each: in real time while the
+ * host lets the state be reached, else in lockstep (SIG_AGAIN_RT_MAX). */
 static void check_signal_in_every_state(int sig, const char *sig_name)
 {
     for (size_t i = 0; i < sizeof(SIG_CASES) / sizeof(SIG_CASES[0]); i++) {
         const sig_case_t *c = &SIG_CASES[i];
-        int n_again = 0; /* per state: a loaded host's stalls come in spells */
-        for (int r = 0; r < SIG_REPEATS; r++) {
-            char path[32];
-            make_temp_file(path, sizeof(path));
-            double exit_s = 0, sent_s = 0;
-            bool is_startup_estop = false;
-            const int rc = run_signalled(c, sig, path, &exit_s, &sent_s, &is_startup_estop);
-            if (rc != 0)
-                fail_full("%s in %s: exit %d, want 0:\n%s", sig_name, c->state, rc, out);
-            if (exit_s > SIG_EXIT_S)
-                fail_full("%s in %s: exited %.1f s after the signal:\n%s", sig_name, c->state,
-                          exit_s, out);
-            cJSON *j = read_json(path);
-            /* The signal, not the duration, ended the loop: it ran no longer
-             * than until the exit after the signal (loop time starts after
-             * the process's own start-up, so it is the shorter). A loaded
-             * host can delay the trigger itself: its run then took another
-             * path or overran, judged below. */
-            const double loop_s = num(j, "loop_s");
-            if (loop_s > sent_s + exit_s + 0.5)
-                fail_full("%s in %s: loop ran %.2f s, signal %.2f s after spawn, exit %.2f s "
-                          "after it:\n%s",
-                          sig_name, c->state, loop_s, sent_s, exit_s, out);
-            /* a late policy step (HOLD) as well as overruns: an ASan build's
-             * step once took 513 us against the 500 us deadline under load
-             * (real time: the summary's deterministic is false anyway) */
-            const bool is_host_disturbed =
-                num(j, "overruns") > 0 || num(obj(j, "counters"), "policy_late") > 0;
-            char why[160] = "";
-            const bool is_path_ok = !is_startup_estop && took_expected_path(c, j, why, sizeof(why));
-            cJSON_Delete(j);
-            unlink(path);
-            const bool is_again = !is_path_ok && (is_startup_estop || is_host_disturbed);
-            print_message("      %s in %s, try %d: exit %d after %.2f s%s%s\n", sig_name, c->state,
-                          r + 1, rc, exit_s, is_again ? ", again: " : "",
-                          !is_again          ? ""
-                          : is_startup_estop ? "start-up fault"
-                                             : "host disturbed the run (overruns or a late "
-                                               "policy step)");
-            if (!is_path_ok && !is_again)
-                fail_full("%s in %s: %s in:\n%s", sig_name, c->state, why, out);
-            if (is_again && ++n_again > SIG_AGAIN_MAX)
-                fail_full("%s: %d disturbed runs, %s not tested; last (%s):\n%s", sig_name, n_again,
-                          c->state, why, out);
-            if (is_again)
-                r--;
+        int n_again = 0, n_again_rt = 0; /* per state: a loaded host's stalls come in spells */
+        bool is_lockstep = false;
+        for (int n_ok = 0; n_ok < SIG_REPEATS;) {
+            bool is_again = false;
+            if (run_signal_case(c, sig, sig_name, is_lockstep, &is_again)) {
+                n_ok++;
+                continue;
+            }
+            if (is_lockstep && ++n_again > SIG_AGAIN_MAX)
+                fail_full("%s: %d disturbed lockstep runs, %s not tested; last:\n%s", sig_name,
+                          n_again, c->state, out);
+            if (!is_lockstep && ++n_again_rt >= SIG_AGAIN_RT_MAX) {
+                print_message("      %s in %s: %d real-time runs disturbed by the host; the path "
+                              "is judged in lockstep\n",
+                              sig_name, c->state, n_again_rt);
+                is_lockstep = true;
+            }
         }
     }
 }
