@@ -189,6 +189,47 @@ assert '--swing-cost 1 --swing-cost-joints l_hip_roll,r_hip_roll' in c['trained_
     && ! /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --bc-iters 0 --ppo-iters 1 \
     --residual --swing-cost 1 --swing-cost-joints l_hip_rol --out $out/sw3.safetensors \
     --log-dir $out/sw3 >$out/sw3.out 2>&1 && grep -q 'l_hip_rol not among' $out/sw3.out"
+name="--quiet-cost: info counts the seconds since the harness or a push; the cost is on the residual of the quiet steps"
+# held environments (--harness-p 1): info[9] is -1 while held or pushed,
+# else grows by the policy period (0.02 s) a step until the next push or
+# episode; two rollouts of one zero-residual policy differ in reward by k x
+# 0.25 rad x the residual of every joint on exactly the steps taken 1 s or
+# more after the last disturbance with the expert not in a swing (the info
+# of the step before); train.py writes the option into the contract and
+# refuses it without --residual
+check bash -c "/usr/bin/python3 -c \"
+import sys; sys.path.insert(0, 'policy/train'); import numpy as np, torch, psenv, train
+def run(cost):
+    torch.manual_seed(5)
+    env = psenv.Env(4, 2, seed=7, episode_s=4.0, push_dv_max=0.4, dr=True, harness_p=1.0)
+    net = train.Policy(env.n_obs, env.n_act, [32, 32])
+    with torch.no_grad():
+        net.pi[-1].weight.zero_(); net.pi[-1].bias.zero_(); net.log_std.fill_(np.log(0.05))
+    env.reset(); _, _, _, expert, info0 = env.step(np.zeros((4, env.n_act), np.float32))
+    buf = train.rollout(env, net, train.RunningNorm(env.n_obs), env.obs.copy(), 300, 0.0, expert,
+                        np.random.default_rng(1), residual=True, quiet_cost=cost)[0]
+    return buf, info0
+(b0, i0), (b1, _) = run(None), run((3.0, 1.0))
+assert np.array_equal(b0['act'], b1['act']) and np.array_equal(b0['info'], b1['info'])
+q = b0['info'][:, :, 9]
+assert (q == -1.0).any() and q.max() > 1.0, q
+grow = (q[1:] > 0) & (q[:-1] >= 0) & (b0['done'][:-1] == 0)
+assert grow.sum() > 100 and np.allclose((q[1:] - q[:-1])[grow], 0.02, atol=1e-4)
+prev = np.concatenate([i0[None], b0['info'][:-1]])
+flag = (prev[:, :, 9] >= 1.0) & (prev[:, :, 8] == 0.0)
+assert 0.1 < flag.mean() < 0.9, flag.mean()
+want = 3.0 * flag * 0.25 * np.abs(b0['act']).sum(-1)
+assert np.allclose(b0['rew'] - b1['rew'], want, atol=1e-6) and want.max() > 0\" \
+    && /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 --bc-iters 0 \
+    --ppo-iters 1 --residual --quiet-cost 1 --quiet-after 0.5 --out $out/qc.safetensors \
+    --log-dir $out/qc >/dev/null 2>&1 \
+    && /usr/bin/python3 -c \"
+import sys, json; sys.path.insert(0, 'policy/train'); import psfile
+c = json.loads(psfile.read_safetensors('$out/qc.safetensors')[1][psfile.CONTRACT_KEY])
+assert '--quiet-cost 1 --quiet-after 0.5' in c['trained_by'], c\" \
+    && ! /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --bc-iters 0 --ppo-iters 1 \
+    --quiet-cost 1 --out $out/qc2.safetensors --log-dir $out/qc2 >$out/qc2.out 2>&1 \
+    && grep -q 'give --residual' $out/qc2.out"
 name="GAE: a time-limit cut bootstraps from the state's value, a fall does not (--bootstrap-timeouts)"
 # one environment, 2 steps, reward 1, values 10 and 20, both episodes end at
 # step 0: a fall (info[0] = 1) gives delta = 1 - 10; a cut gives
@@ -259,10 +300,13 @@ assert all(c['direction_deg'] == [90.0, 90.0] for c in d['cells']), d['cells']\"
     --zero-residual l_hip_roll >$out/zp.out 2>&1 && grep -q 'not a residual policy' $out/zp.out \
     && ! /usr/bin/python3 policy/train/eval.py --directions 2 --dr --runtime bench/results/push.json \
     >$out/zd.out 2>&1 && grep -q 'not with --dr or --only-dir-deg' $out/zd.out"
-name="the shipped policy (policy/weights/ps1_stage1.safetensors) stands in lockstep, contract checked"
-check bash -c "${PUSHSTEP_BIN:-build/pushstep} --lockstep --quiet --duration 6 --scenario scenarios/stand.yaml \
+# the whole scene (20 s, let go at 2 s): a policy that shuffles can fall
+# seconds after it was let go with no push at all (r18: at 7.6 s)
+name="the shipped policy (policy/weights/ps1_stage1.safetensors) stands through scenarios/stand.yaml in lockstep, contract checked"
+check bash -c "${PUSHSTEP_BIN:-build/pushstep} --lockstep --quiet --scenario scenarios/stand.yaml \
     --policy mlp --weights policy/weights/ps1_stage1.safetensors --summary $out/shipped.json \
     >$out/run.out 2>&1 && grep -Eq '\"fall_detected\":[[:space:]]*false' $out/shipped.json \
+    && grep -Eq '\"fell_while_active\":[[:space:]]*false' $out/shipped.json \
     && grep -Eq '\"policy_runs\":[[:space:]]*[1-9]' $out/shipped.json"
 [ $fail -gt 0 ] && { cat "$out/train.out" "$out/run.out" 2>/dev/null | tail -20; }
 echo "[  PASSED  ] $pass test(s)."

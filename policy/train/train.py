@@ -151,11 +151,15 @@ def plot(log_csv, png):
 
 
 def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=True,
-            explore=True, dart_std=0.0, stair=None, residual=False, swing_cost=None):
+            explore=True, dart_std=0.0, stair=None, residual=False, swing_cost=None,
+            quiet_cost=None):
     """n_steps of every environment. beta_expert: probability that an
     environment follows the expert this step (DAgger). swing_cost (k, joint
     indices): a residual's cost, k per radian of those joints' residual
-    targets, on the steps whose expert action is part of a step."""
+    targets, on the steps whose expert action is part of a step. quiet_cost
+    (k, s): a residual's cost, k per radian of every joint's residual
+    target, on the steps taken s seconds or more after the robot was last
+    disturbed (the harness, a push) whose expert action is not a step's."""
     n = env.n
     buf = {k: [] for k in ("obs", "raw", "act", "logp", "rew", "done", "val", "expert", "info")}
     for _ in range(n_steps):
@@ -183,12 +187,17 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
         # the expert's swing flag belongs to the state the expert acted on: the
         # last step's info (psenv.INFO_KEYS), read before this step replaces it
         swing = env.info[:, psenv.INFO_KEYS.index("expert_swing")].copy()
+        quiet_s = env.info[:, psenv.INFO_KEYS.index("quiet_s")].copy()
         # a residual policy's action is added to the expert's (both in action units)
         obs2, rew, done, expert2, info = env.step(a + expert if residual else a)
         if swing_cost is not None:
             k, idx = swing_cost
             rew = (rew - k * swing * ct.ACTION_SCALE * np.abs(a[:, idx]).sum(axis=1)).astype(
                 np.float32)
+        if quiet_cost is not None:
+            k, after_s = quiet_cost
+            quiet = (quiet_s >= after_s) & (swing == 0.0)
+            rew = (rew - k * quiet * ct.ACTION_SCALE * np.abs(a).sum(axis=1)).astype(np.float32)
         if stair is not None:
             stair.observe(info)
         buf["obs"].append(o)
@@ -372,6 +381,14 @@ def main():
                          "controller swings a foot (its step is left to it)")
     ap.add_argument("--swing-cost-joints", default="l_hip_roll,r_hip_roll",
                     help="the action joints --swing-cost applies to")
+    ap.add_argument("--quiet-cost", type=float, default=0.0,
+                    help="with --residual: a cost, this much reward per radian, on the "
+                         "residual's targets of every action joint while the robot stands "
+                         "undisturbed (--quiet-after seconds after the harness let go or a "
+                         "push ended, the controller not stepping): its stance is left to the "
+                         "controller")
+    ap.add_argument("--quiet-after", type=float, default=1.0,
+                    help="seconds after a disturbance from which --quiet-cost applies")
     ap.add_argument("--obs-base-action", action="store_true",
                     help="with --residual: the observation ends with the controller's action "
                          "of this step (field base_action), which prev_action (the total "
@@ -407,6 +424,12 @@ def main():
             raise SystemExit("--swing-cost-joints: %s not among the action joints (%s)"
                              % (",".join(unknown) or "none given", ",".join(ct.LEGS)))
         swing_cost = (a.swing_cost, [ct.LEGS.index(j) for j in names])
+    quiet_cost = None
+    if a.quiet_cost != 0.0:
+        if not a.residual or a.quiet_cost < 0.0 or not a.quiet_after >= 0.0:
+            raise SystemExit("--quiet-cost: a cost (>= 0) on a residual (give --residual), "
+                             "--quiet-after >= 0")
+        quiet_cost = (a.quiet_cost, a.quiet_after)
     fields = ct.OBS_FIELDS_BASE if a.obs_base_action else ct.OBS_FIELDS
     if a.init and a.bc_iters:
         raise SystemExit("--init fine-tunes: give --bc-iters 0")
@@ -474,6 +497,8 @@ def main():
     if swing_cost is not None:
         trained_by += " --swing-cost %g --swing-cost-joints %s" % (a.swing_cost,
                                                                    a.swing_cost_joints)
+    if quiet_cost is not None:
+        trained_by += " --quiet-cost %g --quiet-after %g" % quiet_cost
     if a.ramp_start:
         trained_by += " --ramp-start"
     if a.expert != "quick":
@@ -513,7 +538,8 @@ def main():
         buf, obs, expert, last_v = rollout(env, net, norm, obs, a.steps, beta, expert, rng,
                                            update_norm=not a.init, explore=not is_bc,
                                            dart_std=a.dart_std if is_bc else 0.0, stair=stair,
-                                           residual=a.residual, swing_cost=swing_cost)
+                                           residual=a.residual, swing_cost=swing_cost,
+                                           quiet_cost=quiet_cost)
         n_env_steps += a.steps * env.n
         st = stats(buf)
         O = torch.from_numpy(buf["obs"].reshape(-1, env.n_obs))

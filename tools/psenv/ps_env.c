@@ -525,6 +525,25 @@ static int reset1(const ps_env_t *e, env1_t *v, float *obs, float *expert)
     return rc;
 }
 
+/* Seconds since the harness let go or the last push ended, whichever came
+ * last; -1 while held or pushed. */
+static float quiet_s(const env1_t *v)
+{
+    const double t_s = (double)v->t_ns * 1e-9;
+    if (v->is_held)
+        return -1.0f;
+    double since = v->release_s;
+    for (int i = 0; i < v->n_push; i++) {
+        const push_t *p = &v->push[i];
+        if (t_s < p->t_s)
+            continue;
+        if (t_s < p->t_s + p->dur_s)
+            return -1.0f;
+        since = fmax(since, p->t_s + p->dur_s);
+    }
+    return (float)(t_s - since);
+}
+
 static int step1(const ps_env_t *e, env1_t *v, const float *a, float *obs, float *rew,
                  uint8_t *done, float *expert, float *info)
 {
@@ -558,9 +577,11 @@ static int step1(const ps_env_t *e, env1_t *v, const float *a, float *obs, float
         rc_next = reset1(e, v, obs, expert);
     else
         observe_with_expert(e, v, obs, expert);
-    if (info != NULL)
+    if (info != NULL) {
         info[PS_ENV_INFO_EXPERT_SWING] =
             expert != NULL && v->cap.phase == PS_CAPTURE_SWING ? 1.0f : 0.0f;
+        info[PS_ENV_INFO_QUIET_S] = quiet_s(v);
+    }
     return rc_next;
 }
 

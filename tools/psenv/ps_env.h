@@ -88,14 +88,19 @@ typedef struct {
                                without the flag */
 } ps_env_cfg_t;
 
-#define PS_ENV_INFO 9 /**< floats of info per environment and step: */
+#define PS_ENV_INFO 10 /**< floats of info per environment and step: */
 /* [0] fell this step, [1] episode ended, [2] episode time s, [3] last push
  * delta-v m/s, [4] r_balance, [5] r_quality, [6] CoM height m, [7] pushes so far,
  * [8] 1 when the expert's action for the new observation's state is part of a
  * step (the capture-point controller is in its swing), 0 otherwise and when no
  * expert output is asked for (added 2026-12-04: a cost on a residual while the
  * controller steps, train.py --swing-cost) */
-#define PS_ENV_INFO_EXPERT_SWING 8 /**< the index of that last flag */
+#define PS_ENV_INFO_EXPERT_SWING 8 /**< the index of that flag */
+/* [9] seconds since the robot was last disturbed, for the new observation's
+ * state: since the harness let go or a push ended, whichever came last; -1
+ * while held or pushed (added 2026-12-05: a cost on a residual while the
+ * robot stands undisturbed, train.py --quiet-cost) */
+#define PS_ENV_INFO_QUIET_S 9
 
 /** @return 0 | -errno; err holds the reason  @rt INIT */
 int ps_env_create(const char *robot_path, const ps_env_cfg_t *cfg, ps_env_t **out, char *err,
