@@ -301,22 +301,20 @@ static void test_cli_lockstep_candump_log_has_every_frame(void **state)
     assert_non_null(strstr(out, "--candump: /nonexistent-dir/f.log: No such file or directory"));
 }
 
+static cJSON *undisturbed_run(const char *args, const char *summary_path);
+
 /* A shove the controller cannot take: the loop detects the fall and brakes,
  * and the summary's ground truth says it fell while in charge; the standing
- * run above says it did not. */
+ * run above says it did not. Judged on an undisturbed run: a policy step
+ * late on a loaded host's CPU time holds the pose first (seen in a
+ * fresh-check's sanitized build: no "ACTIVE -> DAMPING (FALL)"). */
 static void test_cli_lockstep_shove_fall_detected_and_in_truth(void **state)
 {
     (void)state;
     char path[32];
     make_temp_file(path, sizeof(path));
-    char args[256];
-    snprintf(args, sizeof(args), "--lockstep --quiet --scenario scenarios/shove.yaml --summary %s",
-             path);
-    int rc = run(args);
-    if (rc != 0)
-        fail_msg("exit %d:\n%s", rc, out);
+    cJSON *j = undisturbed_run("--lockstep --quiet --scenario scenarios/shove.yaml", path);
     assert_non_null(strstr(out, "state ACTIVE -> DAMPING (FALL)"));
-    cJSON *j = read_json(path);
     assert_true(cJSON_IsTrue(obj(j, "fall_detected")));
     const cJSON *truth = obj(j, "sim_truth");
     assert_true(cJSON_IsTrue(obj(truth, "fell_while_active")));
