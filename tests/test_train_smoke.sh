@@ -153,25 +153,30 @@ for f, want in (('rb', [False, True]), ('res', [False])):
     sys.argv = ['eval.py', '--weights', '$out/' + f + '.safetensors', '--dv', '0.3',
                 '--durations', '0.1', '--directions', '2']
     ev.main(); assert made == want, (f, made)\" >/dev/null 2>&1"
+# n_steps rollout steps of one zero-residual policy (4 environments with
+# domain randomisation, seeded) with the reward costs given, after a first
+# step of zero actions; the buffer and that first step's info
+COST_PY="
+import sys; sys.path.insert(0, 'policy/train'); import numpy as np, torch, psenv, train
+def run(n_steps, env_kw, **cost):
+    torch.manual_seed(5)
+    env = psenv.Env(4, 2, seed=7, dr=True, **env_kw)
+    net = train.Policy(env.n_obs, env.n_act, [32, 32])
+    with torch.no_grad():
+        net.pi[-1].weight.zero_(); net.pi[-1].bias.zero_(); net.log_std.fill_(np.log(0.05))
+    env.reset(); _, _, _, expert, info0 = env.step(np.zeros((4, env.n_act), np.float32))
+    buf = train.rollout(env, net, train.RunningNorm(env.n_obs), env.obs.copy(), n_steps, 0.0,
+                        expert, np.random.default_rng(1), residual=True, **cost)[0]
+    return buf, info0"
 name="--swing-cost: info flags the controller's swings; the cost is on the residual of the steps whose expert swings"
 # two rollouts of one zero-residual policy (same seeds, so the same actions
 # and states): their rewards differ by k x 0.25 rad x |residual| of the
 # joints named, on exactly the steps whose expert action was taken in a
 # swing (the flag of the step before); train.py writes the option into the
 # contract and refuses it without --residual and for a joint not in the action
-check bash -c "/usr/bin/python3 -c \"
-import sys; sys.path.insert(0, 'policy/train'); import numpy as np, torch, psenv, train
-def run(cost):
-    torch.manual_seed(5)
-    env = psenv.Env(4, 2, seed=7, episode_s=2.5, push_dv_max=0.6, dr=True)
-    net = train.Policy(env.n_obs, env.n_act, [32, 32])
-    with torch.no_grad():
-        net.pi[-1].weight.zero_(); net.pi[-1].bias.zero_(); net.log_std.fill_(np.log(0.05))
-    env.reset(); _, _, _, expert, info0 = env.step(np.zeros((4, env.n_act), np.float32))
-    buf = train.rollout(env, net, train.RunningNorm(env.n_obs), env.obs.copy(), 200, 0.0, expert,
-                        np.random.default_rng(1), residual=True, swing_cost=cost)[0]
-    return buf, info0
-(b0, i0), (b1, _) = run(None), run((2.0, [1, 7]))
+check bash -c "/usr/bin/python3 -c \"$COST_PY
+env_kw = dict(episode_s=2.5, push_dv_max=0.6)
+(b0, i0), (b1, _) = run(200, env_kw), run(200, env_kw, swing_cost=(2.0, [1, 7]))
 assert np.array_equal(b0['act'], b1['act']) and np.array_equal(b0['info'], b1['info'])
 flag = np.concatenate([i0[None, :, 8], b0['info'][:-1, :, 8]])
 assert set(np.unique(flag)) == {0.0, 1.0} and flag.mean() < 0.5, flag.mean()
@@ -197,19 +202,9 @@ name="--quiet-cost: info counts the seconds since the harness or a push; the cos
 # more after the last disturbance with the expert not in a swing (the info
 # of the step before); train.py writes the option into the contract and
 # refuses it without --residual
-check bash -c "/usr/bin/python3 -c \"
-import sys; sys.path.insert(0, 'policy/train'); import numpy as np, torch, psenv, train
-def run(cost):
-    torch.manual_seed(5)
-    env = psenv.Env(4, 2, seed=7, episode_s=4.0, push_dv_max=0.4, dr=True, harness_p=1.0)
-    net = train.Policy(env.n_obs, env.n_act, [32, 32])
-    with torch.no_grad():
-        net.pi[-1].weight.zero_(); net.pi[-1].bias.zero_(); net.log_std.fill_(np.log(0.05))
-    env.reset(); _, _, _, expert, info0 = env.step(np.zeros((4, env.n_act), np.float32))
-    buf = train.rollout(env, net, train.RunningNorm(env.n_obs), env.obs.copy(), 300, 0.0, expert,
-                        np.random.default_rng(1), residual=True, quiet_cost=cost)[0]
-    return buf, info0
-(b0, i0), (b1, _) = run(None), run((3.0, 1.0))
+check bash -c "/usr/bin/python3 -c \"$COST_PY
+env_kw = dict(episode_s=4.0, push_dv_max=0.4, harness_p=1.0)
+(b0, i0), (b1, _) = run(300, env_kw), run(300, env_kw, quiet_cost=(3.0, 1.0))
 assert np.array_equal(b0['act'], b1['act']) and np.array_equal(b0['info'], b1['info'])
 q = b0['info'][:, :, 9]
 assert (q == -1.0).any() and q.max() > 1.0, q
