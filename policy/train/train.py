@@ -150,6 +150,12 @@ def plot(log_csv, png):
     return subprocess.run(["gnuplot", "-e", script]).returncode == 0
 
 
+def residual_rad(a, idx=slice(None)):
+    """Per environment, the sum of |residual target| in radians over the
+    action joints idx (all by default): the swing and quiet costs' measure."""
+    return ct.ACTION_SCALE * np.abs(a[:, idx]).sum(axis=1)
+
+
 def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=True,
             explore=True, dart_std=0.0, stair=None, residual=False, swing_cost=None,
             quiet_cost=None):
@@ -192,12 +198,11 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
         obs2, rew, done, expert2, info = env.step(a + expert if residual else a)
         if swing_cost is not None:
             k, idx = swing_cost
-            rew = (rew - k * swing * ct.ACTION_SCALE * np.abs(a[:, idx]).sum(axis=1)).astype(
-                np.float32)
+            rew = (rew - k * swing * residual_rad(a, idx)).astype(np.float32)
         if quiet_cost is not None:
             k, after_s = quiet_cost
             quiet = (quiet_s >= after_s) & (swing == 0.0)
-            rew = (rew - k * quiet * ct.ACTION_SCALE * np.abs(a).sum(axis=1)).astype(np.float32)
+            rew = (rew - k * quiet * residual_rad(a)).astype(np.float32)
         if stair is not None:
             stair.observe(info)
         buf["obs"].append(o)
