@@ -374,6 +374,25 @@ static bool was_still_ramping(const char *out, const char *fault)
     return true;
 }
 
+/* A VM stall longer than the robot's reply timeout (far shorter than the
+ * drives' comms timeout above) holds the runtime for stale replies before
+ * the fault the emulator injects; such a run did not test ACTIVE either:
+ * it is run again (said). The fault must still stop it: HOLD -> ESTOP. */
+static bool was_held_for_stale_replies(const char *out, const char *fault)
+{
+    char line[64];
+    snprintf(line, sizeof(line), "HOLD -> ESTOP (%s", fault);
+    const bool is_stale = strstr(out, "ACTIVE -> HOLD (REPLY_STALE") != NULL ||
+                          strstr(out, "ACTIVE -> HOLD (IMU_STALE") != NULL;
+    if (!is_stale || strstr(out, line) == NULL)
+        return false;
+    print_lines_with(out, "-> HOLD");
+    print_lines_with(out, "-> ESTOP");
+    print_message("  a VM stall held the runtime for stale replies before the %s: run again\n",
+                  fault);
+    return true;
+}
+
 static bool estop_once(void)
 {
     pid_t emu = start_emulator("6", OUT_DIR "/emu-estop.json", OUT_DIR "/emu-estop.out",
@@ -383,7 +402,7 @@ static bool estop_once(void)
     (void)wait_exit(spawn(argv, OUT_DIR "/estop.out"));
     assert_int_equal(wait_exit(emu), 0);
     const char *out = slurp(OUT_DIR "/estop.out");
-    if (was_still_ramping(out, "ESTOP_INPUT"))
+    if (was_still_ramping(out, "ESTOP_INPUT") || was_held_for_stale_replies(out, "ESTOP_INPUT"))
         return false;
     static const char *const steps[] = {"RAMP -> ACTIVE", "ACTIVE -> ESTOP (ESTOP_INPUT"};
     assert_in_order(out, steps, 2);
@@ -410,7 +429,8 @@ static bool estop_once(void)
 static void test_an_estop_edge_in_active_limps_the_drives_within_four_ticks(void **state)
 {
     (void)state;
-    run_until_tested(estop_once, "the runtime was still ramping at the press");
+    run_until_tested(estop_once,
+                     "the runtime was still ramping or held for stale replies at the press");
 }
 
 /* One SIGKILL run; false when the runtime never reached ACTIVE (a VM stall
@@ -477,7 +497,7 @@ static bool bus_off_once(void)
     (void)wait_exit(spawn(argv, OUT_DIR "/busoff.out"));
     assert_int_equal(wait_exit(emu), 0);
     const char *out = slurp(OUT_DIR "/busoff.out");
-    if (was_still_ramping(out, "BUS_OFF"))
+    if (was_still_ramping(out, "BUS_OFF") || was_held_for_stale_replies(out, "BUS_OFF"))
         return false;
     static const char *const steps[] = {"RAMP -> ACTIVE", "ACTIVE -> ESTOP (BUS_OFF", "vxcan0 ",
                                         "1 error reports (1 bus-off"};
@@ -488,7 +508,8 @@ static bool bus_off_once(void)
 static void test_a_bus_off_report_in_active_is_an_estop(void **state)
 {
     (void)state;
-    run_until_tested(bus_off_once, "the runtime was still ramping at the bus-off");
+    run_until_tested(bus_off_once,
+                     "the runtime was still ramping or held for stale replies at the bus-off");
 }
 
 int main(void)
