@@ -263,21 +263,42 @@ static void test_lockstep_stand_10s_no_fall_no_alloc_no_fault(void **state)
     assert_true(loop_time_s() - t_stop <= app.robot.control.damping_s + 0.01);
 }
 
-static void run_for(double t_s, ps_sim_truth_t *out)
+/* Runs the push scenario for t_s; true when the host left the run alone: a
+ * lockstep run is a function of its scenario except where the loop judges
+ * time on the CPU clock (an overrunning tick, a policy step late enough to
+ * hand the slot to the fallback), which a loaded host inflates. */
+static bool run_for(double t_s, ps_sim_truth_t *out)
 {
     start_app("scenarios/push.yaml");
     step_until(t_s);
     ps_sim_get_truth(app.sim, out);
+    const bool is_undisturbed =
+        app.loop.pacer.n_overruns == 0 && app.loop.counters.n_policy_late == 0;
+    if (!is_undisturbed)
+        print_message("run disturbed by the host (%llu overruns, %llu late policy steps)\n",
+                      (unsigned long long)app.loop.pacer.n_overruns,
+                      (unsigned long long)app.loop.counters.n_policy_late);
     ps_app_deinit(&app);
+    return is_undisturbed;
 }
 
-/* Same seed, same run: lockstep is deterministic through the whole system. */
+#define SAME_SEED_PAIRS_MAX 4 /* pairs tried for one the host left alone */
+
+/* Same seed, same run: lockstep is deterministic through the whole system
+ * (judged on a pair of runs the host did not disturb; a sanitized build in
+ * a loaded chroot once had a late policy step in one of the two). */
 static void test_lockstep_same_seed_identical_truth(void **state)
 {
     (void)state;
     ps_sim_truth_t a, b;
-    run_for(6.0, &a);
-    run_for(6.0, &b);
+    int pair = 0;
+    bool is_undisturbed = false;
+    while (!is_undisturbed && pair++ < SAME_SEED_PAIRS_MAX) {
+        const bool is_a_undisturbed = run_for(6.0, &a);
+        is_undisturbed = run_for(6.0, &b) && is_a_undisturbed;
+    }
+    if (!is_undisturbed)
+        fail_msg("the host disturbed all %d pairs of runs", SAME_SEED_PAIRS_MAX);
     assert_memory_equal(a.com_m, b.com_m, sizeof(a.com_m));
     assert_true(a.head_height_m == b.head_height_m);
     assert_int_equal(a.n_cmd_frames, b.n_cmd_frames);
