@@ -1,7 +1,7 @@
 """Stance width of each policy (stand.yaml, scene seeds 1-3) against its
 runtime trials 0-1 at 0.45 and 0.60 m/s, by push direction class.
 Run from the repository root after `make`."""
-import csv,json,subprocess,sys,collections,os,tempfile
+import collections, csv, json, subprocess, tempfile
 TMP=tempfile.mkdtemp()
 runs={'capture':('capture',None),'r16':('bench/results/swing_cost/r16/r16.safetensors','bench/results/swing_cost/r16/runtime_trials0-1.json'),
 'r15':('bench/results/swing_cost/r15/r15.safetensors','bench/results/swing_cost/r15/runtime_trials0-1.json'),
@@ -26,7 +26,7 @@ for name,(w,tj) in runs.items():
         ws.append(m(2)-m(4)); ss.append(m(1)-m(3))
     width=sum(ws)/3; stag=sum(ss)/3
     print('   widths', ' '.join('%.3f'%w for w in ws), 'staggers', ' '.join('%+.3f'%w for w in ss))
-    if tj: tr=[t for t in json.load(open(tj))['trials']]
+    if tj: tr=json.load(open(tj))['trials']
     else: tr=[t for t in full['trials'] if t['controller']=='capture' and int(t['id'][-2:])<2]
     ok=collections.Counter(); n=collections.Counter()
     for t in tr:
