@@ -225,6 +225,36 @@ assert '--quiet-cost 1 --quiet-after 0.5' in c['trained_by'], c\" \
     && ! /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --bc-iters 0 --ppo-iters 1 \
     --quiet-cost 1 --out $out/qc2.safetensors --log-dir $out/qc2 >$out/qc2.out 2>&1 \
     && grep -q 'give --residual' $out/qc2.out"
+name="--width-cost: info gives the feet's distance apart; the cost is on the steps that end wider than the target"
+# info[10] is the horizontal distance between the feet bodies (the
+# controller's stance: 0.16 m); two rollouts of one zero-residual policy
+# differ in reward by k x (distance - target) where the step ends with the
+# feet further apart than the target, the robot standing (before its first
+# push, or 1 s or more after the last disturbance), the expert not in a
+# swing and the episode going on (that step's own info); train.py writes
+# the option into the contract and refuses it without --residual
+check bash -c "/usr/bin/python3 -c \"$COST_PY
+env_kw = dict(episode_s=2.5, push_dv_max=0.6)
+(b0, i0), (b1, _) = run(200, env_kw), run(200, env_kw, width_cost=(2.0, 0.15))
+assert np.array_equal(b0['act'], b1['act']) and np.array_equal(b0['info'], b1['info'])
+apart = b0['info'][:, :, 10]
+assert abs(i0[0, 10] - 0.16) < 0.005 and apart.max() > 0.2, (i0[:, 10], apart.max())
+i = b0['info']; q = i[:, :, 9]
+standing = (q >= 1.0) | ((q < 0.0) & (i[:, :, 7] == 0))
+assert 0.05 < standing.mean() < 0.95, standing.mean()
+over = np.maximum(0.0, apart - 0.15) * (i[:, :, 8] == 0) * (b0['done'] == 0) * standing
+assert np.allclose(b0['rew'] - b1['rew'], 2.0 * over, atol=1e-6) and (over > 0).sum() > 20, (over > 0).sum()
+assert ((apart > 0.2) & ~standing).any(), 'a step (feet apart) while pushed costs nothing'\" \
+    && /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 --bc-iters 0 \
+    --ppo-iters 1 --residual --width-cost 1 --width-target 0.25 --out $out/wc.safetensors \
+    --log-dir $out/wc >/dev/null 2>&1 \
+    && /usr/bin/python3 -c \"
+import sys, json; sys.path.insert(0, 'policy/train'); import psfile
+c = json.loads(psfile.read_safetensors('$out/wc.safetensors')[1][psfile.CONTRACT_KEY])
+assert '--width-cost 1 --width-target 0.25' in c['trained_by'], c\" \
+    && ! /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --bc-iters 0 --ppo-iters 1 \
+    --width-cost 1 --out $out/wc2.safetensors --log-dir $out/wc2 >$out/wc2.out 2>&1 \
+    && grep -q 'give --residual' $out/wc2.out"
 name="GAE: a time-limit cut bootstraps from the state's value, a fall does not (--bootstrap-timeouts)"
 # one environment, 2 steps, reward 1, values 10 and 20, both episodes end at
 # step 0: a fall (info[0] = 1) gives delta = 1 - 10; a cut gives

@@ -158,14 +158,17 @@ def residual_rad(a, idx=slice(None)):
 
 def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=True,
             explore=True, dart_std=0.0, stair=None, residual=False, swing_cost=None,
-            quiet_cost=None):
+            quiet_cost=None, width_cost=None):
     """n_steps of every environment. beta_expert: probability that an
     environment follows the expert this step (DAgger). swing_cost (k, joint
     indices): a residual's cost, k per radian of those joints' residual
     targets, on the steps whose expert action is part of a step. quiet_cost
     (k, s): a residual's cost, k per radian of every joint's residual
     target, on the steps taken s seconds or more after the robot was last
-    disturbed (the harness, a push) whose expert action is not a step's."""
+    disturbed (the harness, a push) whose expert action is not a step's.
+    width_cost (k, m): k per metre the feet stand further apart than m
+    (horizontal distance between the feet bodies), on the steps that end
+    with the expert not stepping."""
     n = env.n
     buf = {k: [] for k in ("obs", "raw", "act", "logp", "rew", "done", "val", "expert", "info")}
     for _ in range(n_steps):
@@ -203,6 +206,16 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
             k, after_s = quiet_cost
             quiet = (quiet_s >= after_s) & (swing == 0.0)
             rew = (rew - k * quiet * residual_rad(a)).astype(np.float32)
+        if width_cost is not None:
+            k, target_m = width_cost
+            apart = info[:, psenv.INFO_KEYS.index("feet_apart_m")]
+            stepping = info[:, psenv.INFO_KEYS.index("expert_swing")]
+            q = info[:, psenv.INFO_KEYS.index("quiet_s")]
+            before_push = (q < 0.0) & (info[:, psenv.INFO_KEYS.index("pushes")] == 0)
+            standing = (q >= 1.0) | before_push  # not while pushed or recovering
+            over = (np.maximum(0.0, apart - target_m) * (stepping == 0.0) * (done == 0)
+                    * standing)
+            rew = (rew - k * over).astype(np.float32)
         if stair is not None:
             stair.observe(info)
         buf["obs"].append(o)
@@ -394,6 +407,12 @@ def main():
                          "controller")
     ap.add_argument("--quiet-after", type=float, default=1.0,
                     help="seconds after a disturbance from which --quiet-cost applies")
+    ap.add_argument("--width-cost", type=float, default=0.0,
+                    help="with --residual: a cost, this much reward per metre, on feet "
+                         "further apart than --width-target (horizontal distance between the "
+                         "feet bodies) while the controller is not stepping")
+    ap.add_argument("--width-target", type=float, default=0.20,
+                    help="metres between the feet from which --width-cost applies")
     ap.add_argument("--obs-base-action", action="store_true",
                     help="with --residual: the observation ends with the controller's action "
                          "of this step (field base_action), which prev_action (the total "
@@ -429,6 +448,12 @@ def main():
             raise SystemExit("--swing-cost-joints: %s not among the action joints (%s)"
                              % (",".join(unknown) or "none given", ",".join(ct.LEGS)))
         swing_cost = (a.swing_cost, [ct.LEGS.index(j) for j in names])
+    width_cost = None
+    if a.width_cost != 0.0:
+        if not a.residual or a.width_cost < 0.0 or not a.width_target > 0.0:
+            raise SystemExit("--width-cost: a cost (>= 0) on a residual (give --residual), "
+                             "--width-target > 0")
+        width_cost = (a.width_cost, a.width_target)
     quiet_cost = None
     if a.quiet_cost != 0.0:
         if not a.residual or a.quiet_cost < 0.0 or not a.quiet_after >= 0.0:
@@ -504,6 +529,8 @@ def main():
                                                                    a.swing_cost_joints)
     if quiet_cost is not None:
         trained_by += " --quiet-cost %g --quiet-after %g" % quiet_cost
+    if width_cost is not None:
+        trained_by += " --width-cost %g --width-target %g" % width_cost
     if a.ramp_start:
         trained_by += " --ramp-start"
     if a.expert != "quick":
@@ -544,7 +571,7 @@ def main():
                                            update_norm=not a.init, explore=not is_bc,
                                            dart_std=a.dart_std if is_bc else 0.0, stair=stair,
                                            residual=a.residual, swing_cost=swing_cost,
-                                           quiet_cost=quiet_cost)
+                                           quiet_cost=quiet_cost, width_cost=width_cost)
         n_env_steps += a.steps * env.n
         st = stats(buf)
         O = torch.from_numpy(buf["obs"].reshape(-1, env.n_obs))

@@ -544,6 +544,16 @@ static float quiet_s(const env1_t *v)
     return (float)(t_s - since);
 }
 
+/* Horizontal distance between the feet bodies: the stance's width and stagger
+ * in one number. */
+static float feet_apart_m(const env1_t *v)
+{
+    double p[2][3];
+    for (int s = 0; s < 2; s++)
+        ps_plant_get_body_pos(v->plant, v->feet[s], p[s]);
+    return (float)hypot(p[0][0] - p[1][0], p[0][1] - p[1][1]);
+}
+
 static int step1(const ps_env_t *e, env1_t *v, const float *a, float *obs, float *rew,
                  uint8_t *done, float *expert, float *info)
 {
@@ -581,6 +591,7 @@ static int step1(const ps_env_t *e, env1_t *v, const float *a, float *obs, float
         info[PS_ENV_INFO_EXPERT_SWING] =
             expert != NULL && v->cap.phase == PS_CAPTURE_SWING ? 1.0f : 0.0f;
         info[PS_ENV_INFO_QUIET_S] = quiet_s(v);
+        info[PS_ENV_INFO_FEET_APART_M] = feet_apart_m(v);
     }
     return rc_next;
 }

@@ -88,7 +88,7 @@ typedef struct {
                                without the flag */
 } ps_env_cfg_t;
 
-#define PS_ENV_INFO 10 /**< floats of info per environment and step: */
+#define PS_ENV_INFO 11 /**< floats of info per environment and step: */
 /* [0] fell this step, [1] episode ended, [2] episode time s, [3] last push
  * delta-v m/s, [4] r_balance, [5] r_quality, [6] CoM height m, [7] pushes so far,
  * [8] 1 when the expert's action for the new observation's state is part of a
@@ -101,6 +101,10 @@ typedef struct {
  * while held or pushed (added 2026-12-05: a cost on a residual while the
  * robot stands undisturbed, train.py --quiet-cost) */
 #define PS_ENV_INFO_QUIET_S 9
+/* [10] horizontal distance between the feet bodies (m), for the new
+ * observation's state (added 2026-12-05: a cost on a stance wider than a
+ * target, train.py --width-cost) */
+#define PS_ENV_INFO_FEET_APART_M 10
 
 /** @return 0 | -errno; err holds the reason  @rt INIT */
 int ps_env_create(const char *robot_path, const ps_env_cfg_t *cfg, ps_env_t **out, char *err,
