@@ -168,6 +168,21 @@ def run(n_steps, env_kw, **cost):
     buf = train.rollout(env, net, train.RunningNorm(env.n_obs), env.obs.copy(), n_steps, 0.0,
                         expert, np.random.default_rng(1), residual=True, **cost)[0]
     return buf, info0"
+# A residual's reward option: one iteration of train.py writes it into the
+# contract's trained_by (WANT: text it must hold), and train.py refuses it
+# without --residual. residual_option TAG "OPTIONS" "WANT"
+residual_option() {
+    /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 --bc-iters 0 \
+        --ppo-iters 1 --residual $2 --out $out/$1.safetensors --log-dir $out/$1 >/dev/null 2>&1 \
+        && /usr/bin/python3 -c "
+import sys, json; sys.path.insert(0, 'policy/train'); import psfile
+c = json.loads(psfile.read_safetensors('$out/$1.safetensors')[1][psfile.CONTRACT_KEY])
+assert '$3' in c['trained_by'], c" \
+        && ! /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --bc-iters 0 \
+        --ppo-iters 1 $2 --out $out/$1-nr.safetensors --log-dir $out/$1-nr >$out/$1-nr.out 2>&1 \
+        && grep -q 'give --residual' $out/$1-nr.out
+}
+export -f residual_option; export out
 name="--swing-cost: info flags the controller's swings; the cost is on the residual of the steps whose expert swings"
 # two rollouts of one zero-residual policy (same seeds, so the same actions
 # and states): their rewards differ by k x 0.25 rad x |residual| of the
@@ -182,15 +197,7 @@ flag = np.concatenate([i0[None, :, 8], b0['info'][:-1, :, 8]])
 assert set(np.unique(flag)) == {0.0, 1.0} and flag.mean() < 0.5, flag.mean()
 want = 2.0 * flag * 0.25 * np.abs(b0['act'][:, :, [1, 7]]).sum(-1)
 assert np.allclose(b0['rew'] - b1['rew'], want, atol=1e-6) and want.max() > 0\" \
-    && /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 --bc-iters 0 \
-    --ppo-iters 1 --residual --swing-cost 1 --out $out/sw.safetensors --log-dir $out/sw >/dev/null 2>&1 \
-    && /usr/bin/python3 -c \"
-import sys, json; sys.path.insert(0, 'policy/train'); import psfile
-c = json.loads(psfile.read_safetensors('$out/sw.safetensors')[1][psfile.CONTRACT_KEY])
-assert '--swing-cost 1 --swing-cost-joints l_hip_roll,r_hip_roll' in c['trained_by'], c\" \
-    && ! /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --bc-iters 0 --ppo-iters 1 \
-    --swing-cost 1 --out $out/sw2.safetensors --log-dir $out/sw2 >$out/sw2.out 2>&1 \
-    && grep -q 'give --residual' $out/sw2.out \
+    && residual_option sw '--swing-cost 1' '--swing-cost 1 --swing-cost-joints l_hip_roll,r_hip_roll' \
     && ! /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --bc-iters 0 --ppo-iters 1 \
     --residual --swing-cost 1 --swing-cost-joints l_hip_rol --out $out/sw3.safetensors \
     --log-dir $out/sw3 >$out/sw3.out 2>&1 && grep -q 'l_hip_rol not among' $out/sw3.out"
@@ -215,16 +222,7 @@ flag = (prev[:, :, 9] >= 1.0) & (prev[:, :, 8] == 0.0)
 assert 0.1 < flag.mean() < 0.9, flag.mean()
 want = 3.0 * flag * 0.25 * np.abs(b0['act']).sum(-1)
 assert np.allclose(b0['rew'] - b1['rew'], want, atol=1e-6) and want.max() > 0\" \
-    && /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 --bc-iters 0 \
-    --ppo-iters 1 --residual --quiet-cost 1 --quiet-after 0.5 --out $out/qc.safetensors \
-    --log-dir $out/qc >/dev/null 2>&1 \
-    && /usr/bin/python3 -c \"
-import sys, json; sys.path.insert(0, 'policy/train'); import psfile
-c = json.loads(psfile.read_safetensors('$out/qc.safetensors')[1][psfile.CONTRACT_KEY])
-assert '--quiet-cost 1 --quiet-after 0.5' in c['trained_by'], c\" \
-    && ! /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --bc-iters 0 --ppo-iters 1 \
-    --quiet-cost 1 --out $out/qc2.safetensors --log-dir $out/qc2 >$out/qc2.out 2>&1 \
-    && grep -q 'give --residual' $out/qc2.out"
+    && residual_option qc '--quiet-cost 1 --quiet-after 0.5' '--quiet-cost 1 --quiet-after 0.5'"
 name="--width-cost: info gives the feet's distance apart; the cost is on the steps that end wider than the target"
 # info[10] is the horizontal distance between the feet bodies (the
 # controller's stance: 0.16 m); two rollouts of one zero-residual policy
@@ -245,16 +243,7 @@ assert 0.05 < standing.mean() < 0.95, standing.mean()
 over = np.maximum(0.0, apart - 0.15) * (i[:, :, 8] == 0) * (b0['done'] == 0) * standing
 assert np.allclose(b0['rew'] - b1['rew'], 2.0 * over, atol=1e-6) and (over > 0).sum() > 20, (over > 0).sum()
 assert ((apart > 0.2) & ~standing).any(), 'a step (feet apart) while pushed costs nothing'\" \
-    && /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 --bc-iters 0 \
-    --ppo-iters 1 --residual --width-cost 1 --width-target 0.25 --out $out/wc.safetensors \
-    --log-dir $out/wc >/dev/null 2>&1 \
-    && /usr/bin/python3 -c \"
-import sys, json; sys.path.insert(0, 'policy/train'); import psfile
-c = json.loads(psfile.read_safetensors('$out/wc.safetensors')[1][psfile.CONTRACT_KEY])
-assert '--width-cost 1 --width-target 0.25' in c['trained_by'], c\" \
-    && ! /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --bc-iters 0 --ppo-iters 1 \
-    --width-cost 1 --out $out/wc2.safetensors --log-dir $out/wc2 >$out/wc2.out 2>&1 \
-    && grep -q 'give --residual' $out/wc2.out"
+    && residual_option wc '--width-cost 1 --width-target 0.25' '--width-cost 1 --width-target 0.25'"
 name="GAE: a time-limit cut bootstraps from the state's value, a fall does not (--bootstrap-timeouts)"
 # one environment, 2 steps, reward 1, values 10 and 20, both episodes end at
 # step 0: a fall (info[0] = 1) gives delta = 1 - 10; a cut gives
