@@ -6,12 +6,12 @@ import os
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-INFO = 11
 # The capture-point controller's tunables (train.py, eval.py --expert): quick,
 # the runtime's; slow, as before its 2026-12-03 change (tools/psenv/ps_env.h)
 EXPERTS = ("quick", "slow")
 INFO_KEYS = ("fell", "ended", "t_s", "push_dv", "r_balance", "r_quality", "com_z", "pushes",
              "expert_swing", "quiet_s", "feet_apart_m")
+INFO = len(INFO_KEYS)  # floats of info per environment and step (PS_ENV_INFO)
 
 
 class EnvCfg(ctypes.Structure):

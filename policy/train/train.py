@@ -150,6 +150,9 @@ def plot(log_csv, png):
     return subprocess.run(["gnuplot", "-e", script]).returncode == 0
 
 
+STANDING_AFTER_S = 1.0  # --width-cost: a robot undisturbed this long stands
+
+
 def residual_rad(a, idx=slice(None)):
     """Per environment, the sum of |residual target| in radians over the
     action joints idx (all by default): the swing and quiet costs' measure."""
@@ -168,7 +171,8 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
     disturbed (the harness, a push) whose expert action is not a step's.
     width_cost (k, m): k per metre the feet stand further apart than m
     (horizontal distance between the feet bodies), on the steps that end
-    with the expert not stepping."""
+    with the robot standing (before its first push, or STANDING_AFTER_S or
+    more after the last disturbance) and the expert not stepping."""
     n = env.n
     buf = {k: [] for k in ("obs", "raw", "act", "logp", "rew", "done", "val", "expert", "info")}
     for _ in range(n_steps):
@@ -212,7 +216,7 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
             stepping = info[:, psenv.INFO_KEYS.index("expert_swing")]
             q = info[:, psenv.INFO_KEYS.index("quiet_s")]
             before_push = (q < 0.0) & (info[:, psenv.INFO_KEYS.index("pushes")] == 0)
-            standing = (q >= 1.0) | before_push  # not while pushed or recovering
+            standing = (q >= STANDING_AFTER_S) | before_push  # not pushed or recovering
             over = (np.maximum(0.0, apart - target_m) * (stepping == 0.0) * (done == 0)
                     * standing)
             rew = (rew - k * over).astype(np.float32)
@@ -410,7 +414,9 @@ def main():
     ap.add_argument("--width-cost", type=float, default=0.0,
                     help="with --residual: a cost, this much reward per metre, on feet "
                          "further apart than --width-target (horizontal distance between the "
-                         "feet bodies) while the controller is not stepping")
+                         "feet bodies) while the robot stands (before its first push, or "
+                         "1 s or more after the last disturbance) and the controller is not "
+                         "stepping")
     ap.add_argument("--width-target", type=float, default=0.20,
                     help="metres between the feet from which --width-cost applies")
     ap.add_argument("--obs-base-action", action="store_true",
