@@ -244,6 +244,57 @@ over = np.maximum(0.0, apart - 0.15) * (i[:, :, 8] == 0) * (b0['done'] == 0) * s
 assert np.allclose(b0['rew'] - b1['rew'], 2.0 * over, atol=1e-6) and (over > 0).sum() > 20, (over > 0).sum()
 assert ((apart > 0.2) & ~standing).any(), 'a step (feet apart) while pushed costs nothing'\" \
     && residual_option wc '--width-cost 1 --width-target 0.25' '--width-cost 1 --width-target 0.25'"
+name="--priv-critic: info carries the plant's privileged state; the critic sees it after the observation, the policy file does not"
+# held environments with domain randomisation: the harness flag is 1 exactly
+# while held (quiet_s -1 and no push yet), a push acts exactly while it is
+# pushing (quiet_s -1, not held) with |force| / weight x g x duration = its
+# delta-v (info[3]) for a duration of 0.1 or 0.3 s, the episode's draws lie
+# in their ranges and stay put within an episode, the feet carry the weight
+# when the robot stands free, not while it hangs in the harness; a rollout's critic input is the observation followed by
+# the normalised privileged state and its values are the critic's on it;
+# train.py writes the option into trained_by and a file of the actor alone
+check bash -c "/usr/bin/python3 -c \"
+import sys; sys.path.insert(0, 'policy/train'); import numpy as np, torch, psenv, train
+K = psenv.PRIV_KEYS; P = lambda k: psenv.PRIV.start + K.index(k)
+env = psenv.Env(4, 2, seed=7, dr=True, episode_s=2.5, push_dv_max=0.6, harness_p=1.0)
+torch.manual_seed(5)
+net = train.Policy(env.n_obs, env.n_act, [32, 32], len(K))
+env.reset(); _, _, _, expert, _ = env.step(np.zeros((4, env.n_act), np.float32))
+npriv = train.RunningNorm(len(K))
+buf = train.rollout(env, net, train.RunningNorm(env.n_obs), env.obs.copy(), 300, 0.0, expert,
+                    np.random.default_rng(1), residual=True, norm_priv=npriv)[0]
+i = np.concatenate([buf['info'][:, e] for e in range(4)])
+# a step that ends an episode has the new one's quiet_s and privileged state
+i = i[np.concatenate([buf['done'][:, e] for e in range(4)]) == 0]
+held, q, left = i[:, P('held')], i[:, 9], i[:, P('push_left_s')]
+assert set(np.unique(held)) == {0.0, 1.0}, np.unique(held)
+assert np.array_equal(held == 1, (q < 0) & (i[:, 7] == 0)), 'held'
+pushing = (q < 0) & (held == 0)
+assert pushing.sum() > 10 and np.array_equal(left > 0, pushing), 'push timing'
+dv = np.hypot(i[:, P('push_x')], i[:, P('push_y')]) * 9.81
+ok = np.isclose(dv * 0.1, i[:, 3], rtol=1e-3) | np.isclose(dv * 0.3, i[:, 3], rtol=1e-3)
+assert ok[pushing].all() and (dv[~pushing] == 0).all(), 'push force'
+for k, lo, hi in (('friction', 0.6, 1.4), ('strength', 0.85, 1.15), ('latency_ms', 0, 2),
+                  ('torso_mass', 0.9, 1.1), ('pelvis_mass', 0.9, 1.1)):
+    v = buf['info'][:, :, P(k)]
+    assert (v >= lo).all() and (v <= hi).all() and len(np.unique(v)) > 1, k
+    same = buf['done'][1:] == 0  # step t's state is the episode of step t + 1's
+    assert (v[1:] == v[:-1])[same].all(), k + ' moved within an episode'
+w = i[:, P('force_l')] + i[:, P('force_r')]
+assert np.median(w[held == 1]) < 0.2 and abs(np.median(w[q > 1.0]) - 1.0) < 0.1, 'weight'
+c, o = buf['cobs'], buf['obs']
+assert c.shape[-1] == env.n_obs + len(K) and np.array_equal(c[..., :env.n_obs], o)
+assert np.allclose(c[-1, :, env.n_obs:], npriv(buf['info'][-2][:, psenv.PRIV]), atol=1e-6)
+with torch.no_grad():
+    v = net.v(torch.from_numpy(c[5])).squeeze(-1).numpy()
+assert np.allclose(v, buf['val'][5], atol=1e-6)\" \
+    && /usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 --bc-iters 0 \
+    --ppo-iters 2 --residual --priv-critic --out $out/pc.safetensors --log-dir $out/pc \
+    >/dev/null 2>&1 && /usr/bin/python3 -c \"
+import sys, json; sys.path.insert(0, 'policy/train'); import psfile
+t, m = psfile.read_safetensors('$out/pc.safetensors')
+c = json.loads(m[psfile.CONTRACT_KEY])
+assert '--priv-critic' in c['trained_by'] and t['base.0.weight'].shape[1] == len(c['observation']['mean'])\""
 name="GAE: a time-limit cut bootstraps from the state's value, a fall does not (--bootstrap-timeouts)"
 # one environment, 2 steps, reward 1, values 10 and 20, both episodes end at
 # step 0: a fall (info[0] = 1) gives delta = 1 - 10; a cut gives

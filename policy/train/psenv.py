@@ -11,7 +11,13 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 EXPERTS = ("quick", "slow")
 INFO_KEYS = ("fell", "ended", "t_s", "push_dv", "r_balance", "r_quality", "com_z", "pushes",
              "expert_swing", "quiet_s", "feet_apart_m")
-INFO = len(INFO_KEYS)  # floats of info per environment and step (PS_ENV_INFO)
+# the critic's privileged state (PS_ENV_INFO_PRIV .. of the info; train.py --priv-critic)
+PRIV_KEYS = ("com_x", "com_y", "com_dz", "vel_x", "vel_y", "vel_z", "force_l", "force_r",
+             "push_x", "push_y", "push_left_s", "push_next_s", "held", "friction", "strength",
+             "latency_ms", "torso_mass", "pelvis_mass", "torso_com_x", "torso_com_y",
+             "torso_com_z")
+PRIV = slice(len(INFO_KEYS), len(INFO_KEYS) + len(PRIV_KEYS))
+INFO = len(INFO_KEYS) + len(PRIV_KEYS)  # floats of info per environment and step (PS_ENV_INFO)
 
 
 class EnvCfg(ctypes.Structure):

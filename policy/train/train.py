@@ -77,14 +77,16 @@ class RunningNorm:
 
 
 class Policy(torch.nn.Module):
-    def __init__(self, n_obs, n_act, hidden):
+    def __init__(self, n_obs, n_act, hidden, n_priv=0):
+        """n_priv: the critic sees this many privileged inputs after the
+        observation (--priv-critic); the actor never does."""
         super().__init__()
         layers, a = [], n_obs
         for h in hidden:
             layers += [torch.nn.Linear(a, h), torch.nn.ELU()]
             a = h
         self.pi = torch.nn.Sequential(*layers, torch.nn.Linear(a, n_act))
-        layers, a = [], n_obs
+        layers, a = [], n_obs + n_priv
         for h in hidden:
             layers += [torch.nn.Linear(a, h), torch.nn.ELU()]
             a = h
@@ -159,9 +161,22 @@ def residual_rad(a, idx=slice(None)):
     return ct.ACTION_SCALE * np.abs(a[:, idx]).sum(axis=1)
 
 
+def critic_input(o, env, norm_priv, update_norm):
+    """The critic's input for the observations o (normalised) of env's last
+    step: o alone, or with norm_priv (--priv-critic) o followed by the
+    privileged state of the same states (the info's psenv.PRIV part, which
+    follows the new observation as the swing flag does), normalised."""
+    if norm_priv is None:
+        return o
+    p = env.info[:, psenv.PRIV]
+    if update_norm:
+        norm_priv.update(p)
+    return np.concatenate([o, norm_priv(p)], axis=1)
+
+
 def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=True,
             explore=True, dart_std=0.0, stair=None, residual=False, swing_cost=None,
-            quiet_cost=None, width_cost=None):
+            quiet_cost=None, width_cost=None, norm_priv=None):
     """n_steps of every environment. beta_expert: probability that an
     environment follows the expert this step (DAgger). swing_cost (k, joint
     indices): a residual's cost, k per radian of those joints' residual
@@ -172,13 +187,18 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
     width_cost (k, m): k per metre the feet stand further apart than m
     (horizontal distance between the feet bodies), on the steps that end
     with the robot standing (before its first push, or STANDING_AFTER_S or
-    more after the last disturbance) and the expert not stepping."""
+    more after the last disturbance) and the expert not stepping. norm_priv:
+    the critic also sees the privileged state (critic_input); its statistics
+    always learn (the critic is not in the policy file: a fine-tuning run's
+    critic starts new too)."""
     n = env.n
-    buf = {k: [] for k in ("obs", "raw", "act", "logp", "rew", "done", "val", "expert", "info")}
+    buf = {k: [] for k in ("obs", "raw", "act", "logp", "rew", "done", "val", "expert", "info",
+                           "cobs")}
     for _ in range(n_steps):
         if update_norm:
             norm.update(obs)
         o = norm(obs)
+        c = critic_input(o, env, norm_priv, True)
         with torch.no_grad():
             t = torch.from_numpy(o)
             d = net.dist(t)
@@ -186,7 +206,7 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
             # PPO explores around them
             a = d.sample() if explore else d.mean
             logp = d.log_prob(a).sum(-1)
-            v = net.v(t).squeeze(-1)
+            v = net.v(torch.from_numpy(c)).squeeze(-1)
         a = a.numpy()
         if beta_expert > 0.0:
             use = rng.random(n) < beta_expert
@@ -231,9 +251,11 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
         buf["val"].append(v.numpy())
         buf["expert"].append(np.zeros_like(expert) if residual else expert)
         buf["info"].append(info)
+        buf["cobs"].append(c)
         obs, expert = obs2, expert2
     with torch.no_grad():
-        last_v = net.v(torch.from_numpy(norm(obs))).squeeze(-1).numpy()
+        c = critic_input(norm(obs), env, norm_priv, False)
+        last_v = net.v(torch.from_numpy(c)).squeeze(-1).numpy()
     return {k: np.asarray(v) for k, v in buf.items()}, obs, expert, last_v
 
 
@@ -419,6 +441,12 @@ def main():
                          "stepping")
     ap.add_argument("--width-target", type=float, default=0.20,
                     help="metres between the feet from which --width-cost applies")
+    ap.add_argument("--priv-critic", action="store_true",
+                    help="an asymmetric critic: the value network also sees the plant's "
+                         "privileged state, which the policy does not observe (true CoM "
+                         "and velocity, the push acting and the next one's time, the "
+                         "episode's randomised friction, strength, latency and masses: "
+                         "tools/psenv/ps_env.h); the policy file is unchanged")
     ap.add_argument("--obs-base-action", action="store_true",
                     help="with --residual: the observation ends with the controller's action "
                          "of this step (field base_action), which prev_action (the total "
@@ -477,7 +505,9 @@ def main():
     if env.n_obs != n_obs_contract or env.n_act != len(ct.LEGS):
         raise SystemExit("environment (%d obs, %d actions) and contract.py (%d, %d) disagree"
                          % (env.n_obs, env.n_act, n_obs_contract, len(ct.LEGS)))
-    net = Policy(env.n_obs, env.n_act, hidden)
+    n_priv = len(psenv.PRIV_KEYS) if a.priv_critic else 0
+    net = Policy(env.n_obs, env.n_act, hidden, n_priv)
+    norm_priv = RunningNorm(n_priv) if a.priv_critic else None
     if a.residual:  # a zero residual: exactly the expert
         with torch.no_grad():
             net.pi[-1].weight.zero_()
@@ -530,6 +560,8 @@ def main():
         trained_by += " --residual"
     if a.obs_base_action:
         trained_by += " --obs-base-action"
+    if a.priv_critic:
+        trained_by += " --priv-critic"
     if swing_cost is not None:
         trained_by += " --swing-cost %g --swing-cost-joints %s" % (a.swing_cost,
                                                                    a.swing_cost_joints)
@@ -577,10 +609,12 @@ def main():
                                            update_norm=not a.init, explore=not is_bc,
                                            dart_std=a.dart_std if is_bc else 0.0, stair=stair,
                                            residual=a.residual, swing_cost=swing_cost,
-                                           quiet_cost=quiet_cost, width_cost=width_cost)
+                                           quiet_cost=quiet_cost, width_cost=width_cost,
+                                           norm_priv=norm_priv)
         n_env_steps += a.steps * env.n
         st = stats(buf)
         O = torch.from_numpy(buf["obs"].reshape(-1, env.n_obs))
+        C = torch.from_numpy(buf["cobs"].reshape(O.shape[0], -1))  # the critic's input
         E = torch.from_numpy(buf["expert"].reshape(-1, env.n_act).astype(np.float32))
         if is_bc:
             ds_o.append(buf["raw"].reshape(-1, env.n_obs))
@@ -602,7 +636,7 @@ def main():
             adv, ret = gae(buf, last_v, a.gamma, a.gae_lambda, a.bootstrap_timeouts)
             R = torch.from_numpy(ret.reshape(-1).astype(np.float32))
             for _ in range(4):
-                vl = ((net.v(O).squeeze(-1) - R) ** 2).mean()
+                vl = ((net.v(C).squeeze(-1) - R) ** 2).mean()
                 opt.zero_grad()
                 vl.backward()
                 opt.step()
@@ -634,7 +668,7 @@ def main():
                         loss.backward()
                         torch.nn.utils.clip_grad_norm_(actor_params, 1.0)
                         opt_pi.step()
-                    vl = ((net.v(O[idx]).squeeze(-1) - R[idx]) ** 2).mean()
+                    vl = ((net.v(C[idx]).squeeze(-1) - R[idx]) ** 2).mean()
                     opt_v.zero_grad()
                     vl.backward()
                     torch.nn.utils.clip_grad_norm_(net.v.parameters(), 1.0)

@@ -63,6 +63,8 @@ typedef struct {
     ps_targets_t tgt;
     uint64_t rng;
     int64_t latency_ns;
+    /* this episode's other draws, kept for the critic's privileged state */
+    double friction_scale, strength, torso_mass_scale, pelvis_mass_scale, torso_com_off_m[3];
     double imu_noise_scale, gyro_bias[3], accel_bias[3];
     int64_t t_ns;
     uint64_t tick;
@@ -149,6 +151,7 @@ static void randomise(const ps_env_t *e, env1_t *v)
     const ps_robot_cfg_t *r = &e->robot;
     const bool dr = e->cfg.is_dr != 0;
     const double strength = dr ? uni(&v->rng, 0.85, 1.15) : 1.0;
+    v->strength = strength;
     for (uint32_t j = 0; j < r->n_joints; j++) {
         ps_act_cfg_t a = r->act[j];
         v->lim[j] = r->servo[j].lim;
@@ -160,9 +163,14 @@ static void randomise(const ps_env_t *e, env1_t *v)
     const double off[3] = {dr ? uni(&v->rng, -0.02, 0.02) : 0.0,
                            dr ? uni(&v->rng, -0.02, 0.02) : 0.0,
                            dr ? uni(&v->rng, -0.02, 0.02) : 0.0};
-    ps_plant_scale_body_mass(v->plant, v->torso, dr ? uni(&v->rng, 0.9, 1.1) : 1.0, off);
-    ps_plant_scale_body_mass(v->plant, v->pelvis, dr ? uni(&v->rng, 0.9, 1.1) : 1.0, NULL);
-    ps_plant_scale_friction(v->plant, dr ? uni(&v->rng, 0.6, 1.4) : 1.0);
+    memcpy(v->torso_com_off_m, off, sizeof(off));
+    /* one draw a statement, in this order: the random stream of every run */
+    v->torso_mass_scale = dr ? uni(&v->rng, 0.9, 1.1) : 1.0;
+    ps_plant_scale_body_mass(v->plant, v->torso, v->torso_mass_scale, off);
+    v->pelvis_mass_scale = dr ? uni(&v->rng, 0.9, 1.1) : 1.0;
+    ps_plant_scale_body_mass(v->plant, v->pelvis, v->pelvis_mass_scale, NULL);
+    v->friction_scale = dr ? uni(&v->rng, 0.6, 1.4) : 1.0;
+    ps_plant_scale_friction(v->plant, v->friction_scale);
     v->latency_ns = dr ? (int64_t)uni(&v->rng, 0.0, 2e6) : 0;
     v->imu_noise_scale = dr ? uni(&v->rng, 0.5, 2.0) : 1.0;
     for (int k = 0; k < 3; k++) {
@@ -554,6 +562,56 @@ static float feet_apart_m(const env1_t *v)
     return (float)hypot(p[0][0] - p[1][0], p[0][1] - p[1][1]);
 }
 
+/* A world vector's horizontal part in the frame of heading yaw. */
+static void to_heading(double yaw, double x, double y, float out[2])
+{
+    out[0] = (float)(cos(yaw) * x + sin(yaw) * y);
+    out[1] = (float)(-sin(yaw) * x + cos(yaw) * y);
+}
+
+/* The critic's privileged state (PS_ENV_INFO_PRIV, ps_env.h, in its order),
+ * for the state of the observation just made. */
+static void privileged(const ps_env_t *e, const env1_t *v, float out[PS_ENV_PRIV])
+{
+    ps_plant_truth_t tr;
+    double feet[2][3], force[2], cop[2][3], pos[3], quat[4], vel[3];
+    ps_plant_get_truth(v->plant, &tr);
+    ps_plant_get_root(v->plant, pos, quat, vel);
+    (void)ps_plant_get_feet_contact(v->plant, force, cop);
+    for (int s = 0; s < 2; s++)
+        ps_plant_get_body_pos(v->plant, v->feet[s], feet[s]);
+    const double yaw = yaw_of(quat), weight_n = e->robot.kin.mass_kg * 9.81;
+    const double t_s = (double)v->t_ns * 1e-9;
+    double push_n[2] = {0, 0}, left_s = 0.0, next_s = 1.0;
+    for (int i = 0; i < v->n_push; i++) {
+        const push_t *p = &v->push[i];
+        if (t_s >= p->t_s && t_s < p->t_s + p->dur_s) {
+            push_n[0] = p->force_n[0] / weight_n, push_n[1] = p->force_n[1] / weight_n;
+            left_s = p->t_s + p->dur_s - t_s;
+        } else if (t_s < p->t_s) {
+            next_s = fmin(next_s, p->t_s - t_s);
+        }
+    }
+    to_heading(yaw, tr.com_m[0] - 0.5 * (feet[0][0] + feet[1][0]),
+               tr.com_m[1] - 0.5 * (feet[0][1] + feet[1][1]), out);
+    out[2] = (float)(tr.com_m[2] - v->z_rest);
+    to_heading(yaw, vel[0], vel[1], out + 3);
+    out[5] = (float)vel[2];
+    out[6] = (float)(force[0] / weight_n);
+    out[7] = (float)(force[1] / weight_n);
+    to_heading(yaw, push_n[0], push_n[1], out + 8);
+    out[10] = (float)left_s;
+    out[11] = (float)next_s;
+    out[12] = v->is_held ? 1.0f : 0.0f;
+    out[13] = (float)v->friction_scale;
+    out[14] = (float)v->strength;
+    out[15] = (float)((double)v->latency_ns * 1e-6);
+    out[16] = (float)v->torso_mass_scale;
+    out[17] = (float)v->pelvis_mass_scale;
+    for (int k = 0; k < 3; k++)
+        out[18 + k] = (float)v->torso_com_off_m[k];
+}
+
 static int step1(const ps_env_t *e, env1_t *v, const float *a, float *obs, float *rew,
                  uint8_t *done, float *expert, float *info)
 {
@@ -592,6 +650,7 @@ static int step1(const ps_env_t *e, env1_t *v, const float *a, float *obs, float
             expert != NULL && v->cap.phase == PS_CAPTURE_SWING ? 1.0f : 0.0f;
         info[PS_ENV_INFO_QUIET_S] = quiet_s(v);
         info[PS_ENV_INFO_FEET_APART_M] = feet_apart_m(v);
+        privileged(e, v, info + PS_ENV_INFO_PRIV);
     }
     return rc_next;
 }

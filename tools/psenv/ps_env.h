@@ -88,7 +88,8 @@ typedef struct {
                                without the flag */
 } ps_env_cfg_t;
 
-#define PS_ENV_INFO 11 /**< floats of info per environment and step: */
+/** Floats of info per environment and step: */
+#define PS_ENV_INFO (PS_ENV_INFO_PRIV + PS_ENV_PRIV)
 /* [0] fell this step, [1] episode ended, [2] episode time s, [3] last push
  * delta-v m/s, [4] r_balance, [5] r_quality, [6] CoM height m, [7] pushes so far,
  * [8] 1 when the expert's action for the new observation's state is part of a
@@ -105,6 +106,19 @@ typedef struct {
  * observation's state (added 2026-12-05: a cost on a stance wider than a
  * target, train.py --width-cost) */
 #define PS_ENV_INFO_FEET_APART_M 10
+/* [11 ..] the critic's privileged state (added 2026-12-07: train.py
+ * --priv-critic), for the new observation's state, from the plant's truth
+ * and the episode's draws, which the policy does not observe; horizontal
+ * vectors in the frame of the floating base's heading: CoM relative to the
+ * feet's midpoint (x, y; z above the resting height) m; the floating base's
+ * linear velocity m/s (x, y, z); the left and the right foot's normal force
+ * / weight; the push acting now / weight (x, y); seconds left of that push
+ * (0: none); seconds until the next push starts (at most 1; 1: none to
+ * come); 1 while the harness holds; friction scale; motor strength scale;
+ * command latency ms; torso and pelvis mass scales; the torso's CoM offset m
+ * (x, y, z) */
+#define PS_ENV_INFO_PRIV 11
+#define PS_ENV_PRIV      21
 
 /** @return 0 | -errno; err holds the reason  @rt INIT */
 int ps_env_create(const char *robot_path, const ps_env_cfg_t *cfg, ps_env_t **out, char *err,
