@@ -295,6 +295,18 @@ import sys, json; sys.path.insert(0, 'policy/train'); import psfile
 t, m = psfile.read_safetensors('$out/pc.safetensors')
 c = json.loads(m[psfile.CONTRACT_KEY])
 assert '--priv-critic' in c['trained_by'] and t['base.0.weight'].shape[1] == len(c['observation']['mean'])\""
+name="psenv refuses a libpsenv whose info size is not the one its keys name"
+check /usr/bin/python3 -c "
+import sys; sys.path.insert(0, 'policy/train'); import psenv
+assert psenv.Env(2, 1).info.shape == (2, psenv.INFO)
+psenv.INFO -= 1
+try:
+    psenv.Env(2, 1)
+except RuntimeError as e:
+    assert 'rebuild' in str(e), e
+else:
+    raise AssertionError('a stale library was accepted')
+"
 name="GAE: a time-limit cut bootstraps from the state's value, a fall does not (--bootstrap-timeouts)"
 # one environment, 2 steps, reward 1, values 10 and 20, both episodes end at
 # step 0: a fall (info[0] = 1) gives delta = 1 - 10; a cut gives

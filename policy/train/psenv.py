@@ -47,6 +47,12 @@ class Env:
                                     ctypes.c_size_t]
         L.ps_env_obs_size.argtypes = L.ps_env_act_size.argtypes = [ctypes.c_void_p]
         L.ps_env_obs_size.restype = L.ps_env_act_size.restype = ctypes.c_uint32
+        L.ps_env_info_size.argtypes = []
+        L.ps_env_info_size.restype = ctypes.c_uint32
+        if L.ps_env_info_size() != INFO:  # the info buffer below is sized by INFO
+            raise RuntimeError("libpsenv gives %d floats of info a step, psenv.INFO_KEYS and "
+                               "PRIV_KEYS name %d: rebuild it (make build/libpsenv.so)"
+                               % (L.ps_env_info_size(), INFO))
         L.ps_env_reset.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_float)]
         L.ps_env_step.argtypes = [ctypes.c_void_p] + [ctypes.POINTER(ctypes.c_float)] * 3 + [
             ctypes.POINTER(ctypes.c_uint8)] + [ctypes.POINTER(ctypes.c_float)] * 2

@@ -711,6 +711,11 @@ uint32_t ps_env_act_size(const ps_env_t *e)
     return N_ACT;
 }
 
+uint32_t ps_env_info_size(void)
+{
+    return PS_ENV_INFO;
+}
+
 int ps_env_reset(ps_env_t *e, float *obs)
 {
     e->is_reset = true;

@@ -125,6 +125,8 @@ int ps_env_create(const char *robot_path, const ps_env_cfg_t *cfg, ps_env_t **ou
                   size_t err_len);
 uint32_t ps_env_obs_size(const ps_env_t *e);
 uint32_t ps_env_act_size(const ps_env_t *e);
+/** PS_ENV_INFO, for a caller that sizes the info buffer itself (Python checks it). */
+uint32_t ps_env_info_size(void);
 
 /** Reset every environment. @post obs: n_envs x obs_size  @return 0 | -errno */
 int ps_env_reset(ps_env_t *e, float *obs);
