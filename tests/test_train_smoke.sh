@@ -244,6 +244,28 @@ over = np.maximum(0.0, apart - 0.15) * (i[:, :, 8] == 0) * (b0['done'] == 0) * s
 assert np.allclose(b0['rew'] - b1['rew'], 2.0 * over, atol=1e-6) and (over > 0).sum() > 20, (over > 0).sum()
 assert ((apart > 0.2) & ~standing).any(), 'a step (feet apart) while pushed costs nothing'\" \
     && residual_option wc '--width-cost 1 --width-target 0.25' '--width-cost 1 --width-target 0.25'"
+name="--stagger-cost: info gives the feet's offset along and across the heading; the cost is on standing steps staggered beyond the tolerance"
+# info[11] and [12] are the left foot's offset from the right one along and
+# across the floating base's heading (the controller's stance: 0 and 0.16
+# m), together as long as info[10]'s distance; two rollouts of one
+# zero-residual policy differ in reward by k x (|stagger| - tolerance) on
+# exactly the steps the width cost weighs (train.stands_still) that end
+# staggered beyond it; train.py writes the option into the contract and
+# refuses it without --residual
+check bash -c "/usr/bin/python3 -c \"$COST_PY
+env_kw = dict(episode_s=2.5, push_dv_max=0.6)
+(b0, i0), (b1, _) = run(200, env_kw), run(200, env_kw, stagger_cost=(2.0, 0.02))
+assert np.array_equal(b0['act'], b1['act']) and np.array_equal(b0['info'], b1['info'])
+i = b0['info']; K = psenv.INFO_KEYS.index
+st, lat = i[:, :, K('feet_stagger_m')], i[:, :, K('feet_lateral_m')]
+assert (np.abs(i0[:, 11]) < 0.005).all() and (np.abs(i0[:, 12] - 0.16) < 0.005).all(), i0[:, 11:13]
+assert np.allclose(np.hypot(st, lat), i[:, :, 10], atol=1e-5) and np.abs(st).max() > 0.1
+q = i[:, :, 9]
+standing = (q >= 1.0) | ((q < 0.0) & (i[:, :, 7] == 0))
+over = np.maximum(0.0, np.abs(st) - 0.02) * (i[:, :, 8] == 0) * (b0['done'] == 0) * standing
+assert np.array_equal(over > 0, (np.abs(st) > 0.02) & (train.stands_still(i.reshape(-1, i.shape[-1]), b0['done'].ravel()).reshape(st.shape) > 0))
+assert np.allclose(b0['rew'] - b1['rew'], 2.0 * over, atol=1e-6) and (over > 0).sum() > 10, (over > 0).sum()\" \
+    && residual_option sc '--stagger-cost 1 --stagger-tol 0.04' '--stagger-cost 1 --stagger-tol 0.04'"
 name="--priv-critic: info carries the plant's privileged state; the critic sees it after the observation, the policy file does not"
 # held environments with domain randomisation: the harness flag is 1 exactly
 # while held (quiet_s -1 and no push yet), a push acts exactly while it is

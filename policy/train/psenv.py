@@ -10,7 +10,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 # the runtime's; slow, as before its 2026-12-03 change (tools/psenv/ps_env.h)
 EXPERTS = ("quick", "slow")
 INFO_KEYS = ("fell", "ended", "t_s", "push_dv", "r_balance", "r_quality", "com_z", "pushes",
-             "expert_swing", "quiet_s", "feet_apart_m")
+             "expert_swing", "quiet_s", "feet_apart_m", "feet_stagger_m", "feet_lateral_m")
 # the critic's privileged state (PS_ENV_INFO_PRIV .. of the info; train.py --priv-critic)
 PRIV_KEYS = ("com_x", "com_y", "com_dz", "vel_x", "vel_y", "vel_z", "force_l", "force_r",
              "push_x", "push_y", "push_left_s", "push_next_s", "held", "friction", "strength",

@@ -161,6 +161,18 @@ def residual_rad(a, idx=slice(None)):
     return ct.ACTION_SCALE * np.abs(a[:, idx]).sum(axis=1)
 
 
+def stands_still(info, done):
+    """Per environment, 1 where the step ended with the robot standing (before
+    its first push, or STANDING_AFTER_S or more after the last disturbance),
+    the expert not stepping and the episode going on, else 0: the steps the
+    stance costs (--width-cost, --stagger-cost) weigh."""
+    stepping = info[:, psenv.INFO_KEYS.index("expert_swing")]
+    q = info[:, psenv.INFO_KEYS.index("quiet_s")]
+    before_push = (q < 0.0) & (info[:, psenv.INFO_KEYS.index("pushes")] == 0)
+    standing = (q >= STANDING_AFTER_S) | before_push  # not pushed or recovering
+    return standing * (stepping == 0.0) * (done == 0)
+
+
 def critic_input(o, env, norm_priv, update_norm):
     """The critic's input for the observations o (normalised) of env's last
     step: o alone, or with norm_priv (--priv-critic) o followed by the
@@ -176,7 +188,7 @@ def critic_input(o, env, norm_priv, update_norm):
 
 def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=True,
             explore=True, dart_std=0.0, stair=None, residual=False, swing_cost=None,
-            quiet_cost=None, width_cost=None, norm_priv=None):
+            quiet_cost=None, width_cost=None, stagger_cost=None, norm_priv=None):
     """n_steps of every environment. beta_expert: probability that an
     environment follows the expert this step (DAgger). swing_cost (k, joint
     indices): a residual's cost, k per radian of those joints' residual
@@ -187,7 +199,9 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
     width_cost (k, m): k per metre the feet stand further apart than m
     (horizontal distance between the feet bodies), on the steps that end
     with the robot standing (before its first push, or STANDING_AFTER_S or
-    more after the last disturbance) and the expert not stepping. norm_priv:
+    more after the last disturbance) and the expert not stepping.
+    stagger_cost (k, m): k per metre the feet stand further than m apart
+    along the floating base's heading, on the same steps. norm_priv:
     the critic also sees the privileged state (critic_input); its statistics
     always learn (the critic is not in the policy file: a fine-tuning run's
     critic starts new too)."""
@@ -233,12 +247,12 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
         if width_cost is not None:
             k, target_m = width_cost
             apart = info[:, psenv.INFO_KEYS.index("feet_apart_m")]
-            stepping = info[:, psenv.INFO_KEYS.index("expert_swing")]
-            q = info[:, psenv.INFO_KEYS.index("quiet_s")]
-            before_push = (q < 0.0) & (info[:, psenv.INFO_KEYS.index("pushes")] == 0)
-            standing = (q >= STANDING_AFTER_S) | before_push  # not pushed or recovering
-            over = (np.maximum(0.0, apart - target_m) * (stepping == 0.0) * (done == 0)
-                    * standing)
+            over = np.maximum(0.0, apart - target_m) * stands_still(info, done)
+            rew = (rew - k * over).astype(np.float32)
+        if stagger_cost is not None:
+            k, tol_m = stagger_cost
+            stagger = np.abs(info[:, psenv.INFO_KEYS.index("feet_stagger_m")])
+            over = np.maximum(0.0, stagger - tol_m) * stands_still(info, done)
             rew = (rew - k * over).astype(np.float32)
         if stair is not None:
             stair.observe(info)
@@ -441,6 +455,13 @@ def main():
                          "stepping")
     ap.add_argument("--width-target", type=float, default=0.20,
                     help="metres between the feet from which --width-cost applies")
+    ap.add_argument("--stagger-cost", type=float, default=0.0,
+                    help="with --residual: a cost, this much reward per metre, on feet "
+                         "further apart along the robot's heading than --stagger-tol (one "
+                         "foot ahead of the other) while the robot stands, the steps "
+                         "--width-cost weighs")
+    ap.add_argument("--stagger-tol", type=float, default=0.05,
+                    help="metres of stagger from which --stagger-cost applies")
     ap.add_argument("--priv-critic", action="store_true",
                     help="an asymmetric critic: the value network also sees the plant's "
                          "privileged state, which the policy does not observe (true CoM "
@@ -488,6 +509,12 @@ def main():
             raise SystemExit("--width-cost: a cost (>= 0) on a residual (give --residual), "
                              "--width-target > 0")
         width_cost = (a.width_cost, a.width_target)
+    stagger_cost = None
+    if a.stagger_cost != 0.0:
+        if not a.residual or a.stagger_cost < 0.0 or not a.stagger_tol >= 0.0:
+            raise SystemExit("--stagger-cost: a cost (>= 0) on a residual (give --residual), "
+                             "--stagger-tol >= 0")
+        stagger_cost = (a.stagger_cost, a.stagger_tol)
     quiet_cost = None
     if a.quiet_cost != 0.0:
         if not a.residual or a.quiet_cost < 0.0 or not a.quiet_after >= 0.0:
@@ -569,6 +596,8 @@ def main():
         trained_by += " --quiet-cost %g --quiet-after %g" % quiet_cost
     if width_cost is not None:
         trained_by += " --width-cost %g --width-target %g" % width_cost
+    if stagger_cost is not None:
+        trained_by += " --stagger-cost %g --stagger-tol %g" % stagger_cost
     if a.ramp_start:
         trained_by += " --ramp-start"
     if a.expert != "quick":
@@ -610,7 +639,7 @@ def main():
                                            dart_std=a.dart_std if is_bc else 0.0, stair=stair,
                                            residual=a.residual, swing_cost=swing_cost,
                                            quiet_cost=quiet_cost, width_cost=width_cost,
-                                           norm_priv=norm_priv)
+                                           stagger_cost=stagger_cost, norm_priv=norm_priv)
         n_env_steps += a.steps * env.n
         st = stats(buf)
         O = torch.from_numpy(buf["obs"].reshape(-1, env.n_obs))

@@ -552,6 +552,13 @@ static float quiet_s(const env1_t *v)
     return (float)(t_s - since);
 }
 
+/* A world vector's horizontal part in the frame of heading yaw. */
+static void to_heading(double yaw, double x, double y, float out[2])
+{
+    out[0] = (float)(cos(yaw) * x + sin(yaw) * y);
+    out[1] = (float)(-sin(yaw) * x + cos(yaw) * y);
+}
+
 /* Horizontal distance between the feet bodies: the stance's width and stagger
  * in one number. */
 static float feet_apart_m(const env1_t *v)
@@ -562,11 +569,19 @@ static float feet_apart_m(const env1_t *v)
     return (float)hypot(p[0][0] - p[1][0], p[0][1] - p[1][1]);
 }
 
-/* A world vector's horizontal part in the frame of heading yaw. */
-static void to_heading(double yaw, double x, double y, float out[2])
+/* The left foot body's place relative to the right one's in the frame of
+ * the floating base's heading: out[0] along it (the stance's stagger, > 0
+ * with the left foot ahead), out[1] across it (its width, > 0 with the left
+ * foot on the left). */
+_Static_assert(PS_ENV_INFO_FEET_LATERAL_M == PS_ENV_INFO_FEET_STAGGER_M + 1,
+               "feet_offset_m fills both in one go");
+static void feet_offset_m(const env1_t *v, float out[2])
 {
-    out[0] = (float)(cos(yaw) * x + sin(yaw) * y);
-    out[1] = (float)(-sin(yaw) * x + cos(yaw) * y);
+    double p[2][3], pos[3], quat[4], vel[3];
+    for (int s = 0; s < 2; s++)
+        ps_plant_get_body_pos(v->plant, v->feet[s], p[s]);
+    ps_plant_get_root(v->plant, pos, quat, vel);
+    to_heading(yaw_of(quat), p[0][0] - p[1][0], p[0][1] - p[1][1], out);
 }
 
 /* The critic's privileged state (PS_ENV_INFO_PRIV, ps_env.h, in its order),
@@ -650,6 +665,7 @@ static int step1(const ps_env_t *e, env1_t *v, const float *a, float *obs, float
             expert != NULL && v->cap.phase == PS_CAPTURE_SWING ? 1.0f : 0.0f;
         info[PS_ENV_INFO_QUIET_S] = quiet_s(v);
         info[PS_ENV_INFO_FEET_APART_M] = feet_apart_m(v);
+        feet_offset_m(v, info + PS_ENV_INFO_FEET_STAGGER_M);
         privileged(e, v, info + PS_ENV_INFO_PRIV);
     }
     return rc_next;

@@ -106,7 +106,13 @@ typedef struct {
  * observation's state (added 2026-12-05: a cost on a stance wider than a
  * target, train.py --width-cost) */
 #define PS_ENV_INFO_FEET_APART_M 10
-/* [11 ..] the critic's privileged state (added 2026-12-07: train.py
+/* [11] the left foot body's offset from the right one's along the floating
+ * base's heading (m, > 0: left ahead) and [12] across it (m, > 0: left on
+ * the left), for the new observation's state (added 2026-12-07: a cost on
+ * a staggered stance, train.py --stagger-cost) */
+#define PS_ENV_INFO_FEET_STAGGER_M 11
+#define PS_ENV_INFO_FEET_LATERAL_M 12
+/* [13 ..] the critic's privileged state (added 2026-12-07: train.py
  * --priv-critic), for the new observation's state, from the plant's truth
  * and the episode's draws, which the policy does not observe; horizontal
  * vectors in the frame of the floating base's heading: CoM relative to the
@@ -117,7 +123,7 @@ typedef struct {
  * come); 1 while the harness holds; friction scale; motor strength scale;
  * command latency ms; torso and pelvis mass scales; the torso's CoM offset m
  * (x, y, z) */
-#define PS_ENV_INFO_PRIV 11
+#define PS_ENV_INFO_PRIV 13
 #define PS_ENV_PRIV      21
 
 /** @return 0 | -errno; err holds the reason  @rt INIT */
