@@ -367,6 +367,17 @@ def stats(buf):
             "r_bal": float(info[..., 4].mean()), "r_q": float(info[..., 5].mean())}
 
 
+def residual_cost(is_residual, name, k, param_name, param, param_ok, param_rule):
+    """(k, param) of a residual's reward option --NAME-cost k --NAME-PARAM_NAME
+    param, None when k is 0; exits naming the rule a bad pair breaks."""
+    if k == 0.0:
+        return None
+    if not is_residual or k < 0.0 or not param_ok:
+        raise SystemExit("--%s-cost: a cost (>= 0) on a residual (give --residual), --%s-%s %s"
+                         % (name, name, param_name, param_rule))
+    return (k, param)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -503,24 +514,12 @@ def main():
             raise SystemExit("--swing-cost-joints: %s not among the action joints (%s)"
                              % (",".join(unknown) or "none given", ",".join(ct.LEGS)))
         swing_cost = (a.swing_cost, [ct.LEGS.index(j) for j in names])
-    width_cost = None
-    if a.width_cost != 0.0:
-        if not a.residual or a.width_cost < 0.0 or not a.width_target > 0.0:
-            raise SystemExit("--width-cost: a cost (>= 0) on a residual (give --residual), "
-                             "--width-target > 0")
-        width_cost = (a.width_cost, a.width_target)
-    stagger_cost = None
-    if a.stagger_cost != 0.0:
-        if not a.residual or a.stagger_cost < 0.0 or not a.stagger_tol >= 0.0:
-            raise SystemExit("--stagger-cost: a cost (>= 0) on a residual (give --residual), "
-                             "--stagger-tol >= 0")
-        stagger_cost = (a.stagger_cost, a.stagger_tol)
-    quiet_cost = None
-    if a.quiet_cost != 0.0:
-        if not a.residual or a.quiet_cost < 0.0 or not a.quiet_after >= 0.0:
-            raise SystemExit("--quiet-cost: a cost (>= 0) on a residual (give --residual), "
-                             "--quiet-after >= 0")
-        quiet_cost = (a.quiet_cost, a.quiet_after)
+    width_cost = residual_cost(a.residual, "width", a.width_cost, "target", a.width_target,
+                               a.width_target > 0.0, "> 0")
+    stagger_cost = residual_cost(a.residual, "stagger", a.stagger_cost, "tol", a.stagger_tol,
+                                 a.stagger_tol >= 0.0, ">= 0")
+    quiet_cost = residual_cost(a.residual, "quiet", a.quiet_cost, "after", a.quiet_after,
+                               a.quiet_after >= 0.0, ">= 0")
     fields = ct.OBS_FIELDS_BASE if a.obs_base_action else ct.OBS_FIELDS
     if a.init and a.bc_iters:
         raise SystemExit("--init fine-tunes: give --bc-iters 0")
