@@ -223,17 +223,19 @@ assert 0.1 < flag.mean() < 0.9, flag.mean()
 want = 3.0 * flag * 0.25 * np.abs(b0['act']).sum(-1)
 assert np.allclose(b0['rew'] - b1['rew'], want, atol=1e-6) and want.max() > 0\" \
     && residual_option qc '--quiet-cost 1 --quiet-after 0.5' '--quiet-cost 1 --quiet-after 0.5'"
-name="--width-cost: info gives the feet's distance apart; the cost is on the steps that end wider than the target"
+name="--width-cost: info gives the feet's distance apart; the cost is on the steps that end wider than the target (or closer than --width-min)"
 # info[10] is the horizontal distance between the feet bodies (the
 # controller's stance: 0.16 m); two rollouts of one zero-residual policy
 # differ in reward by k x (distance - target) where the step ends with the
 # feet further apart than the target, the robot standing (before its first
 # push, or 1 s or more after the last disturbance), the expert not in a
-# swing and the episode going on (that step's own info); train.py writes
-# the option into the contract and refuses it without --residual
+# swing and the episode going on (that step's own info), and with
+# --width-min also by k x (min - distance) where it ends closer; train.py
+# writes the options into the contract and refuses --width-cost without
+# --residual, --width-min without --width-cost
 check bash -c "/usr/bin/python3 -c \"$COST_PY
 env_kw = dict(episode_s=2.5, push_dv_max=0.6)
-(b0, i0), (b1, _) = run(200, env_kw), run(200, env_kw, width_cost=(2.0, 0.15))
+(b0, i0), (b1, _) = run(200, env_kw), run(200, env_kw, width_cost=(2.0, 0.15, 0.0))
 assert np.array_equal(b0['act'], b1['act']) and np.array_equal(b0['info'], b1['info'])
 apart = b0['info'][:, :, 10]
 assert abs(i0[0, 10] - 0.16) < 0.005 and apart.max() > 0.2, (i0[:, 10], apart.max())
@@ -242,8 +244,16 @@ standing = (q >= 1.0) | ((q < 0.0) & (i[:, :, 7] == 0))
 assert 0.05 < standing.mean() < 0.95, standing.mean()
 over = np.maximum(0.0, apart - 0.15) * (i[:, :, 8] == 0) * (b0['done'] == 0) * standing
 assert np.allclose(b0['rew'] - b1['rew'], 2.0 * over, atol=1e-6) and (over > 0).sum() > 20, (over > 0).sum()
-assert ((apart > 0.2) & ~standing).any(), 'a step (feet apart) while pushed costs nothing'\" \
-    && residual_option wc '--width-cost 1 --width-target 0.25' '--width-cost 1 --width-target 0.25'"
+assert ((apart > 0.2) & ~standing).any(), 'a step (feet apart) while pushed costs nothing'
+b2 = run(200, env_kw, width_cost=(2.0, 0.20, 0.17))[0]  # --width-min: closer than 0.17 m costs too
+off = np.maximum(0.0, apart - 0.20) + np.maximum(0.0, 0.17 - apart)
+on = (i[:, :, 8] == 0) * (b0['done'] == 0) * standing
+assert np.allclose(b0['rew'] - b2['rew'], 2.0 * off * on, atol=1e-6)
+assert ((apart < 0.17) & on).sum() > 20 and ((apart > 0.20) & on).sum() > 5, 'both sides'\" \
+    && residual_option wc '--width-cost 1 --width-target 0.25' '--width-cost 1 --width-target 0.25' \
+    && residual_option wm '--width-cost 1 --width-target 0.25 --width-min 0.1' '--width-target 0.25 --width-min 0.1' \
+    && ! /usr/bin/python3 policy/train/train.py --ppo-iters 1 --bc-iters 0 --residual --width-min 0.1 \
+    --out $out/wm2.safetensors --log-dir $out/wm2 >$out/wm2.out 2>&1 && grep -q 'width-min: with --width-cost' $out/wm2.out"
 name="--stagger-cost: info gives the feet's offset along and across the heading; the cost is on standing steps staggered beyond the tolerance"
 # info[11] and [12] are the left foot's offset from the right one along and
 # across the floating base's heading (the controller's stance: 0 and 0.16

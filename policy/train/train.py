@@ -196,7 +196,8 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
     (k, s): a residual's cost, k per radian of every joint's residual
     target, on the steps taken s seconds or more after the robot was last
     disturbed (the harness, a push) whose expert action is not a step's.
-    width_cost (k, m): k per metre the feet stand further apart than m
+    width_cost (k, m, n): k per metre the feet stand further apart than m or
+    closer than n
     (horizontal distance between the feet bodies), on the steps that end
     with the robot standing (before its first push, or STANDING_AFTER_S or
     more after the last disturbance) and the expert not stepping.
@@ -245,9 +246,10 @@ def rollout(env, net, norm, obs, n_steps, beta_expert, expert, rng, update_norm=
             quiet = (quiet_s >= after_s) & (swing == 0.0)
             rew = (rew - k * quiet * residual_rad(a)).astype(np.float32)
         if width_cost is not None:
-            k, target_m = width_cost
+            k, target_m, min_m = width_cost
             apart = info[:, psenv.INFO_KEYS.index("feet_apart_m")]
-            over = np.maximum(0.0, apart - target_m) * stands_still(info, done)
+            off = np.maximum(0.0, apart - target_m) + np.maximum(0.0, min_m - apart)
+            over = off * stands_still(info, done)
             rew = (rew - k * over).astype(np.float32)
         if stagger_cost is not None:
             k, tol_m = stagger_cost
@@ -466,6 +468,9 @@ def main():
                          "stepping")
     ap.add_argument("--width-target", type=float, default=0.20,
                     help="metres between the feet from which --width-cost applies")
+    ap.add_argument("--width-min", type=float, default=0.0,
+                    help="with --width-cost: its cost also on feet closer than this many "
+                         "metres (0: none), so that the stance keeps a width between the two")
     ap.add_argument("--stagger-cost", type=float, default=0.0,
                     help="with --residual: a cost, this much reward per metre, on feet "
                          "further apart along the robot's heading than --stagger-tol (one "
@@ -516,6 +521,10 @@ def main():
         swing_cost = (a.swing_cost, [ct.LEGS.index(j) for j in names])
     width_cost = residual_cost(a.residual, "width", a.width_cost, "target", a.width_target,
                                a.width_target > 0.0, "> 0")
+    if a.width_min != 0.0 and (width_cost is None or not 0.0 < a.width_min < a.width_target):
+        raise SystemExit("--width-min: with --width-cost, 0 < --width-min < --width-target")
+    if width_cost is not None:
+        width_cost += (a.width_min,)
     stagger_cost = residual_cost(a.residual, "stagger", a.stagger_cost, "tol", a.stagger_tol,
                                  a.stagger_tol >= 0.0, ">= 0")
     quiet_cost = residual_cost(a.residual, "quiet", a.quiet_cost, "after", a.quiet_after,
@@ -594,7 +603,9 @@ def main():
     if quiet_cost is not None:
         trained_by += " --quiet-cost %g --quiet-after %g" % quiet_cost
     if width_cost is not None:
-        trained_by += " --width-cost %g --width-target %g" % width_cost
+        trained_by += " --width-cost %g --width-target %g" % width_cost[:2]
+        if a.width_min > 0.0:
+            trained_by += " --width-min %g" % a.width_min
     if stagger_cost is not None:
         trained_by += " --stagger-cost %g --stagger-tol %g" % stagger_cost
     if a.ramp_start:
