@@ -559,29 +559,23 @@ static void to_heading(double yaw, double x, double y, float out[2])
     out[1] = (float)(-sin(yaw) * x + cos(yaw) * y);
 }
 
-/* Horizontal distance between the feet bodies: the stance's width and stagger
- * in one number. */
-static float feet_apart_m(const env1_t *v)
-{
-    double p[2][3];
-    for (int s = 0; s < 2; s++)
-        ps_plant_get_body_pos(v->plant, v->feet[s], p[s]);
-    return (float)hypot(p[0][0] - p[1][0], p[0][1] - p[1][1]);
-}
-
-/* The left foot body's place relative to the right one's in the frame of
- * the floating base's heading: out[0] along it (the stance's stagger, > 0
- * with the left foot ahead), out[1] across it (its width, > 0 with the left
- * foot on the left). */
-_Static_assert(PS_ENV_INFO_FEET_LATERAL_M == PS_ENV_INFO_FEET_STAGGER_M + 1,
-               "feet_offset_m fills both in one go");
-static void feet_offset_m(const env1_t *v, float out[2])
+/* The stance, from the feet bodies read once: their horizontal distance
+ * (width and stagger in one number) and the left one's place relative to
+ * the right one's in the frame of the floating base's heading, along it
+ * (the stagger, > 0 with the left foot ahead) and across it (the width,
+ * > 0 with the left foot on the left), into info's three stance fields. */
+_Static_assert(PS_ENV_INFO_FEET_STAGGER_M == PS_ENV_INFO_FEET_APART_M + 1 &&
+                   PS_ENV_INFO_FEET_LATERAL_M == PS_ENV_INFO_FEET_APART_M + 2,
+               "stance fills the three in one go");
+static void stance(const env1_t *v, float out[3])
 {
     double p[2][3], pos[3], quat[4], vel[3];
     for (int s = 0; s < 2; s++)
         ps_plant_get_body_pos(v->plant, v->feet[s], p[s]);
     ps_plant_get_root(v->plant, pos, quat, vel);
-    to_heading(yaw_of(quat), p[0][0] - p[1][0], p[0][1] - p[1][1], out);
+    const double dx = p[0][0] - p[1][0], dy = p[0][1] - p[1][1];
+    out[0] = (float)hypot(dx, dy);
+    to_heading(yaw_of(quat), dx, dy, out + 1);
 }
 
 /* The critic's privileged state (PS_ENV_INFO_PRIV, ps_env.h, in its order),
@@ -664,8 +658,7 @@ static int step1(const ps_env_t *e, env1_t *v, const float *a, float *obs, float
         info[PS_ENV_INFO_EXPERT_SWING] =
             expert != NULL && v->cap.phase == PS_CAPTURE_SWING ? 1.0f : 0.0f;
         info[PS_ENV_INFO_QUIET_S] = quiet_s(v);
-        info[PS_ENV_INFO_FEET_APART_M] = feet_apart_m(v);
-        feet_offset_m(v, info + PS_ENV_INFO_FEET_STAGGER_M);
+        stance(v, info + PS_ENV_INFO_FEET_APART_M);
         privileged(e, v, info + PS_ENV_INFO_PRIV);
     }
     return rc_next;
