@@ -120,6 +120,29 @@ static bool kernel_stamps_monotonic(void)
     return major > 5 || (major == 5 && minor >= 7);
 }
 
+/* Taken after an event read, so every event it took is stamped at or
+ * before read_ns. Kernels < 5.7: REALTIME stamps, moved by the clocks'
+ * difference now (a clock step between the edge and now shifts them:
+ * clamped to the read). */
+typedef struct {
+    int64_t read_ns;
+    int64_t rt_off_ns;
+} event_clock_t;
+
+static event_clock_t event_clock_now(const ps_gpio_gpiod_t *g)
+{
+    const int64_t read_ns = mono_now_ns();
+    return (event_clock_t){.read_ns = read_ns,
+                           .rt_off_ns =
+                               g->is_event_ts_monotonic ? 0 : now_ns_of(CLOCK_REALTIME) - read_ns};
+}
+
+static int64_t event_mono_ns(const event_clock_t *clk, const struct gpiod_line_event *ev)
+{
+    const int64_t t_ns = (int64_t)ev->ts.tv_sec * 1000000000LL + ev->ts.tv_nsec - clk->rt_off_ns;
+    return t_ns > clk->read_ns ? clk->read_ns : t_ns;
+}
+
 static int read_estop(void *ctx, bool *out_pressed_since_last_read)
 {
     ps_gpio_gpiod_t *g = ctx;
@@ -142,16 +165,9 @@ static int read_estop(void *ctx, bool *out_pressed_since_last_read)
                 break;     /* drained */
             return -errno; /* the latch stays: nothing was taken */
         }
-        /* Taken after the read, so every event read is stamped at or before it. */
-        const int64_t read_ns = mono_now_ns();
-        /* Kernels < 5.7: REALTIME stamps, moved by the clocks' difference now
-         * (a clock step between the edge and now shifts them: clamped below). */
-        const int64_t rt_off_ns =
-            g->is_event_ts_monotonic ? 0 : now_ns_of(CLOCK_REALTIME) - read_ns;
+        const event_clock_t clk = event_clock_now(g);
         for (int i = 0; i < n; i++) {
-            int64_t t_ns = (int64_t)ev[i].ts.tv_sec * 1000000000LL + ev[i].ts.tv_nsec - rt_off_ns;
-            if (t_ns > read_ns)
-                t_ns = read_ns;
+            const int64_t t_ns = event_mono_ns(&clk, &ev[i]);
             if (t_ns <= g->level_fix_ns) {
                 g->n_events_covered++;
                 continue; /* the level read of that fix already saw this edge */
@@ -188,18 +204,25 @@ static int read_button(void *ctx, bool *out_pressed_since_last_read)
     if (g->chip == NULL || g->button == NULL)
         return -EBADF;
     struct gpiod_line_event ev[EVENT_BATCH];
-    uint64_t n_edges = 0;
+    uint64_t n_edges = 0, n_new_edges = 0;
     for (unsigned pass = 0; pass < MAX_EVENT_READS; pass++) {
         const int n = gpiod_line_event_read_fd_multiple(g->button_fd, ev, EVENT_BATCH);
         if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK))
             break;
         if (n < 0)
             return -errno;
+        /* An edge stamped before the last level read is in that level
+         * already (a release queued late, after the read that saw it). */
+        const event_clock_t clk = event_clock_now(g);
+        for (int i = 0; i < n; i++)
+            n_new_edges += event_mono_ns(&clk, &ev[i]) > g->button_level_ns ? 1 : 0;
         n_edges += (uint64_t)n;
         if ((unsigned)n < EVENT_BATCH)
             break;
     }
     g->n_button_events += n_edges;
+    g->n_button_events_covered += n_edges - n_new_edges;
+    const int64_t level_ns = mono_now_ns(); /* before the read: edges up to it are in it */
     const int level = gpiod_line_get_value(g->button);
     if (level < 0)
         return -errno;
@@ -207,8 +230,9 @@ static int read_button(void *ctx, bool *out_pressed_since_last_read)
      * released read is a press; two or more edges hold a press whatever the
      * level read last was. */
     *out_pressed_since_last_read =
-        level != 0 || (n_edges > 0 && !g->was_button_pressed) || n_edges >= 2;
+        level != 0 || (n_new_edges > 0 && !g->was_button_pressed) || n_new_edges >= 2;
     g->was_button_pressed = level != 0;
+    g->button_level_ns = level_ns;
     return 0;
 }
 
@@ -439,11 +463,12 @@ static int open_button(ps_gpio_gpiod_t *g, const ps_gpio_cfg_t *cfg, const line_
         return request_failed(g, spec, g->button, "both-edge events", errno, err, err_len);
     g->button_fd = gpiod_line_event_get_fd(g->button);
     const int fl = g->button_fd >= 0 ? fcntl(g->button_fd, F_GETFL) : -1;
+    g->button_level_ns = mono_now_ns();
     const int level = gpiod_line_get_value(g->button);
     if (fl < 0 || fcntl(g->button_fd, F_SETFL, fl | O_NONBLOCK) != 0 || level < 0) {
         const int rc = -errno;
-        ps_err_format(err, err_len, "gpio %s: record button line %u: %s",
-                      gpiod_chip_name(g->chip), g->button_offset, strerror(errno));
+        ps_err_format(err, err_len, "gpio %s: record button line %u: %s", gpiod_chip_name(g->chip),
+                      g->button_offset, strerror(errno));
         return rc;
     }
     g->was_button_pressed = level != 0;

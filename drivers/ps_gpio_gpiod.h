@@ -46,6 +46,9 @@
  * since the last read that can only mean a press happened (the first edge
  * after a read that said released, or two or more edges); no debounce: a
  * bounce only repeats "pressed", and the recorder takes each press once.
+ * Only edges stamped after the last level read count: an edge queued late
+ * (a loaded host, seen in a VM) is already in the level that read saw, and
+ * a late release must not read as a new press.
  *
  * Heartbeat and LED: requested as outputs, initially low/off;
  * set_heartbeat/set_led are one GPIOHANDLE_SET_LINE_VALUES ioctl each. close
@@ -130,13 +133,16 @@ typedef struct {
     struct gpiod_line *estop;
     struct gpiod_line *heartbeat;
     struct gpiod_line *led;
-    struct gpiod_line *button;  /**< the record button; NULL: none */
-    int estop_fd;               /**< the e-stop's event fd, O_NONBLOCK; -1 when closed */
-    int button_fd;              /**< the button's event fd, O_NONBLOCK; -1: none */
-    bool was_button_pressed;    /**< the button's level at the last read_button */
-    uint32_t button_offset;     /**< read-only */
-    uint64_t n_button_events;   /**< read-only: button edge events read */
-    bool is_event_ts_monotonic; /**< kernel >= 5.7: event stamps are CLOCK_MONOTONIC */
+    struct gpiod_line *button; /**< the record button; NULL: none */
+    int estop_fd;              /**< the e-stop's event fd, O_NONBLOCK; -1 when closed */
+    int button_fd;             /**< the button's event fd, O_NONBLOCK; -1: none */
+    bool was_button_pressed;   /**< the button's level at the last read_button */
+    uint32_t button_offset;    /**< read-only */
+    uint64_t n_button_events;  /**< read-only: button edge events read */
+    uint64_t
+        n_button_events_covered; /**< read-only: of those, stamped before the last level read */
+    int64_t button_level_ns;     /**< when the button's level was last read (open or read_button) */
+    bool is_event_ts_monotonic;  /**< kernel >= 5.7: event stamps are CLOCK_MONOTONIC */
     ps_gpio_debounce_t debounce;
     uint32_t estop_offset;         /**< read-only: the lines as resolved at open */
     uint32_t heartbeat_offset;     /**< read-only */
