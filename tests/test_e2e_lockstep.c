@@ -185,14 +185,18 @@ static bool has_transition_cond(uint32_t cond)
     return false;
 }
 
-static void print_transitions(void)
+static void print_records(void)
 {
-    for (unsigned i = 0; i < n_recs; i++)
+    for (unsigned i = 0; i < n_recs; i++) {
+        if (recs[i].kind == PS_REC_REFUSED)
+            print_message("  %.3f s: request 0x%x refused: %s\n",
+                          ps_ns_to_s(recs[i].t_ns - START_NS), recs[i].cond, recs[i].reason);
         if (recs[i].kind == PS_REC_TRANSITION)
             print_message("  %.3f s: %s -> %s (cond 0x%x, %llu overruns)\n",
                           ps_ns_to_s(recs[i].t_ns - START_NS), ps_sm_state_name(recs[i].from_state),
                           ps_sm_state_name(recs[i].state), recs[i].cond,
                           (unsigned long long)recs[i].n_overruns);
+    }
 }
 
 /* Starts the scenario and steps it to t_s, where the robot must be ACTIVE.
@@ -213,9 +217,9 @@ static void start_app_active_at(const char *scenario, double t_s)
         }
         if (app.loop.state == PS_SM_ACTIVE)
             return;
-        print_message("%s: %s, not ACTIVE, at %.2f s (start %d of %d); transitions:\n", scenario,
-                      ps_sm_state_name(app.loop.state), t_s, attempt, HOST_TRIES_MAX);
-        print_transitions();
+        print_message("%s: %s, not ACTIVE, at %.2f s (start %d of %d); transitions and refusals:\n",
+                      scenario, ps_sm_state_name(app.loop.state), t_s, attempt, HOST_TRIES_MAX);
+        print_records();
         if (!has_transition_cond(PS_SM_C_OVERRUN))
             fail_msg("%s: not ACTIVE at %.2f s, and not for overruns", scenario, t_s);
         if (attempt == HOST_TRIES_MAX)
