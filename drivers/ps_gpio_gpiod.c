@@ -92,6 +92,18 @@ bool ps_gpio_debounce_take_pressed(ps_gpio_debounce_t *d)
     return is_pressed;
 }
 
+/* Edge types are not trusted (as the e-stop's): a first edge after a
+ * released read is a press; two or more edges hold a press whatever the
+ * level read last was. One edge queued late changed only the level the last
+ * read saw; two are a whole press that read may have missed, reported
+ * (erring toward pressed, as the e-stop does). */
+bool ps_gpio_button_pressed(bool is_level_pressed, bool was_level_pressed, uint64_t n_new_edges,
+                            uint64_t n_late_edges)
+{
+    return is_level_pressed || (n_new_edges > 0 && !was_level_pressed) || n_new_edges >= 2 ||
+           n_late_edges >= 2;
+}
+
 /* ====================================================================== */
 /* the port                                                               */
 /* ====================================================================== */
@@ -226,11 +238,8 @@ static int read_button(void *ctx, bool *out_pressed_since_last_read)
     const int level = gpiod_line_get_value(g->button);
     if (level < 0)
         return -errno;
-    /* Edge types are not trusted (as the e-stop's): a first edge after a
-     * released read is a press; two or more edges hold a press whatever the
-     * level read last was. */
-    *out_pressed_since_last_read =
-        level != 0 || (n_new_edges > 0 && !g->was_button_pressed) || n_new_edges >= 2;
+    *out_pressed_since_last_read = ps_gpio_button_pressed(level != 0, g->was_button_pressed,
+                                                          n_new_edges, n_edges - n_new_edges);
     g->was_button_pressed = level != 0;
     g->button_level_ns = level_ns;
     return 0;

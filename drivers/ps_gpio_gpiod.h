@@ -46,9 +46,10 @@
  * since the last read that can only mean a press happened (the first edge
  * after a read that said released, or two or more edges); no debounce: a
  * bounce only repeats "pressed", and the recorder takes each press once.
- * Only edges stamped after the last level read count: an edge queued late
- * (a loaded host, seen in a VM) is already in the level that read saw, and
- * a late release must not read as a new press.
+ * An edge stamped before the last level read but queued after it (a loaded
+ * host, seen in a VM) is already in the level that read saw: one such edge
+ * (a late release) is no new press; two or more are a whole press that read
+ * may have missed, and are reported (erring toward pressed).
  *
  * Heartbeat and LED: requested as outputs, initially low/off;
  * set_heartbeat/set_led are one GPIOHANDLE_SET_LINE_VALUES ioctl each. close
@@ -122,6 +123,15 @@ void ps_gpio_debounce_poll(ps_gpio_debounce_t *d, int64_t now_ns);
  *  take (the first: since init); clears the latch  @pre init
  *  @rt RT-SAFE O(1) */
 bool ps_gpio_debounce_take_pressed(ps_gpio_debounce_t *d);
+
+/** The record button's answer to one read (no debounce, see above): pressed
+ *  now, or edges since the last read that can only mean a press happened.
+ *  n_new_edges: edges stamped after the previous level read; n_late_edges:
+ *  edges stamped before it but read only now (one is already in that read's
+ *  level; two or more are a whole press it may have missed).
+ *  @return true: report a press  @rt RT-SAFE O(1), pure */
+bool ps_gpio_button_pressed(bool is_level_pressed, bool was_level_pressed, uint64_t n_new_edges,
+                            uint64_t n_late_edges);
 
 /* ---- the port ------------------------------------------------------------ */
 

@@ -1,7 +1,8 @@
 /*
  * Tests for the e-stop software debounce of drivers/ps_gpio_gpiod
  * (ps_gpio_debounce_*): hand-worked timelines of edges and polls, with a
- * 2 ms debounce (what the real boards use) unless a test says otherwise.
+ * 2 ms debounce (what the real boards use) unless a test says otherwise;
+ * and the record button's rule (ps_gpio_button_pressed), case by case.
  * Times are ms from an arbitrary origin, written as integers of ns through
  * MS()/US(), so every boundary is exact.
  */
@@ -208,6 +209,39 @@ static void test_debounce_press_judged_at_next_edge(void **state)
     assert_true(ps_gpio_debounce_take_pressed(&d));
 }
 
+/* ---- the record button's rule (ps_gpio_button_pressed) ------------------ */
+
+static void test_button_level_or_a_first_edge_after_released_is_a_press(void **state)
+{
+    (void)state;
+    assert_false(ps_gpio_button_pressed(false, false, 0, 0)); /* nothing happened */
+    assert_true(ps_gpio_button_pressed(true, true, 0, 0));    /* held */
+    assert_true(ps_gpio_button_pressed(true, false, 1, 0));   /* pressed since */
+    assert_true(ps_gpio_button_pressed(false, false, 1, 0));  /* a press edge, released again */
+    assert_false(ps_gpio_button_pressed(false, true, 1, 0));  /* the release of a reported press */
+    assert_true(ps_gpio_button_pressed(false, true, 2, 0));   /* released, pressed, released */
+}
+
+/* The CI case: a release edge stamped before the read that saw the button
+ * released arrives only at the next read. Not a new press. */
+static void test_button_one_late_edge_is_no_press(void **state)
+{
+    (void)state;
+    assert_false(ps_gpio_button_pressed(false, false, 0, 1));
+    assert_true(ps_gpio_button_pressed(true, true, 0, 1)); /* held: still pressed */
+}
+
+/* A press and release both between two reads, both queued after the second
+ * read (which saw the button released): reported at the read that gets
+ * them, not lost. */
+static void test_button_two_late_edges_are_a_press(void **state)
+{
+    (void)state;
+    assert_true(ps_gpio_button_pressed(false, false, 0, 2));
+    assert_true(ps_gpio_button_pressed(false, false, 0, 3));
+    assert_false(ps_gpio_button_pressed(false, true, 1, 1)); /* a late press, then its release */
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -222,6 +256,9 @@ int main(void)
         cmocka_unit_test(test_debounce_repeated_level_no_restart),
         cmocka_unit_test(test_debounce_late_edge_taken_at_latest_time),
         cmocka_unit_test(test_debounce_press_judged_at_next_edge),
+        cmocka_unit_test(test_button_level_or_a_first_edge_after_released_is_a_press),
+        cmocka_unit_test(test_button_one_late_edge_is_no_press),
+        cmocka_unit_test(test_button_two_late_edges_are_a_press),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
