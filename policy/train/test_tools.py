@@ -21,6 +21,7 @@ from onnx import TensorProto, helper, numpy_helper
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
+import ensemble  # noqa: E402
 import onnx2policy  # noqa: E402
 import psfile  # noqa: E402
 
@@ -424,6 +425,137 @@ class Malformed(unittest.TestCase):
                     "imported file differs from the graph (%s)" % kind
 
         prop()
+
+
+ROOT = os.path.join(HERE, "..", "..")
+# make train's members in its order (TRAIN_SEEDS 2 5 1: the runs recorded
+# as r16, r39 and r15 in bench/results, docs/policy.md) and the file they
+# average to.
+SHIPPED = os.path.join(ROOT, "policy", "weights", "ps1_stage1.safetensors")
+SHIPPED_MEMBERS = [os.path.join(ROOT, "bench", "results", p) for p in (
+    "swing_cost/r16/r16.safetensors", "train_variants/r39/r39.safetensors",
+    "swing_cost/r15/r15.safetensors")]
+
+
+def member(d, name, rng, hidden, trained_by, **change):
+    """A random policy file of contract(4) with its own normalisation."""
+    c = contract(4)
+    n_obs = len(c["observation"]["mean"])
+    c["observation"]["mean"] = list(0.3 * rng.standard_normal(n_obs))
+    c["observation"]["std"] = list(0.5 + rng.random(n_obs))
+    c["activations"] = ["elu"] * len(hidden) + ["identity"]
+    c["trained_by"] = trained_by
+    c.update(change)
+    sizes = [n_obs] + list(hidden) + [4]
+    layers = [(w, b) for w, b, _ in rand_layers(rng, sizes, c["activations"])]
+    p = os.path.join(d, name)
+    psfile.write_policy(p, layers, c)
+    return p
+
+
+def run_policy(path, x):
+    """The runtime's pass: normalise, clip, MLP (float64 reference)."""
+    t, meta = psfile.read_safetensors(path)
+    c = json.loads(meta[psfile.CONTRACT_KEY])
+    o = c["observation"]
+    z = np.clip((x - np.array(o["mean"])) / np.array(o["std"]), -o["clip"], o["clip"])
+    return psfile.forward(t, z, contract=c)
+
+
+class Ensemble(unittest.TestCase):
+    def setUp(self):
+        self.tmp = tempfile.TemporaryDirectory()
+        self.d = self.tmp.name
+        self.rng = np.random.default_rng(11)
+
+    def tearDown(self):
+        self.tmp.cleanup()
+
+    def test_computes_the_mean_of_its_members(self):
+        cmd = "train.py --seed %d --envs 4"
+        ps = [member(self.d, "m%d.st" % k, self.rng, h, cmd % k)
+              for k, h in enumerate([(16, 16), (8, 24), (16, 16)])]
+        out = os.path.join(self.d, "e.st")
+        layers = ensemble.ensemble(ps, out)
+        self.assertEqual([w.shape for w, _ in layers], [(40, 15), (56, 40), (4, 56)])
+        t, meta = psfile.read_safetensors(out)
+        c = json.loads(meta[psfile.CONTRACT_KEY])
+        self.assertEqual(c["observation"]["mean"], json.loads(psfile.read_safetensors(ps[0])[1][
+            psfile.CONTRACT_KEY])["observation"]["mean"])
+        self.assertEqual(c["trained_by"], "policy/train/ensemble.py, the mean of 3 policies: "
+                         "train.py --seed 0 --envs 4; and with --seed 1; and with --seed 2")
+        # observations within every member's clip: |x - mean| < 2.5, std >= 0.5, clip 5
+        x = self.rng.uniform(-1.0, 1.0, (50, 15))
+        want = np.mean([run_policy(p, x) for p in ps], axis=0)
+        got = run_policy(out, x)
+        self.assertLess(np.abs(got - want).max(), 1e-5)
+        # one member alone differs from the mean by far more
+        self.assertGreater(np.abs(run_policy(ps[0], x) - want).max(), 1e-2)
+
+    def test_same_members_same_bytes(self):
+        ps = [member(self.d, "m%d.st" % k, self.rng, (8, 8), "a") for k in range(2)]
+        a, b = os.path.join(self.d, "a.st"), os.path.join(self.d, "b.st")
+        ensemble.ensemble(ps, a)
+        ensemble.ensemble(ps, b)
+        self.assertEqual(open(a, "rb").read(), open(b, "rb").read())
+
+    def test_trained_by_in_full_where_more_than_options_differ(self):
+        self.assertEqual(ensemble.describe(["x --seed 1", "y --seed 2"]),
+                         "policy/train/ensemble.py, the mean of 2 policies: x --seed 1; "
+                         "and y --seed 2")
+        self.assertEqual(ensemble.describe(["x --seed 1", "x --seed 1 --more"]),
+                         "policy/train/ensemble.py, the mean of 2 policies: x --seed 1; "
+                         "and x --seed 1 --more")
+
+    def test_refuses_members_that_differ(self):
+        base = member(self.d, "base.st", self.rng, (8, 8), "a")
+        c = contract(4)
+        cases = {
+            "joints": {"joints": ["j1", "j0", "j2", "j3"]},
+            "activations": {"activations": ["relu", "elu", "identity"]},
+            "policy_hz": {"policy_hz": 100},
+            "observation.clip": {"observation": dict(c["observation"], clip=3.0)},
+            "action": {"action": dict(c["action"], scale=[0.2] * 4)},
+        }
+        for what, change in cases.items():
+            other = member(self.d, "o.st", self.rng, (8, 8), "a", **change)
+            out = os.path.join(self.d, "e.st")
+            with self.assertRaises(ensemble.Refused) as e:
+                ensemble.ensemble([base, other], out)
+            self.assertIn("contract %s differs" % what, str(e.exception))
+            self.assertFalse(os.path.exists(out))
+
+    def test_refuses_adapters_one_member_and_a_non_policy(self):
+        base = member(self.d, "base.st", self.rng, (8, 8), "a")
+        t, meta = psfile.read_safetensors(base)
+        c = json.loads(meta[psfile.CONTRACT_KEY])
+        layers = [(t["base.%d.weight" % k], t["base.%d.bias" % k]) for k in range(3)]
+        adapted = os.path.join(self.d, "adapted.st")
+        psfile.write_policy(adapted, layers, c, adapters={1: (np.zeros((8, 8)), None)})
+        with self.assertRaisesRegex(ensemble.Refused, "adapted.st: has adapt.1.weight"):
+            ensemble.ensemble([base, adapted], os.path.join(self.d, "e.st"))
+        with self.assertRaisesRegex(ensemble.Refused, "needs 2 or more policy files, 1 given"):
+            ensemble.ensemble([base], os.path.join(self.d, "e.st"))
+        junk = os.path.join(self.d, "junk.st")
+        open(junk, "wb").write(b"\x08" + b"\0" * 7 + b"{}      ")
+        with self.assertRaisesRegex(ensemble.Refused, "junk.st: not a policy file"):
+            ensemble.ensemble([base, junk], os.path.join(self.d, "e.st"))
+
+    def test_cli_refusal_exit_status(self):
+        import subprocess
+        base = member(self.d, "base.st", self.rng, (8, 8), "a")
+        out = os.path.join(self.d, "e.st")
+        r = subprocess.run([sys.executable, os.path.join(HERE, "ensemble.py"), "--out", out, base],
+                           capture_output=True, text=True)
+        self.assertEqual(r.returncode, 1)
+        self.assertTrue(r.stderr.startswith("ensemble.py: refused: an ensemble needs 2"), r.stderr)
+        self.assertFalse(os.path.exists(out))
+
+    def test_shipped_file_is_make_trains_ensemble_of_its_members(self):
+        out = os.path.join(self.d, "shipped.st")
+        ensemble.ensemble(SHIPPED_MEMBERS, out)
+        self.assertEqual(open(out, "rb").read(), open(SHIPPED, "rb").read(),
+                         "policy/weights/ps1_stage1.safetensors is not ensemble.py of its members")
 
 
 def main():
