@@ -41,13 +41,7 @@ fi
 {
     echo "["
     first=1
-    # the issue's probe net, one member of the shipped ensemble and the shipped
-    # file's own shape (its layers' sizes, read from the safetensors header)
-    shipped=$(python3 -c 'import json, struct, sys
-f = open(sys.argv[1], "rb"); h = json.loads(f.read(struct.unpack("<Q", f.read(8))[0]))
-w = [h["base.%d.weight" % k]["shape"] for k in range(sum(1 for n in h if n.startswith("base.") and n.endswith(".weight")))]
-print(",".join(str(n) for n in [w[0][1]] + [s[0] for s in w]))' "$WEIGHTS" 2>/dev/null || true)
-    for net in 100,256,256,128,20 77,128,128,12 $shipped; do
+    for net in 100,256,256,128,20 77,128,128,12; do
         c=$(OPENBLAS_NUM_THREADS=1 build/bench/infer_c $net build/bench/w.bin)
         t='{}'
         [ $has_torch = 1 ] && t=$(OMP_NUM_THREADS=1 build/bench/infer_torch $net build/bench/w.bin)

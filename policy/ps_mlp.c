@@ -24,10 +24,16 @@ int ps_mlp_act_find(const char *name)
     return -ENOENT;
 }
 
+static uint32_t groups_of(const ps_mlp_dense_desc_t *l)
+{
+    return l->n_groups > 1u ? l->n_groups : 1u;
+}
+
 static bool is_dense_ok(const ps_mlp_dense_desc_t *l)
 {
+    const uint32_t g = groups_of(l);
     return l->w != NULL && l->n_in >= 1u && l->n_out >= 1u && l->n_in <= PS_MLP_MAX_WIDTH &&
-           l->n_out <= PS_MLP_MAX_WIDTH;
+           l->n_out <= PS_MLP_MAX_WIDTH && l->n_in % g == 0u && l->n_out % g == 0u;
 }
 
 static bool is_desc_ok(const ps_mlp_desc_t *d)
@@ -42,14 +48,15 @@ static bool is_desc_ok(const ps_mlp_desc_t *d)
         if (k > 0 && l->n_in != d->base[k - 1].n_out)
             return false;
         const ps_mlp_dense_desc_t *a = &d->adapt[k];
-        if (a->w != NULL && (a->n_in != l->n_in || a->n_out != l->n_out))
+        if (a->w != NULL && (a->n_in != l->n_in || a->n_out != l->n_out || groups_of(a) != 1u))
             return false;
     }
     if (d->n_embed > 0) {
         if (d->inject_layer >= d->n_layers)
             return false;
         for (uint32_t j = 0; j < d->n_embed; j++) {
-            if (!is_dense_ok(&d->embed[j]) || (unsigned)d->embed_act[j] >= PS_MLP_ACT_COUNT)
+            if (!is_dense_ok(&d->embed[j]) || groups_of(&d->embed[j]) != 1u ||
+                (unsigned)d->embed_act[j] >= PS_MLP_ACT_COUNT)
                 return false;
             if (j > 0 && d->embed[j].n_in != d->embed[j - 1].n_out)
                 return false;
@@ -62,7 +69,7 @@ static bool is_desc_ok(const ps_mlp_desc_t *d)
 
 static size_t dense_floats(const ps_mlp_dense_desc_t *l)
 {
-    return l->w != NULL ? (size_t)l->n_in * l->n_out + l->n_out : 0u;
+    return l->w != NULL ? (size_t)l->n_in * l->n_out / groups_of(l) + l->n_out : 0u;
 }
 
 static uint32_t max_width(const ps_mlp_desc_t *d)
@@ -89,23 +96,27 @@ size_t ps_mlp_arena_floats(const ps_mlp_desc_t *d)
     return n;
 }
 
-/* Copy one layer, transposed, from *cursor on. */
+/* Copy one layer, each group's block transposed, from *cursor on. */
 static void take_dense(const ps_mlp_dense_desc_t *src, ps_mlp_dense_t *dst, float **cursor)
 {
     dst->n_in = src->n_in;
     dst->n_out = src->n_out;
+    dst->n_groups = groups_of(src);
     if (src->w == NULL) {
         dst->w_t = NULL;
         dst->b = NULL;
         return;
     }
+    const uint32_t gi = src->n_in / dst->n_groups, go = src->n_out / dst->n_groups;
     dst->w_t = *cursor;
-    *cursor += (size_t)src->n_in * src->n_out;
+    *cursor += (size_t)gi * src->n_out;
     dst->b = *cursor;
     *cursor += src->n_out;
-    for (uint32_t o = 0; o < src->n_out; o++)
-        for (uint32_t i = 0; i < src->n_in; i++)
-            dst->w_t[(size_t)i * src->n_out + o] = src->w[(size_t)o * src->n_in + i];
+    for (uint32_t o = 0; o < src->n_out; o++) {
+        float *block = dst->w_t + (size_t)(o / go) * gi * go; /* output o's group */
+        for (uint32_t i = 0; i < gi; i++)
+            block[(size_t)i * go + o % go] = src->w[(size_t)o * gi + i];
+    }
     if (src->b != NULL)
         memcpy(dst->b, src->b, src->n_out * sizeof(float));
     else
@@ -159,12 +170,12 @@ int ps_mlp_init(ps_mlp_t *m, const ps_mlp_desc_t *d, float *arena, size_t n_floa
 #define PS_MLP_CLONES
 #endif
 PS_MLP_CLONES
-static void dense_acc(const ps_mlp_dense_t *l, const float *restrict x, float *restrict y)
+static void block_acc(const float *w_t, uint32_t n_in, uint32_t n_out, const float *restrict x,
+                      float *restrict y)
 {
-    const uint32_t n_out = l->n_out;
     uint32_t i = 0;
-    for (; i + 8u <= l->n_in; i += 8u) {
-        const float *restrict r0 = l->w_t + (size_t)i * n_out;
+    for (; i + 8u <= n_in; i += 8u) {
+        const float *restrict r0 = w_t + (size_t)i * n_out;
         const float *restrict r1 = r0 + n_out;
         const float *restrict r2 = r1 + n_out;
         const float *restrict r3 = r2 + n_out;
@@ -187,12 +198,23 @@ static void dense_acc(const ps_mlp_dense_t *l, const float *restrict x, float *r
             y[o] = acc;
         }
     }
-    for (; i < l->n_in; i++) {
+    for (; i < n_in; i++) {
         const float xi = x[i];
-        const float *restrict row = l->w_t + (size_t)i * n_out;
+        const float *restrict row = w_t + (size_t)i * n_out;
         for (uint32_t o = 0; o < n_out; o++)
             y[o] += row[o] * xi;
     }
+}
+
+/* y += W x, a grouped layer block by block: each output's terms in the order
+ * of its own inputs, as the block-diagonal dense layer sums them (its other
+ * terms are products with zero, which leave a sum unchanged), so grouping
+ * changes no result. */
+static void dense_acc(const ps_mlp_dense_t *l, const float *x, float *y)
+{
+    const uint32_t gi = l->n_in / l->n_groups, go = l->n_out / l->n_groups;
+    for (uint32_t g = 0; g < l->n_groups; g++)
+        block_acc(l->w_t + (size_t)g * gi * go, gi, go, x + (size_t)g * gi, y + (size_t)g * go);
 }
 
 static void add_vec(float *restrict y, const float *restrict b, uint32_t n)

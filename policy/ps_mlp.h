@@ -33,8 +33,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define PS_MLP_MAX_LAYERS 8u   /**< base layers */
-#define PS_MLP_MAX_EMBED  4u   /**< embedding layers of the latent injection */
+#define PS_MLP_MAX_LAYERS 8u    /**< base layers */
+#define PS_MLP_MAX_EMBED  4u    /**< embedding layers of the latent injection */
 #define PS_MLP_MAX_WIDTH  2048u /**< widest input, output or hidden vector */
 
 typedef enum {
@@ -47,19 +47,24 @@ typedef enum {
     PS_MLP_ACT_COUNT
 } ps_mlp_act_t;
 
-/** One dense layer as described (PyTorch layout). */
+/** One dense layer as described (PyTorch layout). A grouped layer (n_groups
+ *  G > 1, as torch.nn.Conv1d's groups) is G dense blocks side by side: output
+ *  block g (n_out / G outputs) reads input block g (n_in / G inputs) only,
+ *  the block-diagonal matrix without its zeros (the hidden layers of an
+ *  ensemble, policy/train/ensemble.py). */
 typedef struct {
     uint32_t n_in, n_out;
-    const float *w; /**< [n_out][n_in]; NULL in adapt[k]: no adapter at layer k */
-    const float *b; /**< [n_out]; NULL: no bias */
+    const float *w;    /**< [n_out][n_in / G]; NULL in adapt[k]: no adapter at layer k */
+    const float *b;    /**< [n_out]; NULL: no bias */
+    uint32_t n_groups; /**< G; 0 or 1: dense. Base layers only */
 } ps_mlp_dense_desc_t;
 
 typedef struct {
     uint32_t n_layers; /**< 1..PS_MLP_MAX_LAYERS */
     ps_mlp_dense_desc_t base[PS_MLP_MAX_LAYERS];
-    ps_mlp_act_t act[PS_MLP_MAX_LAYERS]; /**< after each base layer */
+    ps_mlp_act_t act[PS_MLP_MAX_LAYERS];          /**< after each base layer */
     ps_mlp_dense_desc_t adapt[PS_MLP_MAX_LAYERS]; /**< same shape as base[k], or w NULL */
-    uint32_t n_embed; /**< 0: no latent injection */
+    uint32_t n_embed;                             /**< 0: no latent injection */
     ps_mlp_dense_desc_t embed[PS_MLP_MAX_EMBED];
     ps_mlp_act_t embed_act[PS_MLP_MAX_EMBED];
     uint32_t inject_layer; /**< embed output is added to this base layer's pre-activation */
@@ -67,8 +72,8 @@ typedef struct {
 
 /** A dense layer as the engine holds it (read-only). */
 typedef struct {
-    uint32_t n_in, n_out;
-    float *w_t; /**< [n_in][n_out]: transposed; NULL: absent */
+    uint32_t n_in, n_out, n_groups;
+    float *w_t; /**< per group [n_in / G][n_out / G]: transposed; NULL: absent */
     float *b;   /**< [n_out], zeros when the description had none */
 } ps_mlp_dense_t;
 
@@ -88,6 +93,8 @@ size_t ps_mlp_arena_floats(const ps_mlp_desc_t *d);
 /** Check d, copy its weights (transposed) and biases into arena.
  *  Valid: 1..MAX layers, base[0].n_in >= 1, each layer's n_in equal to the
  *  previous n_out, widths <= PS_MLP_MAX_WIDTH, every base weight present,
+ *  each base layer's n_in and n_out multiples of its n_groups (adapters and
+ *  embedding layers dense),
  *  activations inside the enum, each adapt[k] either absent (w NULL) or the
  *  shape of base[k]; with n_embed > 0: inject_layer < n_layers, the embedding
  *  layers chained and the last one's n_out equal to base[inject_layer].n_out.

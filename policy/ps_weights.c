@@ -104,11 +104,28 @@ static int expect_n(const char *key, uint32_t got, uint32_t want, char *err, siz
     return -EINVAL;
 }
 
-/* Activations of the layers. */
+/* Activations and groups of the layers. */
 typedef struct {
     ps_mlp_act_t act[PS_MLP_MAX_LAYERS], embed_act[PS_MLP_MAX_EMBED];
     uint32_t n_act, n_embed_act, inject_layer;
+    uint32_t groups[PS_MLP_MAX_LAYERS], n_groups; /**< n_groups 0: every layer dense */
 } net_spec_t;
+
+/* "groups": one whole number >= 1 per base layer (optional). */
+static int get_groups(const cJSON *o, net_spec_t *ns, char *err, size_t err_len)
+{
+    float g[PS_MLP_MAX_LAYERS];
+    int rc = get_floats(o, "groups", g, PS_MLP_MAX_LAYERS, &ns->n_groups, err, err_len);
+    for (uint32_t k = 0; rc == 0 && k < ns->n_groups; k++) {
+        if (!(g[k] >= 1.0f && g[k] <= (float)PS_MLP_MAX_WIDTH && g[k] == floorf(g[k]))) {
+            ps_err_format(err, err_len, "contract: groups[%u] is %g, not a whole number >= 1", k,
+                          (double)g[k]);
+            return -EINVAL;
+        }
+        ns->groups[k] = (uint32_t)g[k];
+    }
+    return rc;
+}
 
 static int get_acts(const cJSON *o, const char *key, ps_mlp_act_t *out, uint32_t n_max,
                     uint32_t *out_n, char *err, size_t err_len)
@@ -259,6 +276,8 @@ static int parse_contract(const char *json, ps_weights_contract_t *c, net_spec_t
     if (rc == 0 && ea != NULL)
         rc = get_acts(root, "embed_activations", ns->embed_act, PS_MLP_MAX_EMBED, &ns->n_embed_act,
                       err, err_len);
+    if (rc == 0 && cJSON_GetObjectItemCaseSensitive(root, "groups") != NULL)
+        rc = get_groups(root, ns, err, err_len);
     if (rc == 0 && cJSON_GetObjectItemCaseSensitive(root, "inject_layer") != NULL) {
         rc = get_number(root, "inject_layer", 0, PS_MLP_MAX_LAYERS - 1, &v, err, err_len);
         ns->inject_layer = (uint32_t)v;
@@ -385,6 +404,26 @@ static int build_desc(const ps_st_file_t *st, const net_spec_t *ns, ps_mlp_desc_
                       "embedding layers",
                       ns->n_act, d->n_layers, ns->n_embed_act, d->n_embed);
         return -EINVAL;
+    }
+    if (ns->n_groups != 0 && ns->n_groups != d->n_layers) {
+        ps_err_format(err, err_len, "contract: %u groups for %u base layers", ns->n_groups,
+                      d->n_layers);
+        return -EINVAL;
+    }
+    /* a grouped layer's weight is [out, in / G]: its input is G times wider */
+    for (uint32_t k = 0; k < ns->n_groups; k++) {
+        ps_mlp_dense_desc_t *l = &d->base[k];
+        const uint64_t n_in = (uint64_t)l->n_in * ns->groups[k];
+        if (n_in > PS_MLP_MAX_WIDTH || l->n_out % ns->groups[k] != 0u) {
+            ps_err_format(err, err_len,
+                          "tensor base.%u.weight: [%u, %u] in %u groups (inputs %llu, at most "
+                          "%u; outputs a multiple of the groups)",
+                          k, l->n_out, l->n_in, ns->groups[k], (unsigned long long)n_in,
+                          PS_MLP_MAX_WIDTH);
+            return -EINVAL;
+        }
+        l->n_in = (uint32_t)n_in;
+        l->n_groups = ns->groups[k];
     }
     memcpy(d->act, ns->act, sizeof(d->act));
     memcpy(d->embed_act, ns->embed_act, sizeof(d->embed_act));

@@ -25,6 +25,8 @@
  *                      (q_capture - stance) / scale clipped to clip, computed
  *                      in the same step: policy/ps_mlp_policy.h)
  *   activations        one per base layer ("elu", "relu", ... ps_mlp.h)
+ *   groups             optional, one per base layer: 1 dense, G > 1 a grouped
+ *                      layer whose base.K.weight is [out, in / G] (ps_mlp.h)
  *   embed_activations  one per embedding layer; inject_layer; extra_size
  *   trained_by         the command and seed that made it (informative)
  * Loading checks the file (ps_safetensors), every value of every tensor

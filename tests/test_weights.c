@@ -268,6 +268,96 @@ static void test_ps_weights_load_refuses_bad_contracts(void **st)
                         "tensor base.1.weight is missing");
 }
 
+/* contract "groups": one whole number per base layer; a grouped layer's
+ * weight is [out, in / G], so its input is G times its weight's width. */
+static void test_ps_weights_groups(void **st)
+{
+    (void)st;
+    static const char ACT[] = "\\\"activations\\\"";
+    char path[128], err[512] = "";
+    edited(ACT, "\\\"groups\\\": [1, 1, 1], \\\"activations\\\"", path, sizeof(path));
+    ps_weights_t w;
+    if (ps_weights_load(&w, path, err, sizeof(err)) != 0)
+        fail_msg("%s", err);
+    assert_int_equal(w.mlp.base[1].n_groups, 1);
+    assert_int_equal(w.mlp.base[1].n_in, 64);
+    ps_weights_free(&w);
+    static const struct {
+        const char *groups, *text;
+    } BAD[] = {
+        {"[1, 0, 1]", "contract: groups[1] is 0, not a whole number >= 1"},
+        {"[1, 1.5, 1]", "contract: groups[1] is 1.5, not a whole number >= 1"},
+        {"[1, 1]", "contract: 2 groups for 3 base layers"},
+        {"\\\"x\\\"", "contract: groups is not a list"},
+        /* base.1.weight [64, 64] in 3 groups: 192 inputs, 64 outputs not a multiple */
+        {"[1, 3, 1]", "tensor base.1.weight: [64, 64] in 3 groups (inputs 192"},
+        /* in 2 groups it takes 128 inputs, where base.0 gives 64 */
+        {"[1, 2, 1]", "the layers do not chain"},
+    };
+    for (size_t i = 0; i < sizeof(BAD) / sizeof(BAD[0]); i++) {
+        char to[128];
+        snprintf(to, sizeof(to), "\\\"groups\\\": %s, \\\"activations\\\"", BAD[i].groups);
+        expect_load_refused(ACT, to, -EINVAL, BAD[i].text);
+    }
+}
+
+/* The shipped policy is the mean of its three members (make train's
+ * TRAIN_SEEDS 2 5 1, recorded in bench/results: docs/policy.md), its hidden
+ * layer grouped: run in this engine, on observations around the first
+ * member's mean, it gives the mean of the members' actions, each member
+ * normalising the observation its own way (policy/train/ensemble.py folds
+ * that into the first layer). */
+static void test_ps_weights_shipped_file_is_the_mean_of_its_members(void **st)
+{
+    (void)st;
+    static const char *const MEMBERS[3] = {
+        "bench/results/swing_cost/r16/r16.safetensors",
+        "bench/results/train_variants/r39/r39.safetensors",
+        "bench/results/swing_cost/r15/r15.safetensors",
+    };
+    static ps_weights_t ens, mem[3];
+    char err[512];
+    if (ps_weights_load(&ens, "policy/weights/ps1_stage1.safetensors", err, sizeof(err)) != 0)
+        fail_msg("%s", err);
+    for (int k = 0; k < 3; k++)
+        if (ps_weights_load(&mem[k], MEMBERS[k], err, sizeof(err)) != 0)
+            fail_msg("%s", err);
+    assert_int_equal(ens.mlp.base[1].n_groups, 3);
+    assert_int_equal(ens.mlp.base[1].n_in, 3 * mem[0].mlp.base[1].n_in);
+    const ps_weights_contract_t *c0 = &ens.contract;
+    uint32_t seed = 3u;
+    double worst = 0.0, spread = 0.0;
+    for (int r = 0; r < 50; r++) {
+        float x[PS_OBS_MAX], z[PS_OBS_MAX], out[PS_MAX_JOINTS], mean[PS_MAX_JOINTS] = {0};
+        for (uint32_t i = 0; i < c0->n_obs; i++) {
+            seed = seed * 1664525u + 1013904223u;
+            const float u = (float)((int32_t)(seed >> 8) % 2001 - 1000) * 2e-3f; /* +-2 */
+            x[i] = c0->obs_mean[i] + c0->obs_std[i] * u;
+            z[i] = u;
+        }
+        assert_int_equal(ps_mlp_forward(&ens.mlp, z, NULL, out), 0);
+        for (int k = 0; k < 3; k++) {
+            float zk[PS_OBS_MAX], ok[PS_MAX_JOINTS];
+            for (uint32_t i = 0; i < c0->n_obs; i++)
+                zk[i] = (x[i] - mem[k].contract.obs_mean[i]) / mem[k].contract.obs_std[i];
+            assert_int_equal(ps_mlp_forward(&mem[k].mlp, zk, NULL, ok), 0);
+            for (uint32_t o = 0; o < c0->n_act; o++) {
+                mean[o] += ok[o] / 3.0f;
+                spread = fmax(spread, fabs((double)ok[o] - (double)out[o]));
+            }
+        }
+        for (uint32_t o = 0; o < c0->n_act; o++)
+            worst = fmax(worst, fabs((double)out[o] - (double)mean[o]));
+    }
+    if (!(worst < 1e-5) || !(spread > 1e-2))
+        fail_msg("ensemble against the members' mean: worst %g (want < 1e-5); a member "
+                 "alone differs by up to %g (want > 1e-2)",
+                 worst, spread);
+    for (int k = 0; k < 3; k++)
+        ps_weights_free(&mem[k]);
+    ps_weights_free(&ens);
+}
+
 static void servo_of(const ps_weights_contract_t *c, ps_servo_joint_cfg_t *s,
                      char (*names)[PS_NAME_LEN])
 {
@@ -324,6 +414,8 @@ int main(void)
         cmocka_unit_test(test_ps_weights_action_base),
         cmocka_unit_test(test_ps_weights_base_action_field_with_capture),
         cmocka_unit_test(test_ps_weights_check_robot_names_each_difference),
+        cmocka_unit_test(test_ps_weights_groups),
+        cmocka_unit_test(test_ps_weights_shipped_file_is_the_mean_of_its_members),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }

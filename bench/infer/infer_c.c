@@ -62,7 +62,7 @@ int main(int argc, char **argv)
             b[k][i] = frand() * 0.1f;
         fwrite(w[k], sizeof(float), sz[k] * sz[k + 1], f);
         fwrite(b[k], sizeof(float), sz[k + 1], f);
-        d.base[k] = (ps_mlp_dense_desc_t){sz[k], sz[k + 1], w[k], b[k]};
+        d.base[k] = (ps_mlp_dense_desc_t){sz[k], sz[k + 1], w[k], b[k], 1};
         d.act[k] = k + 1 < nl ? PS_MLP_ACT_ELU : PS_MLP_ACT_IDENTITY;
     }
     float in[1024], out_e[1024], out_b[1024], h0[1024], h1[1024];
@@ -91,8 +91,8 @@ int main(int argc, char **argv)
                 for (uint32_t k = 0; k < nl; k++) {
                     float *y = k + 1 == nl ? out_b : bufs[k & 1];
                     memcpy(y, b[k], sz[k + 1] * sizeof(float));
-                    cblas_sgemv(CblasRowMajor, CblasNoTrans, (int)sz[k + 1], (int)sz[k], 1.0f,
-                                w[k], (int)sz[k], x, 1, 1.0f, y, 1);
+                    cblas_sgemv(CblasRowMajor, CblasNoTrans, (int)sz[k + 1], (int)sz[k], 1.0f, w[k],
+                                (int)sz[k], x, 1, 1.0f, y, 1);
                     if (k + 1 < nl)
                         for (uint32_t i = 0; i < sz[k + 1]; i++)
                             y[i] = y[i] > 0.0f ? y[i] : expm1f(y[i]);

@@ -11,8 +11,10 @@ adapters or embeddings. The file written computes the mean of the members' outpu
 first layer stacks the members' first layers, each member's input
 normalisation folded into its rows so that all read the first member's
 normalised observation; its hidden layers are block-diagonal (each member
-sees only its own units); its last layer is the members' last layers side by
-side, divided by their number. Exact wherever no normalised observation
+sees only its own units): grouped layers (contract "groups", policy/ps_mlp.h)
+where the members' widths agree, which hold and compute the blocks alone,
+else dense ones with the zeros; its last layer is the members' last layers
+side by side, divided by their number. Exact wherever no normalised observation
 reaches the clip (10 standard deviations in make train's files), up to
 float32 rounding. Why an ensemble: runs of one recipe that differ only in
 their seed hold different pushes (docs/policy.md, "An ensemble of seeds"),
@@ -51,6 +53,8 @@ def load(path):
     extra = sorted(k for k in t if not k.startswith("base."))
     if extra:
         raise Refused("%s: has %s; only plain MLPs (base.K layers) can be averaged" % (path, extra[0]))
+    if any(g != 1 for g in c.get("groups", [])):
+        raise Refused("%s: has grouped layers (an ensemble?); only plain MLPs can be averaged" % path)
     n = len(c.get("activations", []))
     for k in range(n):
         if "base.%d.weight" % k not in t:
@@ -77,8 +81,16 @@ def layer(t, k):
     return w, (np.zeros(w.shape[0]) if b is None else b.astype(np.float64))
 
 
-def merge_layers(members):
-    """The ensemble's (W, b) list, float64 (psfile writes float32)."""
+def same_widths(members):
+    t0 = members[0][0]
+    n = len(members[0][1]["activations"])
+    return all(t["base.%d.weight" % k].shape == t0["base.%d.weight" % k].shape
+               for t, _ in members for k in range(n))
+
+
+def merge_layers(members, grouped):
+    """The ensemble's (W, b) list, float64 (psfile writes float32); with
+    grouped, the hidden layers as [K * out, in] weights of K groups."""
     c0 = members[0][1]
     mean0 = np.array(c0["observation"]["mean"], np.float64)
     std0 = np.array(c0["observation"]["std"], np.float64)
@@ -97,7 +109,7 @@ def merge_layers(members):
         if k == n_layers - 1:
             w = np.concatenate(ws, axis=1) / len(members)
             b = np.sum(bs, axis=0) / len(members)
-        elif k == 0:
+        elif k == 0 or grouped:
             w, b = np.concatenate(ws, axis=0), np.concatenate(bs)
         else:
             w = np.zeros((sum(x.shape[0] for x in ws), sum(x.shape[1] for x in ws)))
@@ -134,7 +146,13 @@ def ensemble(paths, out):
     c = dict(members[0][1])
     c["trained_by"] = describe([m[1].get("trained_by", os.path.basename(p))
                                 for p, m in zip(paths, members)])
-    layers = [(w.astype(np.float32), b.astype(np.float32)) for w, b in merge_layers(members)]
+    grouped = same_widths(members)
+    n_layers = len(c["activations"])
+    c.pop("groups", None)
+    if grouped and n_layers > 2:
+        c["groups"] = [1] + [len(members)] * (n_layers - 2) + [1]
+    layers = [(w.astype(np.float32), b.astype(np.float32))
+              for w, b in merge_layers(members, grouped)]
     psfile.write_policy(out, layers, c)
     return layers
 
@@ -151,7 +169,7 @@ def main():
     except Refused as e:
         print("ensemble.py: refused: %s" % e, file=sys.stderr)
         return 1
-    print("%s: the mean of %d policies, layers %s" % (
+    print("%s: the mean of %d policies, layer weights %s" % (
         a.out, len(a.members), " ".join("%dx%d" % w.shape for w, _ in layers)))
     return 0
 

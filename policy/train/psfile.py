@@ -71,10 +71,13 @@ def write_policy(path, layers, contract, adapters=None, embed=None):
     embed: list of (W, b). contract: dict (checked for consistency here)."""
     c = dict(contract)
     c.setdefault("version", VERSION)
+    groups = c.get("groups", [1] * len(layers))
+    if len(groups) != len(layers):
+        raise ValueError("%d groups for %d layers" % (len(groups), len(layers)))
     n_obs = obs_size(c["observation"]["fields"], len(c["joints"]), len(c["action"]["joints"]))
-    if layers[0][0].shape[1] != n_obs:
+    if layers[0][0].shape[1] * groups[0] != n_obs:
         raise ValueError("first layer takes %d inputs, the observation has %d"
-                         % (layers[0][0].shape[1], n_obs))
+                         % (layers[0][0].shape[1] * groups[0], n_obs))
     if layers[-1][0].shape[0] != len(c["action"]["joints"]):
         raise ValueError("last layer gives %d outputs, %d actions"
                          % (layers[-1][0].shape[0], len(c["action"]["joints"])))
@@ -112,6 +115,16 @@ def act(name, x):
     raise ValueError(name)
 
 
+def grouped(h, w, g):
+    """h @ W^T for a layer in g groups (contract "groups", policy/ps_mlp.h):
+    W is [out, in / g]; output block j reads input block j only."""
+    if g == 1:
+        return h @ w.T
+    hs = np.split(h, g, axis=-1)
+    ws = np.split(w, g, axis=0)
+    return np.concatenate([a @ b.T for a, b in zip(hs, ws)], axis=-1)
+
+
 def forward(path_or_tensors, x, extra=None, contract=None):
     """numpy reference forward pass of a policy file (float64)."""
     if isinstance(path_or_tensors, str):
@@ -131,8 +144,10 @@ def forward(path_or_tensors, x, extra=None, contract=None):
             e = act(contract["embed_activations"][j], e)
             j += 1
         inj = e
+    groups = contract.get("groups", [1] * len(acts))
     for k in range(len(acts)):
-        y = h @ t["base.%d.weight" % k].T.astype(np.float64) + t.get("base.%d.bias" % k, 0)
+        y = grouped(h, t["base.%d.weight" % k].astype(np.float64), groups[k]) + t.get(
+            "base.%d.bias" % k, 0)
         if "adapt.%d.weight" % k in t:
             y = y + h @ t["adapt.%d.weight" % k].T.astype(np.float64) + t.get(
                 "adapt.%d.bias" % k, 0)

@@ -480,6 +480,7 @@ class Ensemble(unittest.TestCase):
         self.assertEqual([w.shape for w, _ in layers], [(40, 15), (56, 40), (4, 56)])
         t, meta = psfile.read_safetensors(out)
         c = json.loads(meta[psfile.CONTRACT_KEY])
+        self.assertNotIn("groups", c)  # widths differ: dense, zeros and all
         self.assertEqual(c["observation"]["mean"], json.loads(psfile.read_safetensors(ps[0])[1][
             psfile.CONTRACT_KEY])["observation"]["mean"])
         self.assertEqual(c["trained_by"], "policy/train/ensemble.py, the mean of 3 policies: "
@@ -491,6 +492,32 @@ class Ensemble(unittest.TestCase):
         self.assertLess(np.abs(got - want).max(), 1e-5)
         # one member alone differs from the mean by far more
         self.assertGreater(np.abs(run_policy(ps[0], x) - want).max(), 1e-2)
+
+    def test_members_of_one_width_make_grouped_hidden_layers(self):
+        ps = [member(self.d, "m%d.st" % k, self.rng, (16, 16), "a") for k in range(3)]
+        out = os.path.join(self.d, "g.st")
+        layers = ensemble.ensemble(ps, out)
+        self.assertEqual([w.shape for w, _ in layers], [(48, 15), (48, 16), (4, 48)])
+        c = json.loads(psfile.read_safetensors(out)[1][psfile.CONTRACT_KEY])
+        self.assertEqual(c["groups"], [1, 3, 1])
+        x = self.rng.uniform(-1.0, 1.0, (50, 15))
+        want = np.mean([run_policy(p, x) for p in ps], axis=0)
+        self.assertLess(np.abs(run_policy(out, x) - want).max(), 1e-5)
+        # the grouped layer is the block-diagonal dense one without its zeros
+        t, _ = psfile.read_safetensors(out)
+        w1 = t["base.1.weight"]
+        dense = np.zeros((48, 48), np.float32)
+        for g in range(3):
+            dense[16 * g:16 * (g + 1), 16 * g:16 * (g + 1)] = w1[16 * g:16 * (g + 1)]
+        tt = dict(t)
+        tt["base.1.weight"] = dense
+        cd = dict(c)
+        del cd["groups"]
+        z = self.rng.standard_normal((20, 15))
+        self.assertLess(np.abs(psfile.forward(t, z, contract=c) -
+                               psfile.forward(tt, z, contract=cd)).max(), 1e-12)
+        with self.assertRaisesRegex(ensemble.Refused, "g.st: has grouped layers"):
+            ensemble.ensemble([out, ps[0]], os.path.join(self.d, "gg.st"))
 
     def test_same_members_same_bytes(self):
         ps = [member(self.d, "m%d.st" % k, self.rng, (8, 8), "a") for k in range(2)]

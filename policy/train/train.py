@@ -107,6 +107,9 @@ def load_init(path, net, norm, hidden, fields):
     observing fields; returns its contract."""
     t, meta = psfile.read_safetensors(path)
     c = json.loads(meta[psfile.CONTRACT_KEY])
+    if any(g != 1 for g in c.get("groups", [])):
+        raise SystemExit("--init %s: has grouped layers (an ensemble, policy/train/ensemble.py): "
+                         "fine-tune one of its members" % path)
     if c["observation"]["fields"] != fields:
         raise SystemExit("--init %s: its observation fields (%s) are not this run's (%s)" % (
             path, ", ".join(c["observation"]["fields"]), ", ".join(fields)))
