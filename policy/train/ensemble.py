@@ -131,6 +131,9 @@ def describe(cmds):
         words = cmd.split()
         if len(words) == len(first):
             diff = [i for i, (a, b) in enumerate(zip(first, words)) if a != b]
+            if not diff:
+                parts.append("and the same command")
+                continue
             if all(i > 0 and words[i - 1].startswith("--") and first[i - 1] == words[i - 1] for i in diff):
                 parts.append("and with " + " ".join("%s %s" % (words[i - 1], words[i]) for i in diff))
                 continue

@@ -530,6 +530,9 @@ class Ensemble(unittest.TestCase):
         self.assertEqual(ensemble.describe(["x --seed 1", "y --seed 2"]),
                          "policy/train/ensemble.py, the mean of 2 policies: x --seed 1; "
                          "and y --seed 2")
+        self.assertEqual(ensemble.describe(["x --seed 1", "x --seed 1"]),
+                         "policy/train/ensemble.py, the mean of 2 policies: x --seed 1; "
+                         "and the same command")
         self.assertEqual(ensemble.describe(["x --seed 1", "x --seed 1 --more"]),
                          "policy/train/ensemble.py, the mean of 2 policies: x --seed 1; "
                          "and x --seed 1 --more")
