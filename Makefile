@@ -168,9 +168,10 @@ help:
 	@echo "             random fault every 8 s, each recovered; checks states, limits,"
 	@echo "             recorder, memory: bench/results/soak.json, soak.md"
 	@echo "make train   train the balance policy on the C environment (CPU, 2 cores):"
-	@echo "             one recipe with each of TRAIN_SEEDS (2 5 1; 20-30 min a seed),"
-	@echo "             averaged into policy/weights/ps1_stage1.safetensors (the shipped"
-	@echo "             file, reproduced bit for bit); runs in $(BUILD)/train/seedN/"
+	@echo "             one run of TRAIN_ARGS for each line of TRAIN_MEMBERS (its seed"
+	@echo "             and options; 20-30 min a run), averaged into"
+	@echo "             policy/weights/ps1_stage1.safetensors (the shipped file,"
+	@echo "             reproduced bit for bit); runs in $(BUILD)/train/memberN/"
 	@echo "make train-clone the recipe of the file shipped until 2026-12-04 (about 17"
 	@echo "             min): $(BUILD)/train/clone.safetensors"
 	@echo "make install PREFIX=/usr/local [DESTDIR=]: the binary, its data (boards, robots,"
@@ -381,13 +382,14 @@ bench: deps-bench $(BUILD)/pushstep $(CAMERA_SO) $(BUILD)/crowd_bench $(BUILD)/t
 $(BUILD)/crowd_bench: $(call OBJ,bench/crowd_bench.c) $(LIB_OBJS)
 	$(CC) $(CFLAGS) -o $@ $^ $(LDLIBS)
 
-# The balance policy's training (docs/policy.md): seeded, on the CPUs, three
-# runs of one recipe (TRAIN_ARGS) that differ only in their seed
-# (TRAIN_SEEDS), averaged into the shipped file by policy/train/ensemble.py
-# (one MLP computing the mean of the three; seeds 2, 5 and 1 are r16, r39
-# and r15 of docs/policy.md, the ensemble shipped 2026-12-07; the file keeps
-# the first member's observation normalisation), which it reproduces bit
-# for bit. The recipe: PPO of a residual on the
+# The balance policy's training (docs/policy.md): seeded, on the CPUs, one
+# run of a recipe (TRAIN_ARGS) for each line of TRAIN_MEMBERS (its seed and
+# any further options; the shipped file's list names the three seeds 2, 5 and
+# 1, r16, r39 and r15 of docs/policy.md, and their recorded files and logs,
+# which the tests check), averaged into the shipped file by
+# policy/train/ensemble.py (one MLP computing the mean of the runs; the file
+# keeps the first member's observation normalisation), which it reproduces
+# bit for bit. The recipe: PPO of a residual on the
 # capture-point controller (--residual: the policy's actions are added to
 # the controller's; it starts as the controller) over 1,000 iterations, 70 %
 # of the episodes starting as the runtime's trials do (limp in the harness,
@@ -399,7 +401,7 @@ $(BUILD)/crowd_bench: $(call OBJ,bench/crowd_bench.c) $(LIB_OBJS)
 # tunables before its 2026-12-03 change, PPO: TRAIN_CLONE_ARGS; then PPO
 # fine-tuning from that file: TRAIN_FT_ARGS), which it reproduces bit for bit,
 # into $(BUILD)/train/clone.safetensors.
-TRAIN_SEEDS ?= 2 5 1
+TRAIN_MEMBERS ?= policy/weights/ps1_stage1.members
 TRAIN_ARGS ?= --envs 16 --threads 2 --steps 64 --bc-iters 0 --ppo-iters 1000 \
               --push-dv-start 0.3 --push-dv-max 0.7 --residual --bc-weight 0 --ppo-lr 1e-4 \
               --gamma 0.995 --gae-lambda 0.98 --harness-p 0.7 --ramp-start --stair-p 0.5 \
@@ -411,12 +413,16 @@ TRAIN_FT_ARGS ?= --seed 2 --envs 16 --threads 2 --steps 64 --bc-iters 0 --ppo-it
               --push-dv-start 0.6 --push-dv-max 0.6 --ppo-lr 3e-5 --focus-p 0.3 \
               --gamma 0.995 --gae-lambda 0.98 --fixed-std --expert slow
 train: deps-train $(BUILD)/pushstep $(BUILD)/libpsenv.so
-	set -e; for seed in $(TRAIN_SEEDS); do \
-	    /usr/bin/python3 policy/train/train.py $(TRAIN_ARGS) --seed $$seed \
-	        --out $(BUILD)/train/seed$$seed/policy.safetensors --log-dir $(BUILD)/train/seed$$seed; \
-	done
-	/usr/bin/python3 policy/train/ensemble.py --out policy/weights/ps1_stage1.safetensors \
-	    $(patsubst %,$(BUILD)/train/seed%/policy.safetensors,$(TRAIN_SEEDS))
+	set -e; n=0; runs=; \
+	while read -r seed file log opts; do \
+	    case "$$seed" in ''|'#'*) continue ;; esac; \
+	    n=$$((n + 1)); d=$(BUILD)/train/member$$n; \
+	    /usr/bin/python3 policy/train/train.py $(TRAIN_ARGS) --seed $$seed $$opts \
+	        --out $$d/policy.safetensors --log-dir $$d </dev/null; \
+	    runs="$$runs $$d/policy.safetensors"; \
+	done <$(TRAIN_MEMBERS); \
+	test -n "$$runs" || { echo "$(TRAIN_MEMBERS): no member" >&2; exit 1; }; \
+	/usr/bin/python3 policy/train/ensemble.py --out policy/weights/ps1_stage1.safetensors $$runs
 train-clone: deps-train $(BUILD)/pushstep $(BUILD)/libpsenv.so
 	/usr/bin/python3 policy/train/train.py $(TRAIN_CLONE_ARGS) --out $(BUILD)/train/first.safetensors \
 	    --log-dir $(BUILD)/train/first

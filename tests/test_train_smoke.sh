@@ -22,10 +22,10 @@ name="same seed, same first iterations (deterministic environment and trainer)"
 check bash -c "/usr/bin/python3 policy/train/train.py --envs 4 --threads 2 --steps 16 \
     --bc-iters 3 --ppo-iters 2 --out $out/q.safetensors --log-dir $out/b >/dev/null 2>&1 \
     && cmp -s <(cut -d, -f1-8 $out/log.csv) <(cut -d, -f1-8 $out/b/log.csv)"
-# make train's runs (TRAIN_ARGS with each of TRAIN_SEEDS, residual
-# policies) have the logs of the shipped file's members: seed 2's is
-# bench/results/train_log_residual.csv, seeds 1's and 5's those of r15 and
-# r39 (docs/policy.md); make train-clone's first stage
+# make train's runs (TRAIN_ARGS with each member's seed and options,
+# residual policies; TRAIN_MEMBERS, policy/weights/ps1_stage1.members) have
+# the learning logs recorded for the shipped file's members there;
+# make train-clone's first stage
 # (TRAIN_CLONE_ARGS, --expert slow) the previous file's, train_log.csv; with
 # the runtime's capture-point controller as its expert (--expert quick) it is
 # bench/results/train_log_make_train.csv (docs/policy.md)
@@ -35,18 +35,18 @@ make_var() {
         on { more = sub(/\\$/, ""); printf "%s ", $0; if (!more) exit }' Makefile
 }
 args=$(make_var TRAIN_ARGS)
-for seed in $(make_var TRAIN_SEEDS); do
-    case $seed in
-    1) log=bench/results/swing_cost/r15/log.csv ;;
-    2) log=bench/results/train_log_residual.csv ;;
-    5) log=bench/results/train_variants/r39/log.csv ;;
-    *) log=/nonexistent ;;
-    esac
-    name="make train's seed $seed reproduces the learning log of the shipped file's member ($log, first 3 iterations)"
-    check bash -c "/usr/bin/python3 policy/train/train.py $args --seed $seed --threads 2 \
-        --stop-after 3 --out $out/t$seed.safetensors --log-dir $out/t$seed >/dev/null 2>&1 \
-        && cmp -s <(cut -d, -f1-9 $out/t$seed/log.csv) <(head -4 $log | cut -d, -f1-9)"
-done
+read -r members <<<"$(make_var TRAIN_MEMBERS)"
+n=0
+while read -r seed file log opts; do
+    case "$seed" in '' | '#'*) continue ;; esac
+    n=$((n + 1))
+    name="make train's member $n (seed $seed${opts:+ $opts}) reproduces its recorded learning log ($log, first 3 iterations)"
+    check bash -c "/usr/bin/python3 policy/train/train.py $args --seed $seed $opts --threads 2 \
+        --stop-after 3 --out $out/t$n.safetensors --log-dir $out/t$n >/dev/null 2>&1 </dev/null \
+        && cmp -s <(cut -d, -f1-9 $out/t$n/log.csv) <(head -4 $log | cut -d, -f1-9)"
+done <$members
+name="TRAIN_MEMBERS ($members) lists members"
+check test "$n" -ge 1
 name="make train-clone's first stage reproduces the previous file's learning log (first 2 iterations)"
 args=$(make_var TRAIN_CLONE_ARGS)
 check bash -c "/usr/bin/python3 policy/train/train.py $args --threads 2 \

@@ -301,29 +301,51 @@ static void test_ps_weights_groups(void **st)
     }
 }
 
-/* The shipped policy is the mean of its three members (make train's
- * TRAIN_SEEDS 2 5 1, recorded in bench/results: docs/policy.md), its hidden
- * layer grouped: run in this engine, on observations around the first
- * member's mean, it gives the mean of the members' actions, each member
- * normalising the observation its own way (policy/train/ensemble.py folds
- * that into the first layer). */
+enum { MEMBERS_MAX = 8 };
+
+/* The recorded policy files policy/weights/ps1_stage1.members lists (its
+ * second column; '#' starts a comment line): the count, or fails. */
+static int shipped_members(char (*path)[256])
+{
+    FILE *f = fopen("policy/weights/ps1_stage1.members", "r");
+    if (f == NULL)
+        fail_msg("policy/weights/ps1_stage1.members: %s", strerror(errno));
+    char line[512];
+    int n = 0;
+    while (fgets(line, sizeof(line), f) != NULL) {
+        int seed;
+        char file[256];
+        if (line[strspn(line, " \t")] == '#' || sscanf(line, "%d %255s", &seed, file) != 2)
+            continue;
+        if (n == MEMBERS_MAX)
+            fail_msg("ps1_stage1.members: more than %d members", MEMBERS_MAX);
+        snprintf(path[n++], 256, "%s", file);
+    }
+    fclose(f);
+    return n;
+}
+
+/* The shipped policy is the mean of the members policy/weights/
+ * ps1_stage1.members lists (make train's runs, recorded in bench/results:
+ * docs/policy.md), its hidden layer grouped: run in this engine, on
+ * observations around the first member's mean, it gives the mean of the
+ * members' actions, each member normalising the observation its own way
+ * (policy/train/ensemble.py folds that into the first layer). */
 static void test_ps_weights_shipped_file_is_the_mean_of_its_members(void **st)
 {
     (void)st;
-    static const char *const MEMBERS[3] = {
-        "bench/results/swing_cost/r16/r16.safetensors",
-        "bench/results/train_variants/r39/r39.safetensors",
-        "bench/results/swing_cost/r15/r15.safetensors",
-    };
-    static ps_weights_t ens, mem[3];
+    static char path[MEMBERS_MAX][256];
+    static ps_weights_t ens, mem[MEMBERS_MAX];
+    const int n = shipped_members(path);
+    assert_true(n >= 2);
     char err[512];
     if (ps_weights_load(&ens, "policy/weights/ps1_stage1.safetensors", err, sizeof(err)) != 0)
         fail_msg("%s", err);
-    for (int k = 0; k < 3; k++)
-        if (ps_weights_load(&mem[k], MEMBERS[k], err, sizeof(err)) != 0)
+    for (int k = 0; k < n; k++)
+        if (ps_weights_load(&mem[k], path[k], err, sizeof(err)) != 0)
             fail_msg("%s", err);
-    assert_int_equal(ens.mlp.base[1].n_groups, 3);
-    assert_int_equal(ens.mlp.base[1].n_in, 3 * mem[0].mlp.base[1].n_in);
+    assert_int_equal(ens.mlp.base[1].n_groups, n);
+    assert_int_equal(ens.mlp.base[1].n_in, n * mem[0].mlp.base[1].n_in);
     const ps_weights_contract_t *c0 = &ens.contract;
     uint32_t seed = 3u;
     double worst = 0.0, spread = 0.0;
@@ -336,13 +358,13 @@ static void test_ps_weights_shipped_file_is_the_mean_of_its_members(void **st)
             z[i] = u;
         }
         assert_int_equal(ps_mlp_forward(&ens.mlp, z, NULL, out), 0);
-        for (int k = 0; k < 3; k++) {
+        for (int k = 0; k < n; k++) {
             float zk[PS_OBS_MAX], ok[PS_MAX_JOINTS];
             for (uint32_t i = 0; i < c0->n_obs; i++)
                 zk[i] = (x[i] - mem[k].contract.obs_mean[i]) / mem[k].contract.obs_std[i];
             assert_int_equal(ps_mlp_forward(&mem[k].mlp, zk, NULL, ok), 0);
             for (uint32_t o = 0; o < c0->n_act; o++) {
-                mean[o] += ok[o] / 3.0f;
+                mean[o] += ok[o] / (float)n;
                 spread = fmax(spread, fabs((double)ok[o] - (double)out[o]));
             }
         }
@@ -353,7 +375,7 @@ static void test_ps_weights_shipped_file_is_the_mean_of_its_members(void **st)
         fail_msg("ensemble against the members' mean: worst %g (want < 1e-5); a member "
                  "alone differs by up to %g (want > 1e-2)",
                  worst, spread);
-    for (int k = 0; k < 3; k++)
+    for (int k = 0; k < n; k++)
         ps_weights_free(&mem[k]);
     ps_weights_free(&ens);
 }
