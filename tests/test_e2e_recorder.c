@@ -414,8 +414,16 @@ static void test_e2e_rec_lockstep_shove_guarded_files_match_foxglove_readers(voi
 {
     (void)state;
     char err[PS_ERR_MSG_LEN] = "";
-    ps_app_opts_t o = {
-        .data_dir = ".", .board = "sim", .scenario = "scenarios/shove.yaml", .is_lockstep = true};
+    /* The standing controller, as the scenario is written for: the shipped
+     * MLP (the robot file's default) computes for 0.15-0.3 ms a step in the
+     * ASan build, near its 0.5 ms deadline on the thread's CPU clock, and a
+     * loaded CI host pushed it over once: ACTIVE -> HOLD and a second dump
+     * (WATCHDOG) made the run depend on the host, not on the recorder. */
+    ps_app_opts_t o = {.data_dir = ".",
+                       .board = "sim",
+                       .scenario = "scenarios/shove.yaml",
+                       .is_lockstep = true,
+                       .policy = "stand"};
     int rc = ps_app_init(&app, &o, err, sizeof(err));
     if (rc != 0)
         fail_msg("ps_app_init: %s", err);
@@ -444,6 +452,7 @@ static void test_e2e_rec_lockstep_shove_guarded_files_match_foxglove_readers(voi
     ps_guard_counts_t counts;
     ps_guard_disarm(&counts);
     const uint64_t n_ticks = app.loop.counters.n_ticks;
+    const uint64_t n_late = app.loop.counters.n_policy_late, n_overruns = app.loop.pacer.n_overruns;
     ps_recorder_stop(&rec);
     ps_app_deinit(&app);
 
@@ -454,7 +463,11 @@ static void test_e2e_rec_lockstep_shove_guarded_files_match_foxglove_readers(voi
     assert_int_equal(s->cont.n_records, n_ticks);
     assert_int_equal(s->cont.n_lost_ring + s->cont.n_lost_io, 0);
     assert_int_equal(s->cont.err, 0);
-    assert_int_equal(s->n_dumps, 1);
+    if (s->n_dumps != 1) /* say why: each dump's triggers, the loop's CPU-time faults */
+        fail_msg("%u dumps, want 1 (the fall's); triggers 0x%x, 0x%x; %llu late policy "
+                 "steps, %llu overruns",
+                 s->n_dumps, s->dump[0].triggers, s->n_dumps > 1 ? s->dump[1].triggers : 0u,
+                 (unsigned long long)n_late, (unsigned long long)n_overruns);
     assert_true(s->dump[0].triggers & PS_REC_TRIG_FALL);
     assert_int_equal(s->dump[0].n_records, 7001); /* 5 s before the fall, 2 s after */
     assert_int_equal(s->dump[0].n_lost_ring + s->dump[0].n_lost_io, 0);

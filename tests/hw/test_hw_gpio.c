@@ -24,6 +24,7 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <gpiod.h>
+#include <poll.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -723,16 +724,33 @@ static void test_sigkill_heartbeat_stops(void **state)
 
 /* ---- the port contract the simulated lines keep too (tests/contract) ----- */
 
+/* The event fd of the input the mock changed last, -1 when none since the
+ * last settle. */
+static int g_changed_fd = -1;
+
 static void mock_set_estop(void *ctx, bool is_pressed)
 {
     (void)ctx;
     mock_set(0, is_pressed ? 1 : 0); /* active-high in cfg_default */
+    g_changed_fd = g_a.estop_fd;
 }
 
+/* The edge's interrupt thread queues the event: wait, bounded, until the
+ * changed line's fd has one to read, then 3 ms more. A fixed 3 ms alone was
+ * too short when the host starved the VM (CI failed the contract check once
+ * with it): a press shorter than a tick whose edges were not queued yet reads
+ * as never pressed. An fd already readable (a press's edge not read yet when
+ * its release comes) returns at once: a release queued late is stamped
+ * before the level read that saw it, and counts as no new press. */
 static void mock_settle(void *ctx)
 {
     (void)ctx;
-    sleep_us(3000); /* the edge's interrupt thread queues the event */
+    if (g_changed_fd >= 0) {
+        struct pollfd p = {.fd = g_changed_fd, .events = POLLIN};
+        assert_int_equal(poll(&p, 1, 1000), 1);
+    }
+    g_changed_fd = -1;
+    sleep_us(3000);
 }
 
 static bool mock_heartbeat_level(void *ctx)
@@ -751,6 +769,7 @@ static void mock_set_button(void *ctx, bool is_pressed)
 {
     (void)ctx;
     mock_set(3, is_pressed ? 1 : 0); /* active high */
+    g_changed_fd = g_a.button_fd;
 }
 
 /* Without the record button (read_button says not pressed), then with it
