@@ -415,10 +415,11 @@ static void test_e2e_rec_lockstep_shove_guarded_files_match_foxglove_readers(voi
     (void)state;
     char err[PS_ERR_MSG_LEN] = "";
     /* The standing controller, as the scenario is written for: the shipped
-     * MLP (the robot file's default) computes for 0.15-0.3 ms a step in the
-     * ASan build, near its 0.5 ms deadline on the thread's CPU clock, and a
-     * loaded CI host pushed it over once: ACTIVE -> HOLD and a second dump
-     * (WATCHDOG) made the run depend on the host, not on the recorder. */
+     * MLP (the robot file's default) computed for 0.13-0.3 ms a step in the
+     * ASan build before its kernel's checks became whole-range ones
+     * (policy/ps_mlp.c), near its 0.5 ms deadline on the thread's CPU clock,
+     * and a loaded CI host pushed it over once: ACTIVE -> HOLD and a second
+     * dump (WATCHDOG) made the run depend on the host, not on the recorder. */
     ps_app_opts_t o = {.data_dir = ".",
                        .board = "sim",
                        .scenario = "scenarios/shove.yaml",

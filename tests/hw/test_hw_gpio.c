@@ -736,12 +736,12 @@ static void mock_set_estop(void *ctx, bool is_pressed)
 }
 
 /* The edge's interrupt thread queues the event: wait, bounded, until the
- * changed line's fd has one to read, then 3 ms more. A fixed 3 ms alone was
- * too short when the host starved the VM (CI failed the contract check once
- * with it): a press shorter than a tick whose edges were not queued yet reads
- * as never pressed. An fd already readable (a press's edge not read yet when
- * its release comes) returns at once: a release queued late is stamped
- * before the level read that saw it, and counts as no new press. */
+ * changed line's fd has one to read, then 3 ms more. A fixed 3 ms alone is
+ * too short when the host starves the VM (CI failed the contract check once
+ * with it; its excerpt did not show the line): a press shorter than a tick
+ * whose edges were not queued yet reads as never pressed. An fd already readable (a press's edge
+ * not read yet when its release comes) returns at once: a release queued late is stamped before the
+ * level read that saw it, and counts as no new press. */
 static void mock_settle(void *ctx)
 {
     (void)ctx;
