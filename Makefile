@@ -52,7 +52,7 @@ TEST_PKGS  += clang-14 libclang-rt-14-dev
 # libtorch for the inference comparison (bench/policy.sh).
 BENCH_PKGS := stress-ng gnuplot-nox python3 parallel libopenblas-dev libtorch-dev
 # What `make train` needs (policy/train/, never at run time).
-TRAIN_PKGS := python3 python3-torch python3-numpy python3-yaml python3-tqdm gnuplot-nox
+TRAIN_PKGS := python3 python3-torch python3-numpy python3-yaml python3-tqdm gnuplot-nox libblas3
 # ARCH=aarch64: the cross compiler, qemu-user to run its tests, and the arm64
 # builds of the libraries the binaries link (multiarch; tools/deps.sh adds
 # the arm64 architecture to dpkg when a package names it).

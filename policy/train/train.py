@@ -42,12 +42,19 @@ import subprocess
 import sys
 import time
 
-import numpy as np
-import torch
-from tqdm import tqdm
-
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
+import portable  # noqa: E402
+
+# The same floats on every machine (policy/train/portable.py): before numpy
+# and torch load, the script re-executes itself once with the portable BLAS,
+# libm and ATen kernels. Not when imported as a module.
+FLOAT_PATH = portable.pin() if __name__ == "__main__" else (False, "as a module")
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+from tqdm import tqdm  # noqa: E402
+
 import contract as ct  # noqa: E402
 import psenv  # noqa: E402
 import psfile  # noqa: E402
@@ -502,6 +509,10 @@ def main():
     if not 0.0 <= a.stair_p <= 1.0 or not a.stair_step > 0.0 or not a.stair_dv0 > 0.0:
         raise SystemExit("--stair-p is in [0, 1], --stair-step and --stair-dv0 > 0")
 
+    is_pinned, float_path = FLOAT_PATH
+    if is_pinned and portable.check_loaded() is not None:
+        raise SystemExit(portable.check_loaded())
+    print("floating point: " + float_path, flush=True)
     torch.set_num_threads(1)
     torch.manual_seed(a.seed)
     np.random.seed(a.seed)
