@@ -42,7 +42,7 @@ TOOL_PKGS  := rt-tests can-utils
 # (AARCH64_PKGS below) for the aarch64 part of the suite.
 TEST_PKGS  := can-utils systemd gnuplot-nox libcamera-ipa udev \
               python3 python3-numpy python3-onnx python3-hypothesis python3-torch \
-              python3-yaml python3-tqdm
+              python3-yaml python3-tqdm libblas3 liblapack3
 # The fuzz targets (tests/fuzz/, docs/fuzzing.md): clang with libFuzzer and
 # its sanitizer runtimes (libclang-rt-14-dev is only a recommendation of
 # clang-14's, so it is named).
@@ -51,8 +51,11 @@ TEST_PKGS  += clang-14 libclang-rt-14-dev
 # GNU parallel for the push-recovery grid (bench/push.py), OpenBLAS and
 # libtorch for the inference comparison (bench/policy.sh).
 BENCH_PKGS := stress-ng gnuplot-nox python3 parallel libopenblas-dev libtorch-dev
-# What `make train` needs (policy/train/, never at run time).
-TRAIN_PKGS := python3 python3-torch python3-numpy python3-yaml python3-tqdm gnuplot-nox libblas3
+# What `make train` needs (policy/train/, never at run time). libblas3,
+# liblapack3: the reference BLAS and LAPACK that train.py pins
+# (policy/train/portable.py); OpenBLAS would otherwise stand in for them and
+# round by the CPU it finds.
+TRAIN_PKGS := python3 python3-torch python3-numpy python3-yaml python3-tqdm gnuplot-nox libblas3 liblapack3
 # ARCH=aarch64: the cross compiler, qemu-user to run its tests, and the arm64
 # builds of the libraries the binaries link (multiarch; tools/deps.sh adds
 # the arm64 architecture to dpkg when a package names it).

@@ -11,6 +11,7 @@ tools/run-tests.sh.
 """
 import json
 import os
+import subprocess
 import sys
 import tempfile
 import unittest
@@ -23,6 +24,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 import ensemble  # noqa: E402
 import onnx2policy  # noqa: E402
+import portable  # noqa: E402
 import psfile  # noqa: E402
 
 DATA = os.path.join(HERE, "..", "..", "tests", "data", "policy")
@@ -592,6 +594,91 @@ class Ensemble(unittest.TestCase):
         ensemble.ensemble(members, out)
         self.assertEqual(open(out, "rb").read(), open(SHIPPED, "rb").read(),
                          "policy/weights/ps1_stage1.safetensors is not ensemble.py of its members")
+
+
+PIN_PROBE = """import ctypes, hashlib, json, os, random, struct, sys
+sys.path.insert(0, %r)
+import portable
+is_pinned, what = portable.pin()
+import numpy
+import torch
+cap = [l.strip() for l in torch.__config__.show().splitlines() if "capability" in l]
+libm = ctypes.CDLL("libm.so.6")
+h = hashlib.sha256()
+rng = random.Random(7)
+for name in ("exp", "sin", "cos", "atan", "pow"):
+    f = getattr(libm, name)
+    f.restype = ctypes.c_double
+    f.argtypes = [ctypes.c_double] * (2 if name == "pow" else 1)
+    for _ in range(5000):
+        x = rng.uniform(-20.0, 20.0)
+        h.update(struct.pack("d", f(abs(x) + 1e-3, x / 7) if name == "pow" else f(x)))
+print(json.dumps({"pinned": is_pinned, "refusal": portable.check_loaded(), "capability": cap,
+                  "tunables": os.environ.get("GLIBC_TUNABLES"), "libm": h.hexdigest()}))
+"""
+PIN_VARS = ("LD_LIBRARY_PATH", "GLIBC_TUNABLES", "ATEN_CPU_CAPABILITY", "PUSHSTEP_TRAIN_NATIVE")
+
+
+def cpu_flags():
+    with open("/proc/cpuinfo") as f:
+        for line in f:
+            if line.startswith("flags"):
+                return set(line.split(":", 1)[1].split())
+    return set()
+
+
+class Portable(unittest.TestCase):
+    """train.py's float path (policy/train/portable.py)."""
+
+    def test_pinned_env_puts_its_choices_first_and_keeps_the_users(self):
+        blas, lapack = portable.reference_dirs()
+        env = {"LD_LIBRARY_PATH": "/a:" + blas + ":/b", "X": "1",
+               "GLIBC_TUNABLES": "glibc.malloc.check=3:glibc.cpu.hwcaps=-AVX512F,-FMA"}
+        out = portable.pinned_env(env)
+        self.assertEqual(out["LD_LIBRARY_PATH"], blas + ":" + lapack + ":/a:/b")
+        self.assertEqual(out["ATEN_CPU_CAPABILITY"], "default")
+        self.assertEqual(out["X"], "1")
+        if os.uname().machine == "x86_64":
+            self.assertEqual(out["GLIBC_TUNABLES"],
+                             "glibc.malloc.check=3:glibc.cpu.hwcaps=-AVX512F,-FMA,-AVX2,-FMA4")
+        self.assertEqual(portable.pinned_env(out), out, "pinning twice changes the environment")
+        self.assertEqual(env["X"], "1")
+        self.assertEqual(env["LD_LIBRARY_PATH"], "/a:" + blas + ":/b", "the caller's dict changed")
+
+    def probe(self, **extra):
+        with tempfile.TemporaryDirectory() as d:
+            script = os.path.join(d, "probe.py")
+            with open(script, "w") as f:
+                f.write(PIN_PROBE % HERE)
+            env = {k: v for k, v in os.environ.items() if k not in PIN_VARS}
+            env.update(extra)
+            r = subprocess.run([sys.executable, script], env=env, capture_output=True, text=True)
+            self.assertEqual(r.returncode, 0, r.stderr)
+            return json.loads(r.stdout)
+
+    def test_a_script_that_pins_runs_on_the_portable_libraries(self):
+        pinned = self.probe()
+        self.assertTrue(pinned["pinned"], pinned)
+        self.assertIsNone(pinned["refusal"])
+        self.assertEqual(pinned["capability"], ["- CPU capability usage: NO AVX"])
+        if os.uname().machine != "x86_64":
+            return
+        # libm's baseline variants: the same results as with glibc's vector
+        # features masked wholesale, and, where this CPU would take the FMA
+        # variants, other results than the machine's own.
+        everything = "glibc.cpu.hwcaps=-AVX,-AVX2,-FMA,-FMA4,-AVX512F,-AVX512DQ,-AVX512BW,-AVX512VL"
+        masked = self.probe(PUSHSTEP_TRAIN_NATIVE="1", GLIBC_TUNABLES=everything)
+        self.assertEqual(pinned["libm"], masked["libm"], "libm is not on its baseline variants")
+        if {"fma", "avx2"} <= cpu_flags():
+            native = self.probe(PUSHSTEP_TRAIN_NATIVE="1")
+            self.assertNotEqual(pinned["libm"], native["libm"], "libm kept its FMA variants")
+
+    def test_native_keeps_the_machines_own(self):
+        native = self.probe(PUSHSTEP_TRAIN_NATIVE="1")
+        self.assertFalse(native["pinned"])
+        self.assertIsNone(native["tunables"])
+        if {"fma", "avx2"} <= cpu_flags():
+            self.assertNotEqual(native["capability"], ["- CPU capability usage: NO AVX"])
 
 
 def main():

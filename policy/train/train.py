@@ -510,8 +510,9 @@ def main():
         raise SystemExit("--stair-p is in [0, 1], --stair-step and --stair-dv0 > 0")
 
     is_pinned, float_path = FLOAT_PATH
-    if is_pinned and portable.check_loaded() is not None:
-        raise SystemExit(portable.check_loaded())
+    refusal = portable.check_loaded() if is_pinned else None
+    if refusal is not None:
+        raise SystemExit(refusal)
     print("floating point: " + float_path, flush=True)
     torch.set_num_threads(1)
     torch.manual_seed(a.seed)
