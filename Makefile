@@ -173,8 +173,8 @@ help:
 	@echo "make train   train the balance policy on the C environment (CPU, 2 cores):"
 	@echo "             one run of TRAIN_ARGS for each line of TRAIN_MEMBERS (its seed"
 	@echo "             and options; 20-30 min a run), averaged into"
-	@echo "             policy/weights/ps1_stage1.safetensors (the shipped file,"
-	@echo "             reproduced bit for bit); runs in $(BUILD)/train/memberN/"
+	@echo "             policy/weights/ps1_stage1.safetensors, on the portable float"
+	@echo "             path (docs/policy.md); runs in $(BUILD)/train/memberN/"
 	@echo "make train-clone the recipe of the file shipped until 2026-12-04 (about 17"
 	@echo "             min): $(BUILD)/train/clone.safetensors"
 	@echo "make install PREFIX=/usr/local [DESTDIR=]: the binary, its data (boards, robots,"
@@ -387,12 +387,15 @@ $(BUILD)/crowd_bench: $(call OBJ,bench/crowd_bench.c) $(LIB_OBJS)
 
 # The balance policy's training (docs/policy.md): seeded, on the CPUs, one
 # run of a recipe (TRAIN_ARGS) for each line of TRAIN_MEMBERS (its seed and
-# any further options; the shipped file's list names the three seeds 2, 5 and
-# 1, r16, r39 and r15 of docs/policy.md, and their recorded files and logs,
-# which the tests check), averaged into the shipped file by
-# policy/train/ensemble.py (one MLP computing the mean of the runs; the file
-# keeps the first member's observation normalisation), which it reproduces
-# bit for bit. The recipe: PPO of a residual on the
+# any further options; the shipped file's list names r16, r39 and r15 of
+# docs/policy.md, seeds 2, 5 and 1, and r41, seed 5 with a cost on the
+# stance's width, with their recorded files and logs, which the tests check),
+# averaged by policy/train/ensemble.py (one MLP computing the mean of the
+# runs; the file keeps the first member's observation normalisation), which
+# gives the shipped file from the recorded ones bit for bit. train.py runs on
+# the portable float path (policy/train/portable.py), where the recorded
+# members, trained on machines of another kind, are not made again
+# (docs/policy.md). The recipe: PPO of a residual on the
 # capture-point controller (--residual: the policy's actions are added to
 # the controller's; it starts as the controller) over 1,000 iterations, 70 %
 # of the episodes starting as the runtime's trials do (limp in the harness,
@@ -402,8 +405,10 @@ $(BUILD)/crowd_bench: $(call OBJ,bench/crowd_bench.c) $(LIB_OBJS)
 # The commands and seeds are written into the policy file's contract. `make train-clone` runs the recipe of the file
 # shipped until 2026-12-04 (cloning the capture-point controller with its
 # tunables before its 2026-12-03 change, PPO: TRAIN_CLONE_ARGS; then PPO
-# fine-tuning from that file: TRAIN_FT_ARGS), which it reproduces bit for bit,
-# into $(BUILD)/train/clone.safetensors.
+# fine-tuning from that file: TRAIN_FT_ARGS), into
+# $(BUILD)/train/clone.safetensors; it reproduced that file bit for bit
+# before train.py's portable float path (2026-12-07), and has not been run
+# whole on it.
 TRAIN_MEMBERS ?= policy/weights/ps1_stage1.members
 TRAIN_ARGS ?= --envs 16 --threads 2 --steps 64 --bc-iters 0 --ppo-iters 1000 \
               --push-dv-start 0.3 --push-dv-max 0.7 --residual --bc-weight 0 --ppo-lr 1e-4 \
@@ -415,15 +420,19 @@ TRAIN_FT_ARGS ?= --seed 2 --envs 16 --threads 2 --steps 64 --bc-iters 0 --ppo-it
               --critic-warmup 40 --bc-weight 0.2 --harness-p 0.5 --push-dv-min 0.05 \
               --push-dv-start 0.6 --push-dv-max 0.6 --ppo-lr 3e-5 --focus-p 0.3 \
               --gamma 0.995 --gae-lambda 0.98 --fixed-std --expert slow
+# The list is copied before the first run and read from the copy: the loop
+# reads it a line at a time, and an edit to it during the hours of training
+# once shifted the next read into the middle of a line.
 train: deps-train $(BUILD)/pushstep $(BUILD)/libpsenv.so
-	set -e; n=0; runs=; \
+	set -e; n=0; runs=; mkdir -p $(BUILD)/train; \
+	cp $(TRAIN_MEMBERS) $(BUILD)/train/members; \
 	while read -r seed file log opts; do \
 	    case "$$seed" in ''|'#'*) continue ;; esac; \
 	    n=$$((n + 1)); d=$(BUILD)/train/member$$n; \
 	    /usr/bin/python3 policy/train/train.py $(TRAIN_ARGS) --seed $$seed $$opts \
 	        --out $$d/policy.safetensors --log-dir $$d </dev/null; \
 	    runs="$$runs $$d/policy.safetensors"; \
-	done <$(TRAIN_MEMBERS); \
+	done <$(BUILD)/train/members; \
 	test -n "$$runs" || { echo "$(TRAIN_MEMBERS): no member" >&2; exit 1; }; \
 	/usr/bin/python3 policy/train/ensemble.py --out policy/weights/ps1_stage1.safetensors $$runs
 train-clone: deps-train $(BUILD)/pushstep $(BUILD)/libpsenv.so

@@ -8,8 +8,8 @@ the reference libraries have one) and glibc's libm (FMA variants of exp,
 sin, pow ... on CPUs with FMA and AVX2), which the C environment's physics
 calls. A seeded run on one machine therefore drifted from the same seed's
 run on another (2026-12-07: seed 2's learning log left the recorded one
-after 11 iterations through ATen alone, after 17-26 through the BLAS or
-libm; docs/policy.md, "The same floats on every machine").
+after 11 iterations through ATen alone, after 17-24 through the BLAS or
+libm; docs/policy.md, "The same floats on every x86-64 machine").
 
 pin() makes train.py run on the portable choice of each: ATen's default
 kernels, the reference BLAS and LAPACK (packages libblas3, liblapack3)
