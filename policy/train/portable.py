@@ -37,6 +37,13 @@ def reference_dirs():
     return [os.path.join(lib, "blas"), os.path.join(lib, "lapack")]
 
 
+def reference_libs():
+    """(path, Debian package) of the reference libblas.so.3 and liblapack.so.3."""
+    blas_dir, lapack_dir = reference_dirs()
+    return [(os.path.join(blas_dir, "libblas.so.3"), "libblas3"),
+            (os.path.join(lapack_dir, "liblapack.so.3"), "liblapack3")]
+
+
 def _tunables_with_mask(value):
     """GLIBC_TUNABLES `value` with LIBM_MASK added to its hwcaps (one entry:
     glibc keeps the last value of a tunable, so a second would drop the
@@ -68,10 +75,9 @@ def pin():
     Exits with a message when the reference libraries are not installed."""
     if os.environ.get(NATIVE) == "1":
         return False, f"native ({NATIVE}=1: this machine's BLAS, libm and ATen kernels)"
-    for d, lib, pkg in zip(reference_dirs(), ("libblas.so.3", "liblapack.so.3"),
-                           ("libblas3", "liblapack3")):
-        if not os.path.exists(os.path.join(d, lib)):
-            sys.exit(f"train.py: {os.path.join(d, lib)} not found: install {pkg} "
+    for lib, pkg in reference_libs():
+        if not os.path.exists(lib):
+            sys.exit(f"train.py: {lib} not found: install {pkg} "
                      f"(make deps-train), or set {NATIVE}=1 to train on this machine's own")
     want = pinned_env(os.environ)
     keys = ("ATEN_CPU_CAPABILITY", "LD_LIBRARY_PATH", "GLIBC_TUNABLES")
@@ -100,12 +106,11 @@ def check_loaded():
     one, so is any LAPACK, and no other BLAS is (OpenBLAS's LAPACK brings
     its BLAS along). Returns an error message, or None."""
     mapped = mapped_libraries()
-    blas_dir, lapack_dir = reference_dirs()
-    want = {os.path.realpath(os.path.join(blas_dir, "libblas.so.3")),
-            os.path.realpath(os.path.join(lapack_dir, "liblapack.so.3"))}
+    (blas, _), (lapack, _) = reference_libs()
+    want = {os.path.realpath(blas), os.path.realpath(lapack)}
     real = {p: os.path.realpath(p) for p in mapped}
-    if os.path.realpath(os.path.join(blas_dir, "libblas.so.3")) not in real.values():
-        return f"train.py: pinned to {blas_dir}/libblas.so.3, which the process did not map"
+    if os.path.realpath(blas) not in real.values():
+        return f"train.py: pinned to {blas}, which the process did not map"
     other = sorted(p for p, r in real.items()
                    if (os.path.basename(r).startswith(("libblas", "liblapack")) and r not in want)
                    or any(k in os.path.basename(r) for k in ("openblas", "libmkl", "libblis")))

@@ -46,7 +46,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 import portable  # noqa: E402
 
-# The same floats on every machine (policy/train/portable.py): before numpy
+# The same floats on every x86-64 machine (policy/train/portable.py): before numpy
 # and torch load, the script re-executes itself once with the portable BLAS,
 # libm and ATen kernels. Not when imported as a module.
 FLOAT_PATH = portable.pin() if __name__ == "__main__" else (False, "as a module")
